@@ -1,0 +1,27 @@
+# Two commands for a fresh machine:  `make demo`  and  `make test`  (each sets up .venv first).
+PYTHON ?= python3
+VENV ?= .venv
+BIN = $(VENV)/bin
+
+.PHONY: demo test lint bench clean
+
+$(BIN)/deltoctl: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	@touch $@
+
+demo: $(BIN)/deltoctl
+	$(BIN)/deltoctl profile list
+	$(BIN)/deltoctl profile show dg-5f-right
+	$(BIN)/deltoctl profile validate profiles/*.yaml
+	$(BIN)/deltoctl profile export dg-5f-right --format xacro | head -n 20
+
+test: $(BIN)/deltoctl
+	$(BIN)/ruff check deltoctl tests bench
+	$(BIN)/python -m pytest -q
+
+bench: $(BIN)/deltoctl
+	$(BIN)/python bench/startup.py
+
+clean:
+	rm -rf $(VENV) build dist *.egg-info

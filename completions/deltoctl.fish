@@ -1,0 +1,1 @@
+complete --command deltoctl --no-files --arguments "(env _DELTOCTL_COMPLETE=complete_fish _TYPER_COMPLETE_FISH_ACTION=get-args _TYPER_COMPLETE_ARGS=(commandline -cp) deltoctl)" --condition "env _DELTOCTL_COMPLETE=complete_fish _TYPER_COMPLETE_FISH_ACTION=is-args _TYPER_COMPLETE_ARGS=(commandline -cp) deltoctl"

@@ -1,0 +1,3 @@
+from deltoctl.cli.main import main
+
+main()

@@ -1,0 +1,158 @@
+"""The ``deltoctl`` application: global options, error handling and the verb registry.
+
+Global options are accepted before the verb and after it (``deltoctl --json identify`` and
+``deltoctl identify --json``): the root group moves them to the front before parsing.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from typing import Annotated, Any
+
+import typer
+from typer.core import TyperGroup
+
+from deltoctl import __version__
+from deltoctl.cli.context import Options, parse_pairs
+from deltoctl.errors import DeltoctlError
+
+# option spellings → whether they take a value
+GLOBAL_OPTIONS: dict[str, bool] = {
+    "--profile": True, "-p": True, "--target": True, "-t": True, "--arg": True,
+    "--package-path": True, "--sim": False, "--json": False, "--yes": False, "-y": False,
+    "--verbose": False, "--quiet": False, "-q": False,
+}
+_VERBOSE = re.compile(r"^-v+$")
+
+
+def hoist_global_options(args: list[str]) -> list[str]:
+    """Move global options found after the verb to just before it."""
+    head: list[str] = []  # options before the verb
+    hoisted: list[str] = []  # global options after it
+    tail: list[str] = []  # the verb and everything else
+    i = 0
+    while i < len(args):
+        arg = args[i]
+        if tail and arg == "--":
+            tail.extend(args[i:])
+            break
+        name = arg.split("=", 1)[0]
+        is_global = name in GLOBAL_OPTIONS or bool(_VERBOSE.match(arg))
+        takes_value = GLOBAL_OPTIONS.get(name, False) and "=" not in arg
+        if not tail and not arg.startswith("-"):
+            tail.append(arg)  # the verb
+        elif tail and not is_global:
+            tail.append(arg)
+        else:
+            group = hoisted if tail else head
+            group.append(arg)
+            if takes_value and i + 1 < len(args):
+                group.append(args[i + 1])
+                i += 1
+        i += 1
+    return head + hoisted + tail
+
+
+class DeltoctlGroup(TyperGroup):
+    """Hoists global options and turns DeltoctlError into one line and its exit code."""
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        return super().parse_args(ctx, hoist_global_options(list(args)))
+
+    def invoke(self, ctx: Any) -> Any:
+        try:
+            return super().invoke(ctx)
+        except DeltoctlError as exc:
+            typer.echo(f"deltoctl: error: {exc.message}", err=True)
+            if exc.hint:
+                typer.echo(f"  hint: {exc.hint}", err=True)
+            raise typer.Exit(exc.exit_code) from None
+        except KeyboardInterrupt:
+            typer.echo("deltoctl: interrupted", err=True)
+            raise typer.Exit(130) from None
+
+
+app = typer.Typer(
+    cls=DeltoctlGroup,
+    name="deltoctl",
+    help="Bring-up toolkit for robot hardware: profiles, lifecycle verbs, simulated devices.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"deltoctl {__version__}")
+        raise typer.Exit()
+
+
+def _complete_profile(incomplete: str) -> list[str]:
+    from deltoctl.profile.catalog import catalog_names
+
+    return [n for n in catalog_names() if n.startswith(incomplete)]
+
+
+@app.callback()
+def root(
+    ctx: typer.Context,
+    profile: Annotated[str | None, typer.Option(
+        "--profile", "-p", envvar="DELTOCTL_PROFILE", autocompletion=_complete_profile,
+        help="Device profile: a catalog name or a YAML/URDF/xacro file.")] = None,
+    target: Annotated[list[str] | None, typer.Option(
+        "--target", "-t", envvar="DELTOCTL_TARGET",
+        help="Where the device is: [BUS=]URL, e.g. tcp://169.254.186.72:502 (repeatable).")] = None,
+    sim: Annotated[bool, typer.Option(
+        "--sim", help="Run against a simulated device started for this command.")] = False,
+    json_out: Annotated[bool, typer.Option(
+        "--json", help="Write one JSON document (NDJSON for streams) on stdout.")] = False,
+    yes: Annotated[bool, typer.Option(
+        "--yes", "-y", help="Do not ask for confirmation before motion.")] = False,
+    verbose: Annotated[int, typer.Option(
+        "--verbose", "-v", count=True, help="More diagnostics on stderr.")] = 0,
+    quiet: Annotated[bool, typer.Option(
+        "--quiet", "-q", help="Fewer diagnostics on stderr.")] = False,
+    xacro_arg: Annotated[list[str] | None, typer.Option(
+        "--arg", metavar="NAME:=VALUE", help="A xacro argument (repeatable).")] = None,
+    package_path: Annotated[list[str] | None, typer.Option(
+        "--package-path", metavar="PKG=DIR",
+        help="Where $(find PKG) points, for xacro files (repeatable).")] = None,
+    version: Annotated[bool, typer.Option(
+        "--version", callback=_version, is_eager=True, help="Show the version and exit.")] = False,
+) -> None:
+    """Global options may come before or after the verb."""
+    try:
+        ctx.obj = Options(
+            profile=profile,
+            target=list(target or []),
+            sim=sim,
+            json=json_out,
+            yes=yes,
+            verbose=verbose,
+            quiet=quiet,
+            xacro_args=parse_pairs(list(xacro_arg or []), ":=", "--arg", "NAME:=VALUE"),
+            package_paths=parse_pairs(list(package_path or []), "=", "--package-path", "PKG=DIR"),
+        )
+    except DeltoctlError as exc:
+        typer.echo(f"deltoctl: error: {exc.message}", err=True)
+        raise typer.Exit(exc.exit_code) from None
+
+
+def _register() -> None:
+    from deltoctl.cli import completion_cmd, profile_cmd
+
+    app.add_typer(profile_cmd.app, name="profile")
+    completion_cmd.register(app)
+
+
+_register()
+
+
+def main() -> None:
+    try:
+        app(prog_name="deltoctl")
+    except BrokenPipeError:  # e.g. `deltoctl stream | head`
+        sys.stderr.close()
+        sys.exit(0)

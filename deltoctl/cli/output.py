@@ -1,0 +1,61 @@
+"""Rendering: data on stdout (JSON for scripts, tables for people), diagnostics on stderr.
+
+rich is imported only when a person is looking at a terminal; scripts that pipe the output get
+plain aligned text and pay no import cost for it.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+import typer
+
+
+def stdout_is_terminal() -> bool:
+    return sys.stdout.isatty()
+
+
+def emit_json(data: Any) -> None:
+    typer.echo(json.dumps(data, indent=2, default=_jsonable))
+
+
+def emit_json_line(data: Any) -> None:
+    sys.stdout.write(json.dumps(data, separators=(",", ":"), default=_jsonable) + "\n")
+    sys.stdout.flush()
+
+
+def _jsonable(value: Any) -> Any:
+    if hasattr(value, "__fspath__"):
+        return str(value)
+    if isinstance(value, (set, tuple)):
+        return list(value)
+    raise TypeError(f"cannot write {type(value).__name__} as JSON")
+
+
+def info(message: str) -> None:
+    """A diagnostic line for people, on stderr."""
+    typer.echo(message, err=True)
+
+
+def table(title: str | None, columns: Sequence[str], rows: Sequence[Sequence[Any]]) -> None:
+    cells = [["" if c is None else str(c) for c in row] for row in rows]
+    if stdout_is_terminal():
+        from rich.console import Console
+        from rich.table import Table
+
+        t = Table(title=title, header_style="bold")
+        for column in columns:
+            t.add_column(column)
+        for row in cells:
+            t.add_row(*row)
+        Console().print(t)
+        return
+    widths = [max([len(c)] + [len(r[i]) for r in cells]) for i, c in enumerate(columns)]
+    if title:
+        typer.echo(title)
+    typer.echo("  ".join(c.upper().ljust(w) for c, w in zip(columns, widths)).rstrip())
+    for row in cells:
+        typer.echo("  ".join(v.ljust(w) for v, w in zip(row, widths)).rstrip())

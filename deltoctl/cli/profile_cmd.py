@@ -1,0 +1,217 @@
+"""``deltoctl profile list|show|validate|import|export``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from deltoctl.cli.context import options
+from deltoctl.cli.output import emit_json, info, table
+from deltoctl.errors import DeltoctlError, InvalidInput
+
+app = typer.Typer(help="Browse, check and convert device profiles.", no_args_is_help=True)
+
+ProfileArg = Annotated[str | None, typer.Argument(
+    metavar="[PROFILE]", help="Catalog name or file; default: the --profile option.",
+    autocompletion=lambda incomplete: _complete_profile(incomplete))]
+
+
+def _summary(profile: Any) -> dict[str, Any]:
+    return {
+        "name": profile.name,
+        "family": profile.family or ",".join(
+            sorted({profile.family_of(h) or "?" for h in profile.hardware})),
+        "model": profile.model,
+        "status": profile.status,
+        "description": profile.description,
+        **profile.counts(),
+        "source": profile.source,
+    }
+
+
+@app.command("list")
+def list_profiles(ctx: typer.Context) -> None:
+    """List the built-in profile catalog."""
+    from deltoctl.profile.catalog import catalog_dir, catalog_names, load_profile
+
+    summaries = [_summary(load_profile(catalog_dir() / f"{n}.yaml")) for n in catalog_names()]
+    if options(ctx).json:
+        emit_json(summaries)
+        return
+    table(None, ["name", "family", "model", "joints", "sensors", "gpios", "status"],
+          [[s["name"], s["family"], s["model"], s["joints"], s["sensors"], s["gpios"],
+            s["status"]] for s in summaries])
+
+
+def _limits_text(joint: Any) -> str:
+    lim = joint.limits
+    if lim is None or (lim.lower is None and lim.upper is None):
+        return ""
+    unit = "m" if joint.joint_type == "prismatic" else "rad"
+    return f"[{lim.lower:.4g}, {lim.upper:.4g}] {unit}"
+
+
+def complete_part(ctx: typer.Context, incomplete: str) -> list[str]:
+    """Joint, sensor and GPIO names of the profile given on the command line."""
+    spec = ctx.params.get("profile") or (ctx.find_root().params or {}).get("profile")
+    if not spec:
+        return []
+    try:
+        prof = options(ctx).load_profile(spec)
+    except DeltoctlError:
+        return []
+    return [c.name for _, c in prof.components() if c.name.startswith(incomplete)]
+
+
+def _complete_profile(incomplete: str) -> list[str]:
+    from deltoctl.profile.catalog import catalog_names
+
+    return [n for n in catalog_names() if n.startswith(incomplete)]
+
+
+@app.command("show")
+def show(
+    ctx: typer.Context,
+    profile: Annotated[str | None, typer.Argument(
+        metavar="[PROFILE]", autocompletion=_complete_profile,
+        help="Catalog name or file; default: the --profile option.")] = None,
+    part: Annotated[str | None, typer.Argument(
+        autocompletion=complete_part, help="Show only this joint, sensor or GPIO.")] = None,
+) -> None:
+    """Show a profile: hardware blocks, parts, interfaces and limits."""
+    from deltoctl.profile.exporter import profile_data
+
+    opts = options(ctx)
+    if part is None and profile is not None and opts.profile and not _looks_like_profile(profile):
+        profile, part = None, profile  # `-p dg-5f-right profile show rj_dg_1_1`
+    prof = opts.load_profile(profile)
+    if part is not None:
+        _show_part(prof, part, opts.json)
+        return
+    if opts.json:
+        emit_json({**_summary(prof), "state_interfaces": prof.state_interfaces(),
+                   "command_interfaces": prof.command_interfaces(),
+                   "profile": profile_data(prof)})
+        return
+    info(f"{prof.name}: {prof.description}" + (" (discontinued)"
+                                                  if prof.status == "discontinued" else ""))
+    for bus, url in prof.buses.items():
+        info(f"  bus {bus}: {url}")
+    from deltoctl.profile.validate import part_address
+
+    rows = []
+    for hw, comp in prof.components():
+        address = part_address(prof, hw, comp)
+        rows.append([
+            hw.name, comp.kind, comp.name,
+            "" if address is None else str(address),
+            ", ".join(i.name for i in comp.command_interfaces),
+            ", ".join(i.name for i in comp.state_interfaces),
+            _limits_text(comp) if comp.kind == "joint" else "",
+        ])
+    table(None, ["block", "kind", "name", "address", "commands", "states", "limits"], rows)
+
+
+def _looks_like_profile(spec: str) -> bool:
+    from deltoctl.profile.catalog import catalog_names
+
+    return spec in catalog_names() or Path(spec).exists()
+
+
+def _show_part(prof: Any, name: str, as_json: bool) -> None:
+    from deltoctl.profile.exporter import component_data
+
+    comp = prof.component(name)
+    if comp is None:
+        raise InvalidInput(f"{prof.name} has no joint, sensor or GPIO named {name!r}")
+    data = {"kind": comp.kind, **component_data(comp)}
+    if as_json:
+        emit_json(data)
+        return
+    info(f"{comp.kind} {comp.name}" + (f"  limits {_limits_text(comp)}" if comp.limits else ""))
+    rows = [["command", i.name, i.min, i.max, i.initial_value, i.data_type]
+            for i in comp.command_interfaces]
+    rows += [["state", i.name, i.min, i.max, i.initial_value, i.data_type]
+             for i in comp.state_interfaces]
+    table(None, ["direction", "interface", "min", "max", "initial", "type"], rows)
+
+
+@app.command("validate")
+def validate_cmd(
+    ctx: typer.Context,
+    profiles: Annotated[list[str] | None, typer.Argument(
+        metavar="[PROFILE]...", help="Catalog names or files; default: --profile.")] = None,
+) -> None:
+    """Check profiles against ros2_control's rules and deltoctl's own (exit 2 if any fails)."""
+    opts = options(ctx)
+    specs = list(profiles or []) or ([opts.profile] if opts.profile else [])
+    if not specs:
+        raise InvalidInput("no profile given: name one, or pass --profile")
+    results = []
+    failed: DeltoctlError | None = None
+    for spec in specs:
+        try:
+            prof = opts.load_profile(spec)
+            results.append({"profile": spec, "ok": True, **prof.counts()})
+            if not opts.json and not opts.quiet:
+                c = prof.counts()
+                info(f"ok: {spec} ({c['joints']} joints, {c['sensors']} sensors, "
+                     f"{c['gpios']} gpios)")
+        except DeltoctlError as exc:
+            results.append({"profile": spec, "ok": False, "error": exc.message})
+            failed = failed or exc
+            if not opts.json:
+                info(f"invalid: {exc.message}")
+    if opts.json:
+        emit_json(results)
+    if failed:
+        raise typer.Exit(failed.exit_code)
+
+
+def _write(text: str, output: Path | None) -> None:
+    if output is None:
+        typer.echo(text, nl=False)
+        return
+    try:
+        output.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise InvalidInput(f"cannot write {output}: {exc.strerror}") from None
+    info(f"wrote {output}")
+
+
+OutputOpt = Annotated[Path | None, typer.Option(
+    "--output", "-o", help="Write to this file instead of stdout.")]
+
+
+@app.command("import")
+def import_cmd(
+    ctx: typer.Context,
+    source: Annotated[str, typer.Argument(help="A URDF or xacro file with <ros2_control>.")],
+    output: OutputOpt = None,
+) -> None:
+    """Read a URDF/xacro's <ros2_control> blocks and write them as a YAML profile."""
+    from deltoctl.profile.exporter import to_yaml
+
+    prof = options(ctx).load_profile(source)
+    _write(to_yaml(prof), output)
+
+
+@app.command("export")
+def export_cmd(
+    ctx: typer.Context,
+    profile: ProfileArg = None,
+    fmt: Annotated[str, typer.Option(
+        "--format", "-f", help="urdf (a loadable URDF), xacro (a macro of the "
+        "<ros2_control> blocks) or yaml.")] = "urdf",
+    output: OutputOpt = None,
+) -> None:
+    """Write a profile as a <ros2_control> URDF, a xacro macro, or YAML."""
+    from deltoctl.profile.exporter import to_urdf, to_yaml
+
+    if fmt not in ("urdf", "xacro", "yaml"):
+        raise InvalidInput(f"unknown --format {fmt!r} (expected urdf, xacro or yaml)")
+    prof = options(ctx).load_profile(profile)
+    text = to_yaml(prof) if fmt == "yaml" else to_urdf(prof, macro=fmt == "xacro")
+    _write(text, output)

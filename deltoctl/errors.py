@@ -1,0 +1,62 @@
+"""Errors that carry their exit code (the table is in README.md)."""
+
+from __future__ import annotations
+
+OK = 0
+FAILED = 1
+USAGE = 2
+WARNINGS = 3
+UNREACHABLE = 4
+REFUSED = 5
+
+
+class DeltoctlError(Exception):
+    """A failure reported to the user as one line, exiting with ``exit_code``."""
+
+    exit_code = FAILED
+
+    def __init__(self, message: str, hint: str | None = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.hint = hint
+
+
+class InvalidInput(DeltoctlError):
+    """A bad profile, argument or file (exit 2)."""
+
+    exit_code = USAGE
+
+
+class DeviceError(DeltoctlError):
+    """The device or the operation failed (exit 1)."""
+
+    exit_code = FAILED
+
+
+class Unreachable(DeltoctlError):
+    """The device could not be reached (exit 4)."""
+
+    exit_code = UNREACHABLE
+
+
+class Refused(DeltoctlError):
+    """Refused for safety: a limit, not homed, no confirmation (exit 5)."""
+
+    exit_code = REFUSED
+
+
+class ProtocolError(DeviceError):
+    """Bytes on the wire that do not follow the protocol."""
+
+
+class ProfileError(InvalidInput):
+    """A profile problem, located as ``file:line``."""
+
+    def __init__(self, message: str, source: str | None = None, line: int | None = None) -> None:
+        where = source or "<profile>"
+        if line:
+            where = f"{where}:{line}"
+        super().__init__(f"{where}: {message}")
+        self.source = source
+        self.line = line
+        self.reason = message

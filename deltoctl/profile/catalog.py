@@ -1,0 +1,91 @@
+"""The built-in profile catalog, and resolving ``--profile NAME|PATH`` to a loaded profile."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+from deltoctl.data import data_dir
+from deltoctl.errors import InvalidInput, ProfileError
+from deltoctl.profile.model import Profile
+
+YAML_SUFFIXES = (".yaml", ".yml")
+URDF_SUFFIXES = (".urdf", ".xacro", ".xml")
+
+
+def catalog_dir() -> Path:
+    return data_dir("profiles")
+
+
+def catalog_names() -> list[str]:
+    directory = catalog_dir()
+    if not directory.is_dir():
+        return []
+    return sorted(p.stem for p in directory.glob("*.yaml"))
+
+
+def resolve(spec: str) -> Path:
+    """A catalog name or a file path → the file to load."""
+    path = Path(spec).expanduser()
+    if path.suffix.lower() in YAML_SUFFIXES + URDF_SUFFIXES or "/" in spec or path.exists():
+        if not path.is_file():
+            raise InvalidInput(f"profile file {spec!r} does not exist")
+        return path
+    candidate = catalog_dir() / f"{spec}.yaml"
+    if candidate.is_file():
+        return candidate
+    from difflib import get_close_matches
+
+    close = get_close_matches(spec, catalog_names(), n=3)
+    hint = f" Did you mean {', '.join(close)}?" if close else ""
+    raise InvalidInput(f"no profile named {spec!r}.{hint} "
+                       "Run 'deltoctl profile list' to see the catalog, or give a file path.")
+
+
+def merge_interface_limits(profile: Profile) -> Profile:
+    """Command interface min/max tighten the joint limits, as ros2_control merges them."""
+    from deltoctl.profile.model import Limits
+
+    for joint in profile.joints():
+        for itf in joint.command_interfaces:
+            if itf.min is None and itf.max is None:
+                continue
+            if itf.min is not None and itf.max is not None and itf.min > itf.max:
+                continue  # validation reports it
+            lim = joint.limits or Limits()
+            if itf.name == "position":
+                if itf.min is not None:
+                    lim.lower = itf.min if lim.lower is None else max(lim.lower, itf.min)
+                if itf.max is not None:
+                    lim.upper = itf.max if lim.upper is None else min(lim.upper, itf.max)
+            elif itf.name in ("velocity", "effort") and itf.max is not None:
+                current = getattr(lim, itf.name)
+                setattr(lim, itf.name, itf.max if current is None else min(current, itf.max))
+            else:
+                continue
+            joint.limits = lim
+    return profile
+
+
+def load_profile(
+    spec: str | Path,
+    xacro_args: Mapping[str, str] | None = None,
+    packages: Mapping[str, str] | None = None,
+) -> Profile:
+    """Load and validate a profile from a catalog name or a YAML/URDF/xacro path."""
+    from deltoctl.profile.validate import validate
+
+    path = spec if isinstance(spec, Path) else resolve(spec)
+    suffix = path.suffix.lower()
+    if suffix in YAML_SUFFIXES:
+        from deltoctl.profile.yaml_loader import load_yaml_profile
+
+        profile = load_yaml_profile(path)
+    elif suffix in URDF_SUFFIXES:
+        from deltoctl.profile.urdf_loader import load_urdf_profile
+
+        profile = load_urdf_profile(path, xacro_args, packages)
+    else:
+        raise ProfileError(
+            "unknown profile format (expected .yaml/.yml, or .urdf/.xacro/.xml)", str(path))
+    return validate(merge_interface_limits(profile))

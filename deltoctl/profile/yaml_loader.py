@@ -1,0 +1,321 @@
+"""Load a YAML profile into the model, naming ``file:line`` for every problem."""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from deltoctl.errors import ProfileError
+from deltoctl.profile.model import (
+    Component,
+    Hardware,
+    Interface,
+    Limits,
+    Mimic,
+    Profile,
+    Safety,
+)
+from deltoctl.units import format_number, parse_quantity
+
+
+def param_text(value: Any) -> str:
+    """ros2_control keeps every param as text; numbers get their shortest exact form."""
+    if isinstance(value, (bool, int, float)):
+        return format_number(value)
+    return str(value)
+
+_BaseLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class LineDict(dict):
+    """A mapping that remembers the line of itself and of each key."""
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self.line = 0
+        self.lines: dict[Any, int] = {}
+
+
+class LineList(list):
+    """A list that remembers the line of itself and of each item."""
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self.line = 0
+        self.lines: list[int] = []
+
+
+class _Loader(_BaseLoader):  # type: ignore[misc,valid-type]
+    pass
+
+
+def _construct_mapping(loader: _Loader, node: yaml.MappingNode) -> LineDict:
+    result = LineDict()
+    result.line = node.start_mark.line + 1
+    loader.flatten_mapping(node)
+    for key_node, value_node in node.value:
+        key = loader.construct_object(key_node, deep=True)
+        line = key_node.start_mark.line + 1
+        if key in result:
+            raise ProfileError(f"duplicate key {key!r}", loader.name, line)
+        result[key] = loader.construct_object(value_node, deep=True)
+        result.lines[key] = line
+    return result
+
+
+def _construct_sequence(loader: _Loader, node: yaml.SequenceNode) -> LineList:
+    result = LineList(loader.construct_object(child, deep=True) for child in node.value)
+    result.line = node.start_mark.line + 1
+    result.lines = [child.start_mark.line + 1 for child in node.value]
+    return result
+
+
+_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_sequence)
+
+
+def parse_yaml(text: str, source: str) -> Any:
+    loader = _Loader(text)
+    loader.name = source
+    try:
+        return loader.get_single_data()
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = mark.line + 1 if mark else None
+        raise ProfileError(f"not valid YAML: {exc.problem or exc}", source, line) from None
+    except yaml.YAMLError as exc:
+        raise ProfileError(f"not valid YAML: {exc}", source) from None
+    finally:
+        loader.dispose()
+
+
+class _Reader:
+    """Checks keys and types of one YAML document, locating each complaint."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, message: str, line: int | None) -> ProfileError:
+        return ProfileError(message, self.source, line)
+
+    def mapping(self, value: Any, what: str, line: int | None, allowed: set[str]) -> LineDict:
+        if not isinstance(value, LineDict):
+            raise self.fail(f"{what} must be a mapping, got {type(value).__name__}", line)
+        for key in value:
+            if key not in allowed:
+                expected = ", ".join(sorted(allowed))
+                raise self.fail(f"unknown key {key!r} in {what} (expected one of: {expected})",
+                                value.lines[key])
+        return value
+
+    def require(self, d: LineDict, key: str, what: str) -> Any:
+        if key not in d or d[key] is None or d[key] == "":
+            raise self.fail(f"{what} needs '{key}'", d.line)
+        return d[key]
+
+    def string(self, d: LineDict, key: str, what: str, required: bool = False) -> str | None:
+        if required:
+            self.require(d, key, what)
+        value = d.get(key)
+        if value is None:
+            return None
+        if not isinstance(value, (str, int, float)) or isinstance(value, bool):
+            raise self.fail(f"'{key}' of {what} must be text", d.lines[key])
+        return str(value)
+
+    def number(self, d: LineDict, key: str, what: str) -> float | None:
+        value = d.get(key)
+        if value is None:
+            return None
+        try:
+            return parse_quantity(value)
+        except ValueError as exc:
+            raise self.fail(f"'{key}' of {what}: {exc}", d.lines[key]) from None
+
+    def integer(self, d: LineDict, key: str, what: str) -> int | None:
+        value = d.get(key)
+        if value is None:
+            return None
+        if isinstance(value, str):
+            with contextlib.suppress(ValueError):
+                value = int(value, 0)
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise self.fail(f"'{key}' of {what} must be a whole number, got {value!r}",
+                            d.lines[key])
+        return value
+
+    def boolean(self, d: LineDict, key: str, what: str, default: bool = False) -> bool:
+        value = d.get(key, default)
+        if not isinstance(value, bool):
+            raise self.fail(f"'{key}' of {what} must be true or false, got {value!r}",
+                            d.lines[key])
+        return value
+
+    def sequence(self, d: LineDict, key: str, what: str) -> LineList:
+        value = d.get(key)
+        if value is None:
+            return LineList()
+        if not isinstance(value, LineList):
+            raise self.fail(f"'{key}' of {what} must be a list", d.lines[key])
+        return value
+
+    def scalars(self, d: LineDict, key: str, what: str) -> dict[str, Any]:
+        value = d.get(key)
+        if value is None:
+            return {}
+        if not isinstance(value, LineDict):
+            raise self.fail(f"'{key}' of {what} must be a mapping of name: value", d.lines[key])
+        for name, item in value.items():
+            if isinstance(item, (dict, list)):
+                raise self.fail(f"param {name!r} of {what} must be a single value",
+                                value.lines[name])
+        return {str(k): param_text(v) for k, v in value.items() if v is not None}
+
+
+_INTERFACE_KEYS = {"name", "min", "max", "initial_value", "data_type", "size", "params"}
+_COMPONENT_KEYS = {
+    "name", "command_interfaces", "state_interfaces", "params", "bus", "address",
+}
+_JOINT_KEYS = _COMPONENT_KEYS | {"type", "limits", "mimic", "inverse", "offset"}
+_HARDWARE_KEYS = {
+    "name", "type", "plugin", "params", "group", "family", "bus", "joints", "sensors", "gpios",
+    "attributes",
+}
+_PROFILE_KEYS = {
+    "name", "description", "family", "model", "status", "buses", "safety", "ros2_control",
+}
+_SAFETY_KEYS = {
+    "home_pose", "max_jog_step", "current_cap", "home_tolerance", "home_timeout",
+    "homing_order",
+}
+
+
+def _interface(r: _Reader, item: Any, line: int, owner: str) -> Interface:
+    if isinstance(item, str):
+        return Interface(name=item, line=line)
+    what = f"an interface of {owner}"
+    d = r.mapping(item, what, line, _INTERFACE_KEYS)
+    name = r.string(d, "name", what, required=True)
+    initial = d.get("initial_value")
+    return Interface(
+        name=name or "",
+        min=r.number(d, "min", f"{owner}/{name}"),
+        max=r.number(d, "max", f"{owner}/{name}"),
+        initial_value=None if initial is None else param_text(initial),
+        data_type=r.string(d, "data_type", f"{owner}/{name}"),
+        size=r.integer(d, "size", f"{owner}/{name}"),
+        params=r.scalars(d, "params", f"{owner}/{name}"),
+        line=d.line,
+    )
+
+
+def _component(r: _Reader, kind: str, item: Any, line: int) -> Component:
+    what = f"a {kind}"
+    d = r.mapping(item, what, line, _JOINT_KEYS if kind == "joint" else _COMPONENT_KEYS)
+    name = r.string(d, "name", what, required=True) or ""
+    what = f"{kind} {name!r}"
+    comp = Component(kind=kind, name=name, line=d.line)
+    for key in ("command_interfaces", "state_interfaces"):
+        items = r.sequence(d, key, what)
+        setattr(comp, key, [_interface(r, i, ln, name) for i, ln in zip(items, items.lines)])
+    comp.params = r.scalars(d, "params", what)
+    comp.bus = r.string(d, "bus", what)
+    comp.address = r.integer(d, "address", what)
+    if kind == "joint":
+        comp.joint_type = r.string(d, "type", what) or "revolute"
+        comp.inverse = r.boolean(d, "inverse", what)
+        comp.offset = r.number(d, "offset", what) or 0.0
+        if "limits" in d:
+            ld = r.mapping(d["limits"], f"limits of {what}", d.lines["limits"],
+                           {"lower", "upper", "velocity", "effort"})
+            comp.limits = Limits(
+                lower=r.number(ld, "lower", what),
+                upper=r.number(ld, "upper", what),
+                velocity=r.number(ld, "velocity", what),
+                effort=r.number(ld, "effort", what),
+            )
+        if "mimic" in d:
+            md = r.mapping(d["mimic"], f"mimic of {what}", d.lines["mimic"],
+                           {"joint", "multiplier", "offset"})
+            comp.mimic = Mimic(
+                joint=r.string(md, "joint", f"mimic of {what}", required=True) or "",
+                multiplier=r.number(md, "multiplier", what) or 1.0,
+                offset=r.number(md, "offset", what) or 0.0,
+            )
+    return comp
+
+
+def _hardware(r: _Reader, item: Any, line: int) -> Hardware:
+    d = r.mapping(item, "a ros2_control block", line, _HARDWARE_KEYS)
+    name = r.string(d, "name", "a ros2_control block", required=True) or ""
+    what = f"ros2_control block {name!r}"
+    hw = Hardware(
+        name=name,
+        type=r.string(d, "type", what) or "system",
+        plugin=r.string(d, "plugin", what) or "",
+        params=r.scalars(d, "params", what),
+        group=r.string(d, "group", what),
+        family=r.string(d, "family", what),
+        bus=r.string(d, "bus", what),
+        attributes=r.scalars(d, "attributes", what),
+        line=d.line,
+    )
+    for key, kind in (("joints", "joint"), ("sensors", "sensor"), ("gpios", "gpio")):
+        items = r.sequence(d, key, what)
+        setattr(hw, key, [_component(r, kind, i, ln) for i, ln in zip(items, items.lines)])
+    return hw
+
+
+def _safety(r: _Reader, d: LineDict) -> Safety:
+    s = r.mapping(d["safety"], "safety", d.lines["safety"], _SAFETY_KEYS)
+    pose = s.get("home_pose", LineDict())
+    pose = r.mapping(pose, "safety.home_pose", s.lines.get("home_pose"), set(pose))
+    order = r.sequence(s, "homing_order", "safety")
+    return Safety(
+        home_pose={str(k): r.number(pose, k, "safety.home_pose") or 0.0 for k in pose},
+        max_jog_step=r.number(s, "max_jog_step", "safety"),
+        current_cap=r.number(s, "current_cap", "safety"),
+        home_tolerance=r.number(s, "home_tolerance", "safety"),
+        home_timeout=r.number(s, "home_timeout", "safety"),
+        homing_order=[str(j) for j in order],
+    )
+
+
+def profile_from_data(data: Any, source: str) -> Profile:
+    r = _Reader(source)
+    d = r.mapping(data, "the profile", 1, _PROFILE_KEYS)
+    name = r.string(d, "name", "the profile", required=True) or ""
+    profile = Profile(
+        name=name,
+        description=r.string(d, "description", "the profile") or "",
+        family=r.string(d, "family", "the profile"),
+        model=r.string(d, "model", "the profile"),
+        status=r.string(d, "status", "the profile") or "current",
+        source=source,
+    )
+    buses = r.scalars(d, "buses", "the profile")
+    profile.buses = buses
+    if "safety" in d:
+        profile.safety = _safety(r, d)
+    blocks = r.sequence(d, "ros2_control", "the profile")
+    if not blocks:
+        raise r.fail("the profile needs at least one block under 'ros2_control'", d.line)
+    profile.hardware = [_hardware(r, i, ln) for i, ln in zip(blocks, blocks.lines)]
+    return profile
+
+
+def load_yaml_profile(path: Path) -> Profile:
+    source = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ProfileError(f"cannot read the file: {exc.strerror}", source) from None
+    except UnicodeDecodeError:
+        raise ProfileError("not a text file (expected UTF-8 YAML)", source) from None
+    data = parse_yaml(text, source)
+    if data is None:
+        raise ProfileError("the file is empty (expected a YAML profile)", source, 1)
+    return profile_from_data(data, source)

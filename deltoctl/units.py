@@ -1,0 +1,33 @@
+"""Numbers with units, as technicians type them: ``5deg``, ``-0.1``, ``12mm``."""
+
+from __future__ import annotations
+
+import math
+import re
+
+_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-zA-Z°]*)\s*$")
+_SCALE = {"": 1.0, "rad": 1.0, "deg": math.pi / 180, "°": math.pi / 180, "m": 1.0, "mm": 1e-3}
+
+
+def parse_quantity(text: str | float | int) -> float:
+    """Parse a number with an optional unit into SI (rad or m). Raises ValueError."""
+    if isinstance(text, bool):
+        raise ValueError(f"expected a number, got {text!r}")
+    if isinstance(text, (int, float)):
+        return float(text)
+    match = _QUANTITY.match(str(text))
+    if not match or match.group(2) not in _SCALE:
+        raise ValueError(
+            f"expected a number with an optional unit (rad, deg, m, mm), got {text!r}"
+        )
+    return float(match.group(1)) * _SCALE[match.group(2)]
+
+
+def format_number(value: float) -> str:
+    """Shortest text that reads back as the same float (ints without a dot)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    whole = isinstance(value, float) and value.is_integer() and abs(value) < 1e15
+    if isinstance(value, int) or whole:
+        return str(int(value))
+    return repr(float(value))
