@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 
 
@@ -29,11 +31,16 @@ def main() -> None:
         "deltoctl profile list": [deltoctl, "profile", "list"],
         "deltoctl profile list --json": [deltoctl, "profile", "list", "--json"],
     }
+    cold = "deltoctl profile list (cold cache)"
+    commands[cold] = commands["deltoctl profile list"]
     times: dict[str, list[float]] = {name: [] for name in commands}
     for _ in range(args.runs):
         for name, cmd in commands.items():
+            env = None
+            if name == cold:  # every profile parsed, as on the first run after a change
+                env = dict(os.environ, XDG_CACHE_HOME=tempfile.mkdtemp())
             start = time.perf_counter()
-            subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, check=True)
+            subprocess.run(cmd, capture_output=True, check=True, env=env)
             times[name].append(time.perf_counter() - start)
     base = statistics.median(times[next(iter(commands))])
     rows = [{"command": name, "median_ms": round(statistics.median(t) * 1e3, 1),

@@ -24,3 +24,8 @@ def cli():
 
 
 needs_samples = pytest.mark.skipif(not SAMPLES.is_dir(), reason="../shared/data is not present")
+
+
+@pytest.fixture(autouse=True)
+def _private_cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path_factory.mktemp("cache")))

@@ -116,3 +116,23 @@ def test_wheel_ships_the_data_directories(tmp_path):
         assert f"deltoctl/_data/profiles/{name}.yaml" in names
         assert f"deltoctl/_data/urdf/{name}.urdf" in names
     assert "deltoctl/_data/completions/deltoctl.bash" in names
+
+
+def test_profile_list_uses_the_cache_and_notices_changes(cli, monkeypatch, tmp_path):
+    import deltoctl.profile.catalog as catalog
+
+    first = cli("profile", "list", "--json")
+    assert first.exit_code == 0
+
+    def no_loading(*args, **kwargs):
+        raise AssertionError("the catalog should come from the cache")
+
+    real_load = catalog.load_profile
+    monkeypatch.setattr(catalog, "load_profile", no_loading)
+    assert cli("profile", "list", "--json").stdout == first.stdout
+    # a new or changed profile file is loaded again
+    (tmp_path / "fts-2d.yaml").write_text((REPO / "profiles" / "fts-2d.yaml").read_text())
+    monkeypatch.setattr(catalog, "load_profile", real_load)
+    monkeypatch.setattr(catalog, "catalog_dir", lambda: tmp_path)
+    rows = json.loads(cli("profile", "list", "--json").stdout)
+    assert [r["name"] for r in rows] == ["fts-2d"]

@@ -1,7 +1,5 @@
 """``deltoctl completion SHELL``: the shell completion script (also shipped in completions/)."""
 
-from __future__ import annotations
-
 from typing import Annotated
 
 import typer

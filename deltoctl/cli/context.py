@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import typer
@@ -13,17 +12,30 @@ if TYPE_CHECKING:
     from deltoctl.profile.model import Profile
 
 
-@dataclass
 class Options:
-    profile: str | None = None
-    target: list[str] = field(default_factory=list)
-    sim: bool = False
-    json: bool = False
-    yes: bool = False
-    verbose: int = 0
-    quiet: bool = False
-    xacro_args: dict[str, str] = field(default_factory=dict)
-    package_paths: dict[str, str] = field(default_factory=dict)
+    """The parsed global options (a plain class: dataclasses cost start-up time)."""
+
+    def __init__(
+        self,
+        profile: str | None = None,
+        target: list[str] | None = None,
+        sim: bool = False,
+        json: bool = False,
+        yes: bool = False,
+        verbose: int = 0,
+        quiet: bool = False,
+        xacro_args: dict[str, str] | None = None,
+        package_paths: dict[str, str] | None = None,
+    ) -> None:
+        self.profile = profile
+        self.target = target or []
+        self.sim = sim
+        self.json = json
+        self.yes = yes
+        self.verbose = verbose
+        self.quiet = quiet
+        self.xacro_args = xacro_args or {}
+        self.package_paths = package_paths or {}
 
     def load_profile(self, spec: str | None = None) -> Profile:
         from deltoctl.profile.catalog import load_profile

@@ -4,8 +4,6 @@ Global options are accepted before the verb and after it (``deltoctl --json iden
 ``deltoctl identify --json``): the root group moves them to the front before parsing.
 """
 
-from __future__ import annotations
-
 import re
 import sys
 from typing import Annotated, Any

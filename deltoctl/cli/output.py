@@ -6,7 +6,6 @@ plain aligned text and pay no import cost for it.
 
 from __future__ import annotations
 
-import json
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -19,10 +18,14 @@ def stdout_is_terminal() -> bool:
 
 
 def emit_json(data: Any) -> None:
+    import json
+
     typer.echo(json.dumps(data, indent=2, default=_jsonable))
 
 
 def emit_json_line(data: Any) -> None:
+    import json
+
     sys.stdout.write(json.dumps(data, separators=(",", ":"), default=_jsonable) + "\n")
     sys.stdout.flush()
 

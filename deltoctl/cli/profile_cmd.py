@@ -1,7 +1,5 @@
 """``deltoctl profile list|show|validate|import|export``."""
 
-from __future__ import annotations
-
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -34,9 +32,9 @@ def _summary(profile: Any) -> dict[str, Any]:
 @app.command("list")
 def list_profiles(ctx: typer.Context) -> None:
     """List the built-in profile catalog."""
-    from deltoctl.profile.catalog import catalog_dir, catalog_names, load_profile
+    from deltoctl.profile.catalog import catalog_summaries
 
-    summaries = [_summary(load_profile(catalog_dir() / f"{n}.yaml")) for n in catalog_names()]
+    summaries = catalog_summaries(_summary)
     if options(ctx).json:
         emit_json(summaries)
         return

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from deltoctl.data import data_dir
 from deltoctl.errors import InvalidInput, ProfileError
-from deltoctl.profile.model import Profile
+
+if TYPE_CHECKING:
+    from deltoctl.profile.model import Profile
 
 YAML_SUFFIXES = (".yaml", ".yml")
 URDF_SUFFIXES = (".urdf", ".xacro", ".xml")
@@ -89,3 +92,46 @@ def load_profile(
         raise ProfileError(
             "unknown profile format (expected .yaml/.yml, or .urdf/.xacro/.xml)", str(path))
     return validate(merge_interface_limits(profile))
+
+
+def _cache_file() -> Path:
+    import os
+
+    from deltoctl import __version__
+
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "deltoctl" / f"catalog-{__version__}.json"
+
+
+def catalog_summaries(summarize) -> list[dict]:  # type: ignore[no-untyped-def]
+    """``summarize(profile)`` for every catalog profile, cached by file size and mtime.
+
+    A bring-up script runs ``profile list`` often and the catalog rarely changes: a hit
+    costs a stat per file and no YAML parsing. The cache is best effort; any problem with
+    it just means the profiles are loaded.
+    """
+    import json
+
+    cache_file = _cache_file()
+    try:
+        cache = json.loads(cache_file.read_text())
+    except (OSError, ValueError):
+        cache = {}
+    summaries = []
+    fresh: dict[str, dict] = {}
+    for name in catalog_names():
+        path = catalog_dir() / f"{name}.yaml"
+        stat = path.stat()
+        key = f"{path}:{stat.st_size}:{stat.st_mtime_ns}"
+        summary = cache.get(key)
+        if summary is None:
+            summary = summarize(load_profile(path))
+        fresh[key] = summary
+        summaries.append(summary)
+    if fresh != cache:
+        try:
+            cache_file.parent.mkdir(parents=True, exist_ok=True)
+            cache_file.write_text(json.dumps(fresh))
+        except OSError:
+            pass
+    return summaries
