@@ -139,9 +139,11 @@ def root(
 
 
 def _register() -> None:
-    from deltoctl.cli import completion_cmd, profile_cmd
+    from deltoctl.cli import completion_cmd, device_cmd, profile_cmd, sim_cmd
 
     app.add_typer(profile_cmd.app, name="profile")
+    device_cmd.register(app)
+    app.add_typer(sim_cmd.app, name="sim")
     completion_cmd.register(app)
 
 

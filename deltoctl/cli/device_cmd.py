@@ -1,0 +1,263 @@
+"""The lifecycle verbs on a device: connect, identify, detect, gpio, stream."""
+
+import fnmatch
+import signal
+import statistics
+import time
+from typing import Annotated, Any
+
+import typer
+
+from deltoctl.cli.context import Options, options
+from deltoctl.cli.output import emit_json, emit_json_line, info, stdout_is_terminal, table
+from deltoctl.errors import WARNINGS, DeviceError, InvalidInput
+
+AllowMismatch = Annotated[bool, typer.Option(
+    "--allow-model-mismatch",
+    help="Go on when the gripper reports another model than the profile (exit 3).")]
+
+
+def open_session(opts: Options, allow_model_mismatch: bool = False):  # type: ignore[no-untyped-def]
+    from deltoctl.core.session import Session
+
+    return Session(opts.load_profile(), opts.target, sim=opts.sim,
+                   allow_model_mismatch=allow_model_mismatch)
+
+
+def _finish(session: Any) -> None:
+    """Exit 3 when the verb finished but with warnings (a model mismatch allowed, reconnects)."""
+    warnings = list(session.driver.warnings)
+    if session.driver.stats.get("reconnects"):
+        warnings.append(f"the link was lost and re-established "
+                        f"{session.driver.stats['reconnects']} time(s)")
+    for w in warnings:
+        info(f"warning: {w}")
+    if warnings:
+        raise typer.Exit(WARNINGS)
+
+
+def register(app: typer.Typer) -> None:
+    app.command("connect")(connect)
+    app.command("identify")(identify)
+    app.command("detect")(detect)
+    app.command("stream")(stream)
+    gpio_app = typer.Typer(help="Read and set the gripper's GPIO.", no_args_is_help=True)
+    gpio_app.command("get")(gpio_get)
+    gpio_app.command("set")(gpio_set)
+    app.add_typer(gpio_app, name="gpio")
+
+
+def connect(
+    ctx: typer.Context,
+    count: Annotated[int, typer.Option("--count", "-n", help="Round trips to time.")] = 20,
+    allow_model_mismatch: AllowMismatch = False,
+) -> None:
+    """Reach the device, time round trips, and run the lifecycle to active and back."""
+    opts = options(ctx)
+    session = open_session(opts, allow_model_mismatch)
+    with session:
+        rtts = []
+        for _ in range(max(1, count)):
+            start = time.perf_counter()
+            session.driver.read()
+            rtts.append((time.perf_counter() - start) * 1e3)
+        if not session.driver.connected:
+            raise DeviceError(f"{session.url} stopped answering during the round trips")
+    result = {
+        "target": session.url,
+        "reachable": True,
+        "round_trips": len(rtts),
+        "rtt_ms": {"median": round(statistics.median(rtts), 3), "min": round(min(rtts), 3),
+                   "max": round(max(rtts), 3)},
+        "lifecycle": session.lifecycle.history,
+    }
+    if opts.json:
+        emit_json(result)
+    else:
+        info(f"connected to {session.url}: round trip median {result['rtt_ms']['median']} ms "
+             f"(min {result['rtt_ms']['min']}, max {result['rtt_ms']['max']}, n={len(rtts)})")
+        info("lifecycle: " + " → ".join(session.lifecycle.history))
+    _finish(session)
+
+
+def identify(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
+    """Model, firmware and the motor direction map in use, compared with the profile."""
+    opts = options(ctx)
+    with open_session(opts, allow_model_mismatch) as session:
+        ident = session.driver.identity.as_dict()
+    ident["profile"] = session.profile.name
+    ident["target"] = session.url
+    if opts.json:
+        emit_json(ident)
+    else:
+        table(None, ["field", "value"], [[k, v] for k, v in ident.items()])
+    _finish(session)
+
+
+def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
+    """Sensor type, finger mask and GPIO, compared with the profile."""
+    from deltoctl.drivers.delto.models import FT_TYPES, SENSOR_NAMES
+
+    opts = options(ctx)
+    with open_session(opts, allow_model_mismatch) as session:
+        driver = session.driver
+        values = dict(driver.read())
+        ident = driver.identity
+        model = driver.model
+    hw = session.hw
+    profile_ft = [s.name for s in hw.sensors]
+    reported_ft = ident.sensor_type in FT_TYPES
+    fingers = [f + 1 for f in range(model.fingers) if ident.finger_mask >> f & 1]
+    checks = [
+        {"what": "fingertip F/T sensors", "profile": len(profile_ft),
+         "device": model.fingers if reported_ft else 0},
+        {"what": "GPIO", "profile": bool(hw.gpios), "device": "gpio/input_1" in values},
+    ]
+    for c in checks:
+        c["match"] = c["profile"] == c["device"]
+    result = {
+        "sensor_type": SENSOR_NAMES.get(ident.sensor_type, "unknown"),
+        "fingers_with_sensor": fingers,
+        "gpio": {k.split("/")[1]: v for k, v in values.items() if k.startswith("gpio/")},
+        "checks": checks,
+    }
+    if opts.json:
+        emit_json(result)
+    else:
+        info(f"sensor type {result['sensor_type']}, fingers with a sensor: "
+             f"{', '.join(map(str, fingers)) or 'none'}")
+        table(None, ["check", "profile", "device", "match"],
+              [[c["what"], c["profile"], c["device"], "yes" if c["match"] else "NO"]
+               for c in checks])
+    mismatches = [c["what"] for c in checks if not c["match"]]
+    if mismatches:
+        info(f"warning: the device differs from the profile in: {', '.join(mismatches)}")
+        raise typer.Exit(WARNINGS)
+    _finish(session)
+
+
+_ON = {"on": True, "1": True, "true": True, "off": False, "0": False, "false": False}
+OUTPUTS = ("output_1", "output_2", "output_3")
+
+
+def gpio_get(ctx: typer.Context) -> None:
+    """Read the outputs and the input."""
+    opts = options(ctx)
+    with open_session(opts) as session:
+        values = session.driver.read()
+    gpio = {k.split("/")[1]: bool(v) for k, v in values.items() if k.startswith("gpio/")}
+    if not gpio:
+        raise DeviceError("the device sends no GPIO block (no GPIO on this model, or IO is "
+                          "false in the profile)")
+    if opts.json:
+        emit_json(gpio)
+    else:
+        table(None, ["interface", "value"], [[f"gpio/{k}", "on" if v else "off"]
+                                             for k, v in gpio.items()])
+
+
+def gpio_set(
+    ctx: typer.Context,
+    name: Annotated[str, typer.Argument(help="output_1 (motor on), output_2 (grasp) or "
+                                        "output_3 (release).")],
+    state: Annotated[str, typer.Argument(help="on or off.")],
+) -> None:
+    """Set one output; the three outputs always travel together, the others keep their state."""
+    opts = options(ctx)
+    name = name.removeprefix("gpio/")
+    if name not in OUTPUTS:
+        raise InvalidInput(f"unknown output {name!r} (expected one of: {', '.join(OUTPUTS)})")
+    if state.lower() not in _ON:
+        raise InvalidInput(f"state must be on or off, got {state!r}")
+    with open_session(opts) as session:
+        driver = session.driver
+        values = driver.read()
+        if "gpio/input_1" not in values:
+            raise DeviceError("the device sends no GPIO block (no GPIO on this model, or IO is "
+                              "false in the profile)")
+        outputs = [values[f"gpio/{o}"] == 1.0 for o in OUTPUTS]
+        outputs[OUTPUTS.index(name)] = _ON[state.lower()]
+        driver.set_gpio((outputs[0], outputs[1], outputs[2]))
+        after = driver.read()
+    got = after.get(f"gpio/{name}") == 1.0
+    if got != _ON[state.lower()]:
+        raise DeviceError(f"gpio/{name} reads back {'on' if got else 'off'} after setting it")
+    result = {f"gpio/{o}": after[f"gpio/{o}"] == 1.0 for o in (*OUTPUTS, "input_1")}
+    if opts.json:
+        emit_json(result)
+    elif not opts.quiet:
+        info(f"gpio/{name} is {state.lower()}")
+
+
+def _select(names: list[str], patterns: list[str]) -> list[str]:
+    if not patterns:
+        return names
+    globs = [p for item in patterns for p in item.split(",") if p]
+    chosen = [n for n in names if any(fnmatch.fnmatchcase(n, g) for g in globs)]
+    if not chosen:
+        raise InvalidInput(f"--interfaces {','.join(globs)} matches no interface")
+    return chosen
+
+
+def stream(
+    ctx: typer.Context,
+    rate: Annotated[float, typer.Option("--rate", "-r", help="Samples per second.")] = 50.0,
+    duration: Annotated[float | None, typer.Option(
+        "--duration", "-d", help="Stop after this many seconds (default: until Ctrl-C).")] = None,
+    interfaces: Annotated[list[str] | None, typer.Option(
+        "--interfaces", "-i", help="Glob(s) of interface names, e.g. 'rj_dg_1_*/position'.")]
+        = None,
+    allow_model_mismatch: AllowMismatch = False,
+) -> None:
+    """Stream state interfaces: a live table on a terminal, NDJSON with --json or when piped."""
+    opts = options(ctx)
+    if rate <= 0:
+        raise InvalidInput("--rate must be positive")
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    as_lines = opts.json or not stdout_is_terminal()
+    with open_session(opts, allow_model_mismatch) as session:
+        driver = session.driver
+        names = _select([*session.profile.state_interfaces(), "system/connection_status"],
+                        list(interfaces or []))
+        period = 1.0 / rate
+        start = time.monotonic()
+        next_at = start
+        live = None
+        if not as_lines:
+            from rich.live import Live
+
+            live = Live(auto_refresh=False)
+            live.start()
+        samples = 0
+        try:
+            while duration is None or time.monotonic() - start < duration:
+                values = driver.read()
+                sample = {n: values.get(n) for n in names}
+                samples += 1
+                if live is None:
+                    emit_json_line({"t": time.time_ns(), "values": sample})
+                else:
+                    live.update(_live_table(sample), refresh=True)
+                next_at += period
+                delay = next_at - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                else:
+                    next_at = time.monotonic()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            if live is not None:
+                live.stop()
+    if not opts.quiet:
+        info(f"{samples} samples of {len(names)} interfaces")
+    _finish(session)
+
+
+def _live_table(sample: dict[str, Any]):  # type: ignore[no-untyped-def]
+    from rich.table import Table
+
+    t = Table("interface", "value")
+    for name, value in sample.items():
+        t.add_row(name, "—" if value is None else f"{value:.4g}")
+    return t

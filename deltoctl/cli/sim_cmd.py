@@ -1,0 +1,63 @@
+"""``deltoctl sim serve PROFILE``: a simulated device in its own process."""
+
+import contextlib
+import json
+import signal
+import threading
+from typing import Annotated
+
+import typer
+
+from deltoctl.cli.context import options
+from deltoctl.errors import InvalidInput
+
+app = typer.Typer(help="Simulated devices that speak the real protocol.", no_args_is_help=True)
+
+
+@app.command("serve")
+def serve(
+    ctx: typer.Context,
+    profile: Annotated[str | None, typer.Argument(
+        metavar="[PROFILE]", help="Catalog name or file; default: --profile.")] = None,
+    host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="TCP port (0: any free port).")] = 0,
+    firmware: Annotated[str, typer.Option(
+        help="Firmware version the device reports, MAJOR.MINOR.")] = "3.0",
+    model_id: Annotated[str | None, typer.Option(
+        help="Emulate another model than the profile's (e.g. 0x3F02), to rehearse a "
+             "mismatch.")] = None,
+    short_version: Annotated[bool, typer.Option(
+        help="Send the short GET_VERSION reply of old firmware.")] = False,
+    input_1: Annotated[bool, typer.Option("--input-1", help="Drive gpio/input_1 high.")]
+        = False,
+) -> None:
+    """Serve a simulated device until Ctrl-C or SIGTERM; prints its endpoint (JSON with --json)."""
+    from deltoctl.sim.delto import DeltoServer, firmware_for_profile
+
+    opts = options(ctx)
+    prof = opts.load_profile(profile)
+    try:
+        major, minor = (int(x) for x in firmware.split("."))
+        model = int(model_id, 0) if model_id else None
+    except ValueError:
+        raise InvalidInput(f"bad --firmware {firmware!r} or --model-id {model_id!r}") from None
+    if not any(prof.family_of(h) == "delto" for h in prof.hardware):
+        raise InvalidInput(f"no simulator for profile {prof.name!r} yet (supported: delto)")
+    device = firmware_for_profile(prof, model_id=model, firmware=(major, minor),
+                                  short_version=short_version)
+    device.input_1 = input_1
+    server = DeltoServer(device, host=host, port=port)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    with server:
+        endpoint = {"profile": prof.name, "endpoint": server.endpoint,
+                    "model": device.model.name, "firmware": firmware}
+        if opts.json:
+            typer.echo(json.dumps(endpoint), nl=True)
+        else:
+            typer.echo(server.endpoint)
+        import sys
+
+        sys.stdout.flush()
+        with contextlib.suppress(KeyboardInterrupt):
+            stop.wait()

@@ -1,0 +1,1 @@
+"""The driver core: lifecycle, sessions on a device, the cycle loop, safety rules."""

@@ -1,0 +1,38 @@
+"""ros2_control's hardware lifecycle: unconfigured → inactive → active → finalized."""
+
+from __future__ import annotations
+
+from deltoctl.errors import DeltoctlError
+
+UNCONFIGURED, INACTIVE, ACTIVE, FINALIZED = "unconfigured", "inactive", "active", "finalized"
+
+_TRANSITIONS = {
+    "configure": (UNCONFIGURED, INACTIVE),
+    "activate": (INACTIVE, ACTIVE),
+    "deactivate": (ACTIVE, INACTIVE),
+    "cleanup": (INACTIVE, UNCONFIGURED),
+    "shutdown": (None, FINALIZED),
+}
+
+
+class Lifecycle:
+    """Tracks the state and the transitions taken; a failed transition goes through on_error
+    back to unconfigured, as ros2_control does."""
+
+    def __init__(self) -> None:
+        self.state = UNCONFIGURED
+        self.history: list[str] = [UNCONFIGURED]
+
+    def transition(self, name: str, action=None):  # type: ignore[no-untyped-def]
+        start, end = _TRANSITIONS[name]
+        if start is not None and self.state != start:
+            raise DeltoctlError(f"cannot {name} from {self.state}")
+        try:
+            result = action() if action else None
+        except BaseException:
+            self.state = UNCONFIGURED
+            self.history.append(f"error→{UNCONFIGURED}")
+            raise
+        self.state = end
+        self.history.append(end)
+        return result

@@ -1,0 +1,92 @@
+"""A session on one device: target resolution, an optional in-process simulator, the driver
+and its lifecycle, and the safe state on the way out (duty 0 / stop), whatever happens."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from deltoctl.core.lifecycle import Lifecycle
+from deltoctl.errors import InvalidInput
+from deltoctl.profile.model import Hardware, Profile
+
+
+def resolve_target(profile: Profile, hw: Hardware, targets: list[str]) -> str:
+    """``--target`` values ``[BUS=]URL`` override the profile's bus URLs."""
+    bus = hw.bus
+    for item in targets:
+        name, found, url = item.partition("=")
+        if found and "://" not in name:
+            if name not in profile.buses:
+                raise InvalidInput(f"--target names unknown bus {name!r} "
+                                   f"(the profile's buses: {', '.join(profile.buses)})")
+            if name == bus:
+                return url
+        else:
+            return item
+    if bus is None or bus not in profile.buses:
+        raise InvalidInput(f"{hw.name!r} has no bus URL: pass --target URL")
+    return profile.buses[bus]
+
+
+class Session:
+    """``with Session(profile, opts) as s: s.driver.read()``."""
+
+    def __init__(self, profile: Profile, targets: list[str], sim: bool = False,
+                 allow_model_mismatch: bool = False, sim_options: dict[str, Any] | None = None):
+        self.profile = profile
+        self.hw = self._driven_block(profile)
+        self.sim = None
+        self.lifecycle = Lifecycle()
+        if sim:
+            self.sim = self._start_sim(sim_options or {})
+            self.url = self.sim.endpoint
+        else:
+            self.url = resolve_target(profile, self.hw, targets)
+        self.driver = self._make_driver(allow_model_mismatch)
+
+    @staticmethod
+    def _driven_block(profile: Profile) -> Hardware:
+        for hw in profile.hardware:
+            if profile.family_of(hw) == "delto":
+                return hw
+        families = sorted({profile.family_of(h) or "none" for h in profile.hardware})
+        raise InvalidInput(f"profile {profile.name!r} has no block deltoctl can drive yet "
+                           f"(families: {', '.join(families)}; supported: delto)")
+
+    def _start_sim(self, options: dict[str, Any]):  # type: ignore[no-untyped-def]
+        from deltoctl.sim.delto import DeltoServer, firmware_for_profile
+
+        return DeltoServer(firmware_for_profile(self.profile, **options)).start()
+
+    def _make_driver(self, allow_model_mismatch: bool):  # type: ignore[no-untyped-def]
+        from deltoctl.drivers.delto.driver import DeltoDriver
+
+        return DeltoDriver(self.profile, self.hw, self.url, allow_model_mismatch)
+
+    def __enter__(self) -> Session:
+        try:
+            self.lifecycle.transition("configure", self.driver.configure)
+            self.lifecycle.transition("activate")
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Leave the device safe, then release it (runs on errors and Ctrl-C too)."""
+        try:
+            if self.lifecycle.state == "active":
+                self.driver.stop()
+                self.lifecycle.transition("deactivate")
+            if self.lifecycle.state == "inactive":
+                self.lifecycle.transition("cleanup", self.driver.cleanup)
+            else:
+                self.driver.cleanup()
+            self.lifecycle.transition("shutdown")
+        finally:
+            if self.sim is not None:
+                self.sim.close()
+                self.sim = None

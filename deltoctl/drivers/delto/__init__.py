@@ -1,0 +1,1 @@
+"""Tesollo Delto grippers: developer-mode TCP protocol (codec), driver and model table."""

@@ -1,0 +1,281 @@
+"""The Delto driver: the codec over a TCP link, mapped to ros2_control interface names.
+
+Packet sizes come from the model the gripper *reports* (a configured model that differs is an
+error unless allowed). A lost link sets ``system/connection_status`` to 0 and starts a
+background reconnect (1 s apart, 10 tries a round, rounds repeating); reads meanwhile return
+the last values and writes are skipped, so a loop keeps its rate and a recording goes on.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from urllib.parse import urlsplit
+
+from deltoctl.drivers.delto import codec
+from deltoctl.drivers.delto.models import (
+    DUTY_WIRE_LIMIT,
+    FT_TYPES,
+    MODELS,
+    SENSOR_NAMES,
+    CurrentLimiter,
+    effort_to_duty_percent,
+    model_label,
+)
+from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput
+from deltoctl.profile.model import Hardware, Profile
+from deltoctl.transport.tcp import TcpLink
+
+VERSION_TIMEOUT = 3.0
+DATA_TIMEOUT = 0.5
+RECONNECT_PERIOD = 1.0
+RECONNECT_TRIES = 10
+
+STATUS = "system/connection_status"
+
+
+@dataclass
+class Identity:
+    configured_model: int
+    reported_model: int
+    firmware: tuple[int, int]
+    sensor_type: int | None
+    finger_mask: int | None
+    short_version: bool
+    direction: tuple[int, ...]
+    direction_map: str
+
+    def as_dict(self) -> dict:
+        return {
+            "configured_model": model_label(self.configured_model),
+            "reported_model": model_label(self.reported_model),
+            "model_match": self.configured_model == self.reported_model,
+            "firmware": f"{self.firmware[0]}.{self.firmware[1]}",
+            "sensor_type": SENSOR_NAMES.get(self.sensor_type, "unknown")
+            if self.sensor_type is not None else None,
+            "finger_mask": self.finger_mask,
+            "short_version_reply": self.short_version,
+            "direction_map": self.direction_map,
+            "direction": list(self.direction),
+        }
+
+
+def parse_tcp_url(url: str) -> tuple[str, int]:
+    parts = urlsplit(url)
+    if parts.scheme != "tcp" or not parts.hostname:
+        raise InvalidInput(f"{url!r} is not a TCP target (expected tcp://HOST:PORT)")
+    try:
+        return parts.hostname, parts.port or 502
+    except ValueError:
+        raise InvalidInput(f"{url!r} has a bad port") from None
+
+
+class DeltoDriver:
+    family = "delto"
+
+    def __init__(self, profile: Profile, hw: Hardware, url: str,
+                 allow_model_mismatch: bool = False) -> None:
+        self.profile, self.hw, self.url = profile, hw, url
+        self.host, self.port = parse_tcp_url(url)
+        try:
+            self.configured_model = int(hw.params.get("delto_model", "0"), 0)
+        except ValueError:
+            raise InvalidInput(f"delto_model {hw.params.get('delto_model')!r} of {hw.name!r} "
+                               "is not a number") from None
+        self.fingertip_sensor = hw.params.get("fingertip_sensor") == "true"
+        self.io = hw.params.get("IO") == "true"
+        self.allow_model_mismatch = allow_model_mismatch
+        self.link: TcpLink | None = None
+        self.identity: Identity | None = None
+        self.model = MODELS.get(self.configured_model)
+        self.codes: tuple[int, ...] = ()
+        self.values: dict[str, float] = {STATUS: 0.0}
+        self.limiters = [CurrentLimiter() for _ in hw.joints]
+        self.warnings: list[str] = []
+        self.stats = {"packets": 0, "errors": 0, "reconnects": 0}
+        self._lock = threading.RLock()
+        self._reconnecting = False
+        self._closed = False
+        self._gpio_out = (False, False, False)
+        self._last_read = 0.0
+
+    # -- lifecycle -----------------------------------------------------------------------------
+    def configure(self) -> Identity:
+        self._connect()
+        assert self.identity is not None
+        return self.identity
+
+    def _connect(self) -> None:
+        link = TcpLink(self.host, self.port, connect_timeout=VERSION_TIMEOUT)
+        try:
+            link.send(codec.encode_version_request())
+            info = codec.decode_version_reply(link.recv_frame(VERSION_TIMEOUT))
+        except DeviceError:
+            link.close()
+            raise
+        actual = MODELS.get(info.model_id)
+        if actual is None:
+            link.close()
+            raise DeviceError(f"the gripper at {self.host}:{self.port} reports an unknown "
+                              f"model {info.model_id:#06x}")
+        if info.model_id != self.configured_model:
+            message = (f"model mismatch: the profile says {model_label(self.configured_model)}"
+                       f", the gripper at {self.host}:{self.port} is {model_label(info.model_id)}")
+            if not self.allow_model_mismatch:
+                link.close()
+                raise DeviceError(message, hint="use the profile for the connected model, "
+                                  "or pass --allow-model-mismatch to go on with the reported one")
+            if message not in self.warnings:
+                self.warnings.append(message + " (allowed; using the reported model)")
+        sensor = info.sensor_type
+        short = sensor is None
+        if short:  # old firmware: assume 6-axis F/T when the profile has fingertip sensors
+            from deltoctl.drivers.delto.models import FT_6AXIS, SENSOR_NONE
+
+            sensor = FT_6AXIS if self.fingertip_sensor else SENSOR_NONE
+        direction = actual.direction(info.firmware)
+        revised = all(d == 1 for d in direction) or actual.revised_from is None
+        with self._lock:
+            self.link = link
+            self.model = actual
+            self.codes = codec.data_codes(actual, self.fingertip_sensor, self.io and actual.gpio)
+            self.identity = Identity(
+                self.configured_model, info.model_id, info.firmware, sensor,
+                info.finger_mask if info.finger_mask is not None
+                else (1 << actual.fingers) - 1, short, direction,
+                "revised" if revised else "legacy")
+            self.values[STATUS] = 1.0
+
+    def cleanup(self) -> None:
+        self._closed = True
+        with self._lock:
+            if self.link:
+                self.link.close()
+                self.link = None
+
+    # -- cyclic I/O ------------------------------------------------------------------------------
+    @property
+    def connected(self) -> bool:
+        return self.values.get(STATUS) == 1.0
+
+    def read(self) -> dict[str, float]:
+        """One GET_DATA exchange; on a lost link, the last values with status 0."""
+        with self._lock:
+            link, model, identity = self.link, self.model, self.identity
+        if link is None or model is None or identity is None:
+            self._start_reconnect()
+            return self.values
+        self.stats["packets"] += 1
+        try:
+            link.send(codec.encode_data_request(self.codes))
+            reply = link.recv_frame(DATA_TIMEOUT)
+            record = codec.decode_data_reply(reply, model, self.codes, identity.sensor_type or 0)
+        except DeviceError as exc:
+            self.stats["errors"] += 1
+            self._lost(exc)
+            return self.values
+        self._store(record)
+        return self.values
+
+    def _store(self, record: codec.DataRecord) -> None:
+        v = self.values
+        now = time.monotonic()
+        dt = now - self._last_read if self._last_read else 0.0
+        self._last_read = now
+        for i, joint in enumerate(self.hw.joints[: len(record.position)]):
+            name = joint.name
+            if record.velocity:
+                v[f"{name}/velocity"] = record.velocity[i]
+                v[f"{name}/temperature"] = record.temperature[i]
+            else:  # the DG-3F-B sends no velocity: differentiate the position
+                previous = v.get(f"{name}/position")
+                v[f"{name}/velocity"] = (record.position[i] - previous) / dt \
+                    if previous is not None and dt > 0 else 0.0
+            v[f"{name}/position"] = record.position[i]
+            v[f"{name}/effort"] = record.current[i]
+        if record.ft and self.identity and self.identity.sensor_type in FT_TYPES:
+            for sensor, values in zip(self.hw.sensors, record.ft):
+                for axis, value in zip(("force.x", "force.y", "force.z",
+                                        "torque.x", "torque.y", "torque.z"), values):
+                    v[f"{sensor.name}/{axis}"] = value
+        if record.gpio is not None:
+            for name, value in zip(("output_1", "output_2", "output_3", "input_1"),
+                                   record.gpio):
+                v[f"gpio/{name}"] = 1.0 if value else 0.0
+        v[STATUS] = 1.0
+
+    def write_efforts(self, efforts: dict[str, float]) -> None:
+        """Effort commands (N·m) → current limiter → duty → direction → SET_DUTY."""
+        if self.identity is None or self.model is None:
+            return
+        duties = []
+        for i, joint in enumerate(self.hw.joints[: self.model.motors]):
+            target = efforts.get(joint.name, 0.0)
+            current = self.values.get(f"{joint.name}/effort", 0.0)
+            limited = self.limiters[i](target, current) if target else 0.0
+            if target and (limited > 0) != (target > 0):
+                limited = 0.0  # the limiter shrinks a command, never reverses it
+            duty = int(effort_to_duty_percent(limited) * 10)
+            duty = max(-DUTY_WIRE_LIMIT, min(DUTY_WIRE_LIMIT, duty))
+            duties.append(duty * self.identity.direction[i])
+        duties += [0] * (self.model.motors - len(duties))
+        self._send(codec.encode_duty(duties))
+
+    def stop(self) -> None:
+        """The safe state: duty 0 on every motor."""
+        if self.model is not None:
+            self._send(codec.encode_duty([0] * self.model.motors))
+
+    def set_gpio(self, outputs: tuple[bool, bool, bool]) -> None:
+        if self.model is None or not self.model.gpio:
+            raise DeviceError(f"{self.model.name if self.model else 'this gripper'} has no GPIO")
+        self._gpio_out = outputs
+        self._send(codec.encode_gpio(outputs))
+
+    def tare_ft(self) -> None:
+        if self.identity is None or self.identity.sensor_type not in FT_TYPES:
+            raise DeviceError("this gripper reports no F/T fingertip sensors")
+        self._send(codec.encode_ft_offset())
+
+    def _send(self, data: bytes) -> None:
+        with self._lock:
+            link = self.link
+        if link is None:
+            return
+        try:
+            link.send(data)
+        except DeviceError as exc:
+            self._lost(exc)
+
+    # -- reconnect -------------------------------------------------------------------------------
+    def _lost(self, exc: Exception) -> None:
+        with self._lock:
+            if self.link is not None:
+                self.link.close()
+                self.link = None
+            self.values[STATUS] = 0.0
+        self._start_reconnect()
+
+    def _start_reconnect(self) -> None:
+        with self._lock:
+            if self._reconnecting or self._closed:
+                return
+            self._reconnecting = True
+        threading.Thread(target=self._reconnect_loop, name="delto-reconnect", daemon=True).start()
+
+    def _reconnect_loop(self) -> None:
+        try:
+            while not self._closed:
+                for _ in range(RECONNECT_TRIES):
+                    time.sleep(RECONNECT_PERIOD)
+                    if self._closed:
+                        return
+                    try:
+                        self._connect()
+                    except DeltoctlError:
+                        continue
+                    self.stats["reconnects"] += 1
+                    return
+        finally:
+            self._reconnecting = False

@@ -1,0 +1,261 @@
+"""A Delto gripper emulator: the developer-mode protocol on a real loopback TCP server.
+
+The firmware model answers GET_VERSION and GET_DATA and obeys SET_DUTY, SET_GPIO and
+SET_FT_SENSOR_OFFSET. Joints are driven by duty through simple dynamics (URDF limits stop
+them), temperatures follow current, fingertip F/T read gravity plus noise plus a drifting
+offset that the tare removes. Faults: dropped connection, stalled joint, delay, truncated frame.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import random
+import socket
+import socketserver
+import threading
+import time
+from dataclasses import dataclass, field
+
+from deltoctl.drivers.delto import codec
+from deltoctl.drivers.delto.models import (
+    FT_6AXIS,
+    FT_TYPES,
+    KT,
+    MAX_VOLTAGE,
+    MODELS,
+    RM,
+    SENSOR_NONE,
+    TACTILE_M,
+    TACTILE_S,
+    DeltoModel,
+)
+from deltoctl.errors import ProtocolError
+
+INERTIA = 0.01  # kg·m², seen at the joint
+DAMPING = 0.5  # N·m·s/rad
+FRICTION = 0.01  # N·m
+FT_NOISE = 0.02  # N (torques: 1/10 of it in N·m)
+FT_DRIFT = 0.005  # N/s, random walk of the sensor offset
+GRAVITY = (0.0, 0.0, -0.49)  # N on each fingertip (50 g)
+
+
+@dataclass
+class Faults:
+    delay: float = 0.0  # s added before every reply
+    truncate_next: bool = False  # cut the next reply short
+    stalled: set[int] = field(default_factory=set)  # motor indexes (0-based) that cannot move
+
+
+class DeltoFirmware:
+    """The device: state and protocol handling, stepped in simulated time."""
+
+    def __init__(self, model: DeltoModel, firmware: tuple[int, int] = (3, 0),
+                 sensor_type: int | None = None, short_version: bool = False,
+                 limits: list[tuple[float, float]] | None = None, seed: int = 0) -> None:
+        self.model = model
+        self.firmware = firmware
+        if sensor_type is None:  # what the model ships with
+            sensor_type = SENSOR_NONE if model.legacy else (
+                TACTILE_S if model.motors == 15 else FT_6AXIS)
+        self.sensor_type = sensor_type
+        self.short_version = short_version
+        n = model.motors
+        self.limits = limits or [(-math.pi / 2, math.pi / 2)] * n
+        self.position = [0.0] * n
+        self.velocity = [0.0] * n
+        self.current = [0.0] * n  # mA
+        self.temperature = [28.0] * n
+        self.duty = [0] * n  # as received, 0.1 %
+        self.gpio_out = [False, False, False]
+        self.input_1 = False
+        self.rng = random.Random(seed)
+        self.ft_offset = [[self.rng.uniform(-2, 2) for _ in range(6)] for _ in range(model.fingers)]
+        self.ft_tare = [[0.0] * 6 for _ in range(model.fingers)]
+        self.faults = Faults()
+        self.direction = model.direction(firmware)  # the motors' wiring for this firmware
+        self.lock = threading.Lock()
+        self.last_step = time.monotonic()
+        self.duty_frames = 0
+
+    # -- simulated time ----------------------------------------------------------------------
+    def advance(self, now: float | None = None) -> None:
+        now = time.monotonic() if now is None else now
+        elapsed = min(now - self.last_step, 5.0)
+        self.last_step = now
+        steps = max(1, min(1000, int(elapsed / 0.001)))
+        dt = elapsed / steps
+        for _ in range(steps):
+            self.step(dt)
+
+    def step(self, dt: float) -> None:
+        for i in range(self.model.motors):
+            duty_pct = self.duty[i] / 10.0 * self.direction[i]
+            torque = duty_pct / 100.0 * MAX_VOLTAGE * KT / RM
+            self.current[i] = torque / KT * 1000.0
+            if i in self.faults.stalled:
+                self.velocity[i] = 0.0
+            else:
+                v = self.velocity[i]
+                drag = DAMPING * v + (math.copysign(FRICTION, v) if v else 0.0)
+                if not v and abs(torque) <= FRICTION:
+                    drag = torque
+                self.velocity[i] = v + (torque - drag) / INERTIA * dt
+                self.position[i] += self.velocity[i] * dt
+                lo, hi = self.limits[i]
+                if self.position[i] <= lo or self.position[i] >= hi:
+                    self.position[i] = min(hi, max(lo, self.position[i]))
+                    self.velocity[i] = 0.0
+            amps = self.current[i] / 1000.0
+            self.temperature[i] += (2.0 * amps * amps - 0.01 * (self.temperature[i] - 25.0)) * dt
+        for offset in self.ft_offset:
+            for k in range(6):
+                offset[k] += self.rng.gauss(0.0, FT_DRIFT * math.sqrt(dt))
+
+    # -- the protocol ------------------------------------------------------------------------
+    def handle(self, data: bytes) -> bytes | None:
+        """One request frame in, the reply frame (or None) out."""
+        with self.lock:
+            self.advance()
+            cmd = data[2]
+            if cmd == codec.GET_VERSION:
+                sensor = None if self.short_version else self.sensor_type
+                mask = (1 << self.model.fingers) - 1
+                return codec.encode_version_reply(codec.VersionInfo(
+                    self.model.id, self.firmware, sensor, mask))
+            if cmd == codec.GET_DATA:
+                codes = codec.decode_data_request(data)
+                return codec.encode_data_reply(self.record(), self.model, codes,
+                                               self.sensor_type)
+            if cmd == codec.SET_DUTY:
+                for motor, duty in codec.decode_duty(data).items():
+                    if 1 <= motor <= self.model.motors:
+                        self.duty[motor - 1] = duty
+                self.duty_frames += 1
+                return None
+            if cmd == codec.SET_GPIO:
+                if self.model.gpio:
+                    self.gpio_out = list(codec.decode_gpio(data))
+                return None
+            if cmd == codec.SET_FT_SENSOR_OFFSET:
+                self.ft_tare = [list(self._ft_raw(f, noise=False)) for f in
+                                range(self.model.fingers)]
+                return None
+            raise ProtocolError(f"unknown command {cmd:#04x}")
+
+    def _ft_raw(self, finger: int, noise: bool = True) -> tuple[float, ...]:
+        values = []
+        for k in range(6):
+            g = GRAVITY[k] if k < 3 else 0.0
+            sigma = FT_NOISE if k < 3 else FT_NOISE / 10
+            values.append(g + self.ft_offset[finger][k]
+                          + (self.rng.gauss(0.0, sigma) if noise else 0.0))
+        return tuple(values)
+
+    def record(self) -> codec.DataRecord:
+        fingers = range(self.model.fingers)
+        ft, tactile = [], []
+        if self.sensor_type in FT_TYPES:
+            ft = [tuple(r - t for r, t in zip(self._ft_raw(f), self.ft_tare[f]))
+                  for f in fingers]
+        elif self.sensor_type == TACTILE_M:
+            tactile = [tuple(self.rng.randrange(0, 8) for _ in range(15)) for _ in fingers]
+        elif self.sensor_type == TACTILE_S:
+            tactile = [tuple(self.rng.randrange(0, 64) for _ in range(18)) for _ in fingers]
+        return codec.DataRecord(
+            position=list(self.position), current=list(self.current),
+            temperature=list(self.temperature), velocity=list(self.velocity), ft=ft,
+            tactile=tactile, gpio=(*self.gpio_out, self.input_1))
+
+
+class _Handler(socketserver.BaseRequestHandler):
+    server: DeltoServer
+
+    def handle(self) -> None:
+        sock: socket.socket = self.request
+        self.server.track(sock, True)
+        reader = codec.FrameReader()
+        firmware = self.server.firmware
+        try:
+            while True:
+                data = sock.recv(4096)
+                if not data:
+                    return
+                for request in reader.feed(data):
+                    reply = firmware.handle(request)
+                    if reply is None:
+                        continue
+                    if firmware.faults.delay:
+                        time.sleep(firmware.faults.delay)
+                    if firmware.faults.truncate_next:
+                        firmware.faults.truncate_next = False
+                        reply = reply[: len(reply) // 2]
+                    sock.sendall(reply)
+        except (OSError, ProtocolError):
+            return
+        finally:
+            self.server.track(sock, False)
+
+
+class DeltoServer(socketserver.ThreadingTCPServer):
+    """``with DeltoServer(firmware) as server: server.endpoint``; serves until closed."""
+
+    daemon_threads = True
+    allow_reuse_address = True
+
+    def __init__(self, firmware: DeltoFirmware, host: str = "127.0.0.1", port: int = 0) -> None:
+        super().__init__((host, port), _Handler)
+        self.firmware = firmware
+        self.clients: set[socket.socket] = set()
+        self._clients_lock = threading.Lock()
+        self._thread = threading.Thread(target=self.serve_forever, name="delto-sim",
+                                        daemon=True)
+
+    @property
+    def endpoint(self) -> str:
+        host, port = self.server_address[:2]
+        return f"tcp://{host}:{port}"
+
+    def start(self) -> DeltoServer:
+        self._thread.start()
+        return self
+
+    def track(self, sock: socket.socket, alive: bool) -> None:
+        with self._clients_lock:
+            (self.clients.add if alive else self.clients.discard)(sock)
+
+    def drop_connections(self) -> None:
+        """Fault: cut every open connection, as a pulled cable or a reboot would."""
+        with self._clients_lock:
+            for sock in list(self.clients):
+                with contextlib.suppress(OSError):
+                    sock.shutdown(socket.SHUT_RDWR)
+                sock.close()
+            self.clients.clear()
+
+    def close(self) -> None:
+        self.shutdown()
+        self.drop_connections()
+        self.server_close()
+
+    def __enter__(self) -> DeltoServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def firmware_for_profile(profile, model_id: int | None = None,  # type: ignore[no-untyped-def]
+                         **kwargs) -> DeltoFirmware:
+    """An emulated gripper for a Delto profile: its model (unless another is asked for, to
+    rehearse a mismatch) and its joint limits."""
+    hw = next(h for h in profile.hardware if profile.family_of(h) == "delto")
+    model = MODELS[model_id or int(hw.params.get("delto_model", "0"), 0)]
+    limits = []
+    for joint in hw.joints:
+        lim = joint.limits
+        lo = lim.lower if lim and lim.lower is not None else -math.pi
+        hi = lim.upper if lim and lim.upper is not None else math.pi
+        limits.append((lo, hi))
+    limits += [(-math.pi, math.pi)] * (model.motors - len(limits))
+    return DeltoFirmware(model, limits=limits[: model.motors], **kwargs)

@@ -1,0 +1,173 @@
+"""Every verb end to end: CLI → driver → real TCP socket → the gripper emulator."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+
+import pytest
+
+from deltoctl.core.session import Session
+from deltoctl.profile.catalog import load_profile
+from deltoctl.sim.delto import DeltoServer, firmware_for_profile
+
+DELTO = ["dg-3f-b", "dg-3f-m", "dg-4f", "dg-5f-left", "dg-5f-right", "dg-5f-s-left",
+         "dg-5f-s-right", "dg-5f-s15-left", "dg-5f-s15-right"]
+
+
+@pytest.fixture
+def gripper():
+    """An emulated gripper for a profile, served on loopback; yields (server, profile name)."""
+    servers = []
+
+    def start(name: str, **options):
+        server = DeltoServer(firmware_for_profile(load_profile(name), **options)).start()
+        servers.append(server)
+        return server
+
+    yield start
+    for server in servers:
+        server.close()
+
+
+@pytest.mark.parametrize("name", DELTO)
+def test_identify_every_model(cli, gripper, name):
+    server = gripper(name)
+    result = cli("-p", name, "-t", server.endpoint, "identify", "--json")
+    assert result.exit_code == 0, result.stderr
+    ident = json.loads(result.stdout)
+    assert ident["model_match"] is True
+    assert ident["reported_model"].startswith(load_profile(name).model)
+    # the emulator reports firmware 3.0: revised everywhere but on the DG-3F-B (from 3.6)
+    assert ident["direction_map"] == ("legacy" if name == "dg-3f-b" else "revised")
+
+
+@pytest.mark.parametrize("name", DELTO)
+def test_connect_detect_and_stream_every_model(cli, name):
+    result = cli("--sim", "-p", name, "connect", "--json", "-n", "3")
+    assert result.exit_code == 0, result.stderr
+    assert json.loads(result.stdout)["lifecycle"][-1] == "finalized"
+    result = cli("--sim", "-p", name, "detect", "--json")
+    assert result.exit_code == 0, result.stderr
+    assert all(c["match"] for c in json.loads(result.stdout)["checks"])
+    result = cli("--sim", "-p", name, "stream", "--json", "--duration", "0.1", "--rate", "40")
+    assert result.exit_code == 0, result.stderr
+    lines = [json.loads(line) for line in result.stdout.splitlines()]
+    assert len(lines) >= 2
+    profile = load_profile(name)
+    assert set(lines[-1]["values"]) == set(profile.state_interfaces()) | {
+        "system/connection_status"}
+    assert all(v is not None for v in lines[-1]["values"].values())
+
+
+def test_stream_selects_interfaces(cli):
+    result = cli("--sim", "-p", "dg-5f-right", "stream", "-d", "0.05",
+                 "-i", "rj_dg_1_*/position", "-i", "right_fingertip_finger_1/force.z")
+    assert result.exit_code == 0
+    names = set(json.loads(result.stdout.splitlines()[0])["values"])
+    assert names == {f"rj_dg_1_{j}/position" for j in range(1, 5)} | {
+        "right_fingertip_finger_1/force.z"}
+    assert cli("--sim", "-p", "dg-5f-right", "stream", "-d", "0.05", "-i", "nope*").exit_code == 2
+
+
+def test_old_firmware_selects_the_legacy_direction_map(cli, gripper):
+    server = gripper("dg-5f-right", firmware=(2, 7))
+    ident = json.loads(cli("-p", "dg-5f-right", "-t", server.endpoint, "identify",
+                           "--json").stdout)
+    assert ident["direction_map"] == "legacy"
+    assert ident["direction"][:4] == [1, 1, -1, -1]
+    # a positive effort still moves joint 3 (wired reversed on this firmware) positive
+    profile = load_profile("dg-5f-right")
+    with Session(profile, [server.endpoint]) as session:
+        session.driver.write_efforts({"rj_dg_1_3": 0.3})
+        time.sleep(0.2)
+        assert server.firmware.duty[2] < 0
+        assert session.driver.read()["rj_dg_1_3/position"] > 0.01
+
+
+def test_short_version_reply_of_old_firmware(cli, gripper):
+    server = gripper("dg-3f-m", firmware=(2, 2), short_version=True)
+    ident = json.loads(cli("-p", "dg-3f-m", "-t", server.endpoint, "identify", "--json").stdout)
+    assert ident["short_version_reply"] is True
+    assert ident["sensor_type"] == "ft_6axis"  # assumed from the profile's fingertip sensors
+    assert ident["direction_map"] == "legacy"
+
+
+def test_model_mismatch_is_a_clear_error_or_a_warning(cli, gripper):
+    server = gripper("dg-5f-right", model_id=0x4F02)
+    result = cli("-p", "dg-5f-right", "-t", server.endpoint, "identify")
+    assert result.exit_code == 1
+    assert "model mismatch" in result.stderr and "DG-4F" in result.stderr
+    assert "--allow-model-mismatch" in result.stderr
+    result = cli("-p", "dg-5f-right", "-t", server.endpoint, "identify", "--json",
+                 "--allow-model-mismatch")
+    assert result.exit_code == 3
+    assert json.loads(result.stdout)["reported_model"] == "DG-4F (0x4f02)"
+
+
+def test_unreachable_device_exits_4(cli):
+    result = cli("-p", "dg-4f", "-t", "tcp://127.0.0.1:9", "identify")
+    assert result.exit_code == 4
+    assert "cannot connect" in result.stderr
+
+
+def test_gpio_get_and_set(cli, gripper):
+    server = gripper("dg-5f-right")
+    server.firmware.input_1 = True
+    target = ("-p", "dg-5f-right", "-t", server.endpoint)
+    state = json.loads(cli(*target, "gpio", "get", "--json").stdout)
+    assert state == {"output_1": False, "output_2": False, "output_3": False, "input_1": True}
+    result = cli(*target, "gpio", "set", "output_2", "on", "--json")
+    assert result.exit_code == 0, result.stderr
+    assert server.firmware.gpio_out == [False, True, False]
+    cli(*target, "gpio", "set", "output_1", "on")
+    assert server.firmware.gpio_out == [True, True, False]  # the others keep their state
+    assert cli(*target, "gpio", "set", "output_9", "on").exit_code == 2
+    assert cli("--sim", "-p", "dg-5f-s15-right", "gpio", "get").exit_code == 1
+
+
+def test_reconnect_after_the_link_drops(gripper):
+    server = gripper("dg-5f-right")
+    profile = load_profile("dg-5f-right")
+    statuses = []
+    with Session(profile, [server.endpoint]) as session:
+        driver = session.driver
+        statuses.append(driver.read()["system/connection_status"])
+        server.drop_connections()
+        deadline = time.monotonic() + 5
+        seen_down = False
+        while time.monotonic() < deadline:
+            status = driver.read()["system/connection_status"]
+            seen_down = seen_down or status == 0.0
+            if seen_down and status == 1.0:
+                break
+            time.sleep(0.05)
+        statuses.append(status)
+    assert seen_down and statuses == [1.0, 1.0]
+    assert driver.stats["reconnects"] == 1
+
+
+def test_leaving_a_session_sets_duty_zero(gripper):
+    server = gripper("dg-5f-right")
+    with Session(load_profile("dg-5f-right"), [server.endpoint]) as session:
+        session.driver.write_efforts({"rj_dg_2_2": 0.5})
+        session.driver.read()
+        assert server.firmware.duty[5] != 0
+    time.sleep(0.05)
+    assert server.firmware.duty == [0] * 20
+
+
+def test_sim_serve_in_another_process(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "deltoctl", "sim", "serve", "dg-5f-left",
+                             "--json"], stdout=subprocess.PIPE, text=True)
+    try:
+        endpoint = json.loads(proc.stdout.readline())["endpoint"]
+        out = subprocess.run([sys.executable, "-m", "deltoctl", "-p", "dg-5f-left", "-t",
+                              endpoint, "identify", "--json"], capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        assert json.loads(out.stdout)["reported_model"] == "DG-5F-L (0x5f12)"
+    finally:
+        proc.terminate()
+        assert proc.wait(timeout=5) == 0
