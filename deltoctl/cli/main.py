@@ -139,10 +139,11 @@ def root(
 
 
 def _register() -> None:
-    from deltoctl.cli import completion_cmd, device_cmd, profile_cmd, sim_cmd
+    from deltoctl.cli import completion_cmd, device_cmd, motion_cmd, profile_cmd, sim_cmd
 
     app.add_typer(profile_cmd.app, name="profile")
     device_cmd.register(app)
+    motion_cmd.register(app)
     app.add_typer(sim_cmd.app, name="sim")
     completion_cmd.register(app)
 

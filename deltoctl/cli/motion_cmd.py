@@ -1,0 +1,143 @@
+"""Motion verbs: home and jog. Confirmation on a terminal unless --yes; refused (exit 5)
+outside limits or without confirmation; duty 0 on the way out, Ctrl-C included."""
+
+import math
+import signal
+import sys
+from typing import Annotated
+
+import typer
+
+from deltoctl.cli.context import Options, options
+from deltoctl.cli.device_cmd import AllowMismatch, _finish, open_session
+from deltoctl.cli.output import emit_json, info
+from deltoctl.errors import DeviceError, InvalidInput, Refused
+from deltoctl.units import parse_quantity
+
+
+def register(app: typer.Typer) -> None:
+    app.command("home")(home)
+    # negative deltas (`jog J -5deg`) are arguments, not unknown options
+    app.command("jog", context_settings={"ignore_unknown_options": True})(jog)
+
+
+def _confirm(opts: Options, what: str) -> None:
+    if opts.yes:
+        return
+    if not sys.stdin.isatty():
+        raise Refused(f"{what}: motion needs confirmation; pass --yes to move without asking")
+    if not typer.confirm(f"{what}. Move?", default=False, err=True):
+        raise Refused("not confirmed; nothing moved")
+
+
+def _quantity(text: str, what: str) -> float:
+    try:
+        return parse_quantity(text)
+    except ValueError as exc:
+        raise InvalidInput(f"{what}: {exc}") from None
+
+
+def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
+    from deltoctl.cli.profile_cmd import complete_part
+
+    return complete_part(ctx, incomplete)
+
+
+def _progress(opts: Options, label: str):  # type: ignore[no-untyped-def]
+    """A rich progress bar on stderr for people; nothing for scripts."""
+    if opts.json or opts.quiet or not sys.stderr.isatty():
+        return None, None
+    from rich.progress import Progress
+
+    bar = Progress(transient=True)
+    task = bar.add_task(label, total=1.0)
+    bar.start()
+    return bar, lambda fraction: bar.update(task, completed=fraction)
+
+
+def _move(opts: Options, session, targets: dict[str, float], velocity, label: str):  # type: ignore[no-untyped-def]
+    from deltoctl.core.motion import move_to
+
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    bar, progress = _progress(opts, label)
+    try:
+        result = move_to(session.driver, targets, session.profile, velocity=velocity,
+                         progress=progress)
+    finally:
+        session.driver.stop()
+        if bar is not None:
+            bar.stop()
+    values = session.driver.read()
+    report = {
+        "settled": result.settled,
+        "seconds": round(result.seconds, 3),
+        "targets": targets,
+        "positions": {j: values[f"{j}/position"] for j in targets},
+        "unsettled": result.unsettled,
+    }
+    if opts.json:
+        emit_json(report)
+    elif not opts.quiet:
+        info(f"{label}: {'settled' if result.settled else 'did not settle'} in "
+             f"{result.seconds:.2f} s")
+    if not result.settled:
+        raise DeviceError(f"{len(result.unsettled)} joint(s) did not settle: "
+                          f"{', '.join(result.unsettled)}")
+
+
+def home(
+    ctx: typer.Context,
+    velocity: Annotated[str | None, typer.Option(
+        "--velocity", help="Setpoint speed, e.g. 0.5 or 20deg (per second).")] = None,
+    allow_model_mismatch: AllowMismatch = False,
+) -> None:
+    """Drive every joint to the profile's home pose (zero unless the profile says otherwise)."""
+    from deltoctl.core.motion import check_target
+
+    opts = options(ctx)
+    profile = opts.load_profile()
+    joints = [j for j in profile.joints() if j.command("effort")]
+    targets = {j.name: profile.safety.home_pose.get(j.name, 0.0) for j in joints}
+    for joint in joints:
+        check_target(profile, joint, targets[joint.name], None)
+    speed = _quantity(velocity, "--velocity") if velocity else None
+    _confirm(opts, f"home {len(targets)} joints of {profile.name}")
+    with open_session(opts, allow_model_mismatch) as session:
+        _move(opts, session, targets, speed, "home")
+    _finish(session)
+
+
+def jog(
+    ctx: typer.Context,
+    joint: Annotated[str, typer.Argument(autocompletion=_complete_joint,
+                                         help="The joint to move.")],
+    delta: Annotated[str | None, typer.Argument(
+        help="Relative move, e.g. 0.1, -5deg.")] = None,
+    to: Annotated[str | None, typer.Option("--to", help="Absolute target instead.")] = None,
+    velocity: Annotated[str | None, typer.Option(
+        "--velocity", help="Setpoint speed, e.g. 0.5 or 20deg (per second).")] = None,
+    allow_model_mismatch: AllowMismatch = False,
+) -> None:
+    """Move one joint by DELTA (or --to POS), within its limits and the profile's jog step."""
+    from deltoctl.core.motion import check_target
+
+    opts = options(ctx)
+    profile = opts.load_profile()
+    comp = profile.component(joint)
+    if comp is None or comp.kind != "joint":
+        raise InvalidInput(f"{profile.name} has no joint {joint!r}")
+    if comp.command("effort") is None:
+        raise InvalidInput(f"{joint} has no effort command interface to move it with")
+    if (delta is None) == (to is None):
+        raise InvalidInput("give either DELTA or --to POS")
+    speed = _quantity(velocity, "--velocity") if velocity else None
+    if speed is not None and speed <= 0:
+        raise InvalidInput("--velocity must be positive")
+    with open_session(opts, allow_model_mismatch) as session:
+        start = session.driver.read()[f"{joint}/position"]
+        target = _quantity(to, "--to") if to is not None else start + _quantity(delta, "DELTA")
+        check_target(profile, comp, target, start)
+        _confirm(opts, f"jog {joint} from {start:.4f} to {target:.4f} "
+                       f"({math.degrees(target - start):+.1f}°)")
+        _move(opts, session, {joint: target}, speed, f"jog {joint}")
+    _finish(session)
