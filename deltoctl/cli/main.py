@@ -139,11 +139,19 @@ def root(
 
 
 def _register() -> None:
-    from deltoctl.cli import completion_cmd, device_cmd, motion_cmd, profile_cmd, sim_cmd
+    from deltoctl.cli import (
+        completion_cmd,
+        device_cmd,
+        motion_cmd,
+        profile_cmd,
+        record_cmd,
+        sim_cmd,
+    )
 
     app.add_typer(profile_cmd.app, name="profile")
     device_cmd.register(app)
     motion_cmd.register(app)
+    app.command("record")(record_cmd.record)
     app.add_typer(sim_cmd.app, name="sim")
     completion_cmd.register(app)
 

@@ -1,0 +1,72 @@
+"""The fixed-rate cycle loop: deadlines, lateness percentiles and communication statistics."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+
+@dataclass
+class LoopStats:
+    rate: float  # requested, Hz
+    cycles: int = 0
+    deadline_misses: int = 0  # a cycle that started a whole period late
+    lateness: list[float] = field(default_factory=list)  # s, actual − scheduled start
+    started: float = field(default_factory=time.monotonic)
+    packets: int = 0
+    errors: int = 0
+
+    def percentile(self, q: float) -> float:
+        if not self.lateness:
+            return 0.0
+        ordered = sorted(self.lateness)
+        return ordered[min(len(ordered) - 1, int(q / 100 * len(ordered)))]
+
+    def summary(self) -> dict[str, float | int]:
+        elapsed = max(time.monotonic() - self.started, 1e-9)
+        return {
+            "requested_rate": self.rate,
+            "real_rate": round(self.cycles / elapsed, 2),
+            "cycles": self.cycles,
+            "deadline_misses": self.deadline_misses,
+            "lateness_p50_ms": round(self.percentile(50) * 1e3, 4),
+            "lateness_p99_ms": round(self.percentile(99) * 1e3, 4),
+            "packets": self.packets,
+            "errors": self.errors,
+            "error_rate_perc": round(100 * self.errors / self.packets, 3) if self.packets else 0.0,
+        }
+
+
+class CycleLoop:
+    """``for t in CycleLoop(rate, duration): ...`` yields each cycle's scheduled start.
+
+    A cycle late by a whole period is counted as a deadline miss and the schedule restarts
+    from now, so one stall does not cause a burst of catch-up cycles. ``rate=0``: unpaced.
+    """
+
+    def __init__(self, rate: float, duration: float | None = None) -> None:
+        self.rate = rate
+        self.duration = duration
+        self.stats = LoopStats(rate)
+
+    def __iter__(self):  # type: ignore[no-untyped-def]
+        period = 1.0 / self.rate if self.rate > 0 else 0.0
+        start = time.monotonic()
+        self.stats.started = start
+        scheduled = start
+        end = None if self.duration is None else start + self.duration
+        while end is None or scheduled < end:
+            now = time.monotonic()
+            if period:
+                wait = scheduled - now
+                if wait > 0:
+                    time.sleep(wait)
+                    now = time.monotonic()
+                late = now - scheduled
+                self.stats.lateness.append(late)
+                if late > period:
+                    self.stats.deadline_misses += 1
+                    scheduled = now
+            self.stats.cycles += 1
+            yield scheduled
+            scheduled = scheduled + period if period else time.monotonic()

@@ -1,0 +1,103 @@
+"""record: MCAP in ROS 2 encoding that decodes, ends validly on SIGTERM, marks link losses."""
+
+from __future__ import annotations
+
+import collections
+import json
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+from deltoctl.profile.catalog import load_profile
+from deltoctl.sim.delto import DeltoServer, firmware_for_profile
+
+
+def _messages(path, topics=None):
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _, channel, _, msg in reader.iter_decoded_messages(topics=topics):
+            yield channel.topic, msg
+
+
+def _topics(path):
+    counts = collections.Counter()
+    last = {}
+    for topic, msg in _messages(path):
+        counts[topic] += 1
+        last[topic] = msg
+    return counts, last
+
+
+def test_record_decodes_with_expected_counts(cli, tmp_path):
+    out = tmp_path / "right.mcap"
+    result = cli("--sim", "-p", "dg-5f-right", "record", str(out), "--duration", "0.5",
+                 "--rate", "40", "--json")
+    assert result.exit_code == 0, result.stderr
+    report = json.loads(result.stdout)
+    n = report["loop"]["cycles"]
+    assert 15 <= n <= 21
+    counts, last = _topics(out)
+    assert counts["/joint_states"] == counts["/gpio"] == counts["/dynamic_joint_states"] == n
+    for f in range(1, 6):
+        assert counts[f"/right_fingertip_finger_{f}/wrench"] == n
+    assert counts["/diagnostics"] >= 1
+    js = last["/joint_states"]
+    assert list(js.name) == [f"rj_dg_{f}_{j}" for f in range(1, 6) for j in range(1, 5)]
+    dyn = last["/dynamic_joint_states"]
+    assert list(dyn.interface_values[0].interface_names) == [
+        "position", "velocity", "effort", "temperature"]
+    assert 20 < dyn.interface_values[0].values[3] < 40  # °C
+    gpio = last["/gpio"]
+    assert list(gpio.interface_groups) == ["gpio", "system"]
+    assert list(gpio.interface_values[1].values) == [1.0]
+    assert abs(last["/right_fingertip_finger_1/wrench"].wrench.force.z) < 10
+    with out.open("rb") as f:
+        reader = make_reader(f)
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+        assert reader.get_summary().statistics.message_count == sum(counts.values())
+    assert meta["profile"]["name"] == "dg-5f-right"
+    assert "rj_dg_1_1" in meta["profile"]["yaml"]
+    assert meta["identify"]["reported_model"] == "DG-5F-R (0x5f22)"
+
+
+def test_sigterm_leaves_a_valid_indexed_file(tmp_path):
+    out = tmp_path / "term.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "deltoctl", "--sim", "-p", "dg-4f", "record",
+                             str(out), "--rate", "50"], stderr=subprocess.PIPE, text=True)
+    time.sleep(1.5)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=10)
+    assert proc.returncode == 0, err
+    with out.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics.message_count > 0
+    counts, _ = _topics(out)
+    assert counts["/fingertip_finger_4/wrench"] == counts["/joint_states"] > 0
+
+
+def test_link_loss_is_marked_and_the_recording_goes_on(cli, tmp_path):
+    out = tmp_path / "lossy.mcap"
+    with DeltoServer(firmware_for_profile(load_profile("dg-5f-right"))) as server:
+        timer = threading.Timer(0.4, server.drop_connections)
+        timer.start()
+        result = cli("-p", "dg-5f-right", "-t", server.endpoint, "record", str(out),
+                     "--duration", "3", "--rate", "50")
+        timer.join()
+    assert result.exit_code == 3, result.stderr
+    assert "link was lost 1 time" in result.stderr
+    messages = [m for _, m in _messages(out, ["/diagnostics"])]
+    events = [s.message for m in messages for s in m.status if s.name == "deltoctl/link"]
+    assert events == ["link lost", "link restored"]
+    statuses = [m.interface_values[-1].values[0] for _, m in _messages(out, ["/gpio"])]
+    assert statuses[0] == 1.0 and 0.0 in statuses and statuses[-1] == 1.0
+
+
+def test_record_to_an_unwritable_path(cli):
+    result = cli("--sim", "-p", "dg-4f", "record", "/nonexistent/dir/x.mcap", "-d", "0.1")
+    assert result.exit_code == 2
+    assert "cannot write" in result.stderr
