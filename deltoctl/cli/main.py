@@ -140,6 +140,7 @@ def root(
 
 def _register() -> None:
     from deltoctl.cli import (
+        calibrate_cmd,
         completion_cmd,
         device_cmd,
         motion_cmd,
@@ -151,6 +152,7 @@ def _register() -> None:
     app.add_typer(profile_cmd.app, name="profile")
     device_cmd.register(app)
     motion_cmd.register(app)
+    app.add_typer(calibrate_cmd.app, name="calibrate")
     app.command("record")(record_cmd.record)
     app.add_typer(sim_cmd.app, name="sim")
     completion_cmd.register(app)

@@ -38,6 +38,7 @@ FRICTION = 0.01  # N·m
 FT_NOISE = 0.02  # N (torques: 1/10 of it in N·m)
 FT_DRIFT = 0.005  # N/s, random walk of the sensor offset
 GRAVITY = (0.0, 0.0, -0.49)  # N on each fingertip (50 g)
+FT_OFFSET_FROM = (2, 3)  # firmware that added SET_FT_SENSOR_OFFSET
 
 
 @dataclass
@@ -138,6 +139,8 @@ class DeltoFirmware:
                     self.gpio_out = list(codec.decode_gpio(data))
                 return None
             if cmd == codec.SET_FT_SENSOR_OFFSET:
+                if self.firmware < FT_OFFSET_FROM:
+                    return None  # firmware before 2.3 has no OFFSET command
                 self.ft_tare = [list(self._ft_raw(f, noise=False)) for f in
                                 range(self.model.fingers)]
                 return None
