@@ -95,40 +95,19 @@ def identify(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) ->
 
 
 def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
-    """Sensor type, finger mask and GPIO, compared with the profile."""
-    from deltoctl.drivers.delto.models import FT_TYPES, SENSOR_NAMES
-
+    """Sensors and GPIO as the device reports them, compared with the profile."""
     opts = options(ctx)
     with open_session(opts, allow_model_mismatch) as session:
-        driver = session.driver
-        values = dict(driver.read())
-        ident = driver.identity
-        model = driver.model
-    hw = session.hw
-    profile_ft = [s.name for s in hw.sensors]
-    reported_ft = ident.sensor_type in FT_TYPES
-    fingers = [f + 1 for f in range(model.fingers) if ident.finger_mask >> f & 1]
-    checks = [
-        {"what": "fingertip F/T sensors", "profile": len(profile_ft),
-         "device": model.fingers if reported_ft else 0},
-        {"what": "GPIO", "profile": bool(hw.gpios), "device": "gpio/input_1" in values},
-    ]
-    for c in checks:
-        c["match"] = c["profile"] == c["device"]
-    result = {
-        "sensor_type": SENSOR_NAMES.get(ident.sensor_type, "unknown"),
-        "fingers_with_sensor": fingers,
-        "gpio": {k.split("/")[1]: v for k, v in values.items() if k.startswith("gpio/")},
-        "checks": checks,
-    }
+        result = session.driver.detect()
+    checks = result["checks"]
     if opts.json:
-        emit_json(result)
+        emit_json({k: v for k, v in result.items() if k != "summary"})
     else:
-        info(f"sensor type {result['sensor_type']}, fingers with a sensor: "
-             f"{', '.join(map(str, fingers)) or 'none'}")
-        table(None, ["check", "profile", "device", "match"],
-              [[c["what"], c["profile"], c["device"], "yes" if c["match"] else "NO"]
-               for c in checks])
+        info(result["summary"])
+        if checks:
+            table(None, ["check", "profile", "device", "match"],
+                  [[c["what"], c["profile"], c["device"], "yes" if c["match"] else "NO"]
+                   for c in checks])
     mismatches = [c["what"] for c in checks if not c["match"]]
     if mismatches:
         info(f"warning: the device differs from the profile in: {', '.join(mismatches)}")
@@ -136,57 +115,54 @@ def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> N
     _finish(session)
 
 
-_ON = {"on": True, "1": True, "true": True, "off": False, "0": False, "false": False}
-OUTPUTS = ("output_1", "output_2", "output_3")
+def _gpio_names(profile: Any) -> list[str]:
+    return [n for _, c in profile.components() if c.kind == "gpio"
+            for n in c.interface_names("state")]
 
 
 def gpio_get(ctx: typer.Context) -> None:
-    """Read the outputs and the input."""
+    """Read every GPIO state interface."""
     opts = options(ctx)
     with open_session(opts) as session:
         values = session.driver.read()
-    gpio = {k.split("/")[1]: bool(v) for k, v in values.items() if k.startswith("gpio/")}
-    if not gpio:
-        raise DeviceError("the device sends no GPIO block (no GPIO on this model, or IO is "
+        names = [n for n in _gpio_names(session.profile) if n in values]
+    if not names:
+        raise DeviceError("the device sends no GPIO values (no GPIO on this model, or IO is "
                           "false in the profile)")
+    gpio = {n: values[n] for n in names}
     if opts.json:
         emit_json(gpio)
     else:
-        table(None, ["interface", "value"], [[f"gpio/{k}", "on" if v else "off"]
-                                             for k, v in gpio.items()])
+        table(None, ["interface", "value"], [[n, f"{v:g}"] for n, v in gpio.items()])
+
+
+_ON = {"on": 1.0, "true": 1.0, "off": 0.0, "false": 0.0}
 
 
 def gpio_set(
     ctx: typer.Context,
-    name: Annotated[str, typer.Argument(help="output_1 (motor on), output_2 (grasp) or "
-                                        "output_3 (release).")],
-    state: Annotated[str, typer.Argument(help="on or off.")],
+    name: Annotated[str, typer.Argument(help="A GPIO command interface, e.g. output_2 or "
+                                        "gpio/output_2 (Delto: motor on, grasp, release), "
+                                        "flange_vacuum/vacuum.")],
+    value: Annotated[str, typer.Argument(help="on, off or a number.")],
 ) -> None:
-    """Set one output; the three outputs always travel together, the others keep their state."""
+    """Set one GPIO output and read it back (a Delto's three outputs travel together)."""
     opts = options(ctx)
-    name = name.removeprefix("gpio/")
-    if name not in OUTPUTS:
-        raise InvalidInput(f"unknown output {name!r} (expected one of: {', '.join(OUTPUTS)})")
-    if state.lower() not in _ON:
-        raise InvalidInput(f"state must be on or off, got {state!r}")
+    try:
+        number = _ON[value.lower()] if value.lower() in _ON else float(value)
+    except ValueError:
+        raise InvalidInput(f"value must be on, off or a number, got {value!r}") from None
     with open_session(opts) as session:
-        driver = session.driver
-        values = driver.read()
-        if "gpio/input_1" not in values:
-            raise DeviceError("the device sends no GPIO block (no GPIO on this model, or IO is "
-                              "false in the profile)")
-        outputs = [values[f"gpio/{o}"] == 1.0 for o in OUTPUTS]
-        outputs[OUTPUTS.index(name)] = _ON[state.lower()]
-        driver.set_gpio((outputs[0], outputs[1], outputs[2]))
-        after = driver.read()
-    got = after.get(f"gpio/{name}") == 1.0
-    if got != _ON[state.lower()]:
-        raise DeviceError(f"gpio/{name} reads back {'on' if got else 'off'} after setting it")
-    result = {f"gpio/{o}": after[f"gpio/{o}"] == 1.0 for o in (*OUTPUTS, "input_1")}
+        full = name if "/" in name else f"gpio/{name}"
+        session.driver.set_command(full, number)
+        after = dict(session.driver.read())
+        names = _gpio_names(session.profile)
+    if full in after and after[full] != number:
+        raise DeviceError(f"{full} reads back {after[full]:g} after setting it to {number:g}")
     if opts.json:
-        emit_json(result)
+        emit_json({n: after[n] for n in names if n in after})
     elif not opts.quiet:
-        info(f"gpio/{name} is {state.lower()}")
+        info(f"{full} = {number:g}")
 
 
 def _select(names: list[str], patterns: list[str]) -> list[str]:

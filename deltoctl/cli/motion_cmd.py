@@ -56,13 +56,17 @@ def _progress(opts: Options, label: str):  # type: ignore[no-untyped-def]
 
 
 def _move(opts: Options, session, targets: dict[str, float], velocity, label: str):  # type: ignore[no-untyped-def]
-    from deltoctl.core.motion import move_to
+    from deltoctl.core.motion import MoveResult, move_to
 
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     bar, progress = _progress(opts, label)
     try:
-        result = move_to(session.driver, targets, session.profile, velocity=velocity,
-                         progress=progress)
+        if session.driver.family == "generic":  # position commands, mirrored at once
+            session.driver.write_positions(targets)
+            result = MoveResult(True, 0.0, {j: 0.0 for j in targets}, [])
+        else:
+            result = move_to(session.driver, targets, session.profile, velocity=velocity,
+                             progress=progress)
     finally:
         session.driver.stop()
         if bar is not None:
@@ -96,7 +100,7 @@ def home(
 
     opts = options(ctx)
     profile = opts.load_profile()
-    joints = [j for j in profile.joints() if j.command("effort")]
+    joints = [j for j in profile.joints() if j.command("effort") or j.command("position")]
     targets = {j.name: profile.safety.home_pose.get(j.name, 0.0) for j in joints}
     for joint in joints:
         check_target(profile, joint, targets[joint.name], None)
@@ -126,8 +130,8 @@ def jog(
     comp = profile.component(joint)
     if comp is None or comp.kind != "joint":
         raise InvalidInput(f"{profile.name} has no joint {joint!r}")
-    if comp.command("effort") is None:
-        raise InvalidInput(f"{joint} has no effort command interface to move it with")
+    if comp.command("effort") is None and comp.command("position") is None:
+        raise InvalidInput(f"{joint} has no effort or position command interface to move it")
     if (delta is None) == (to is None):
         raise InvalidInput("give either DELTA or --to POS")
     speed = _quantity(velocity, "--velocity") if velocity else None

@@ -37,6 +37,13 @@ class Session:
         self.hw = self._driven_block(profile)
         self.sim = None
         self.lifecycle = Lifecycle()
+        if profile.family_of(self.hw) == "generic":  # simulated only: no transport
+            from deltoctl.drivers.generic.driver import GenericDriver
+
+            self.url = "mock://" + profile.name
+            self.driver = GenericDriver(profile, [h for h in profile.hardware
+                                                  if profile.family_of(h) == "generic"])
+            return
         if sim:
             self.sim = self._start_sim(sim_options or {})
             self.url = self.sim.endpoint
@@ -47,11 +54,11 @@ class Session:
     @staticmethod
     def _driven_block(profile: Profile) -> Hardware:
         for hw in profile.hardware:
-            if profile.family_of(hw) == "delto":
+            if profile.family_of(hw) in ("delto", "generic"):
                 return hw
         families = sorted({profile.family_of(h) or "none" for h in profile.hardware})
         raise InvalidInput(f"profile {profile.name!r} has no block deltoctl can drive yet "
-                           f"(families: {', '.join(families)}; supported: delto)")
+                           f"(families: {', '.join(families)}; supported: delto, generic)")
 
     def _start_sim(self, options: dict[str, Any]):  # type: ignore[no-untyped-def]
         from deltoctl.sim.delto import DeltoServer, firmware_for_profile

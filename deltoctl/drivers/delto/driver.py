@@ -147,6 +147,44 @@ class DeltoDriver:
                 "revised" if revised else "legacy")
             self.values[STATUS] = 1.0
 
+    def detect(self) -> dict:
+        """Sensors, finger mask and GPIO as the gripper reports them, against the profile."""
+        values = dict(self.read())
+        ident, model = self.identity, self.model
+        assert ident is not None and model is not None
+        fingers = [f + 1 for f in range(model.fingers) if (ident.finger_mask or 0) >> f & 1]
+        reported_ft = ident.sensor_type in FT_TYPES
+        checks = [
+            {"what": "fingertip F/T sensors", "profile": len(self.hw.sensors),
+             "device": model.fingers if reported_ft else 0},
+            {"what": "GPIO", "profile": bool(self.hw.gpios), "device": "gpio/input_1" in values},
+        ]
+        for c in checks:
+            c["match"] = c["profile"] == c["device"]
+        sensor = SENSOR_NAMES.get(ident.sensor_type or 0, "unknown")
+        return {
+            "sensor_type": sensor,
+            "fingers_with_sensor": fingers,
+            "gpio": {k.split("/")[1]: v for k, v in values.items() if k.startswith("gpio/")},
+            "checks": checks,
+            "summary": f"sensor type {sensor}, fingers with a sensor: "
+                       f"{', '.join(map(str, fingers)) or 'none'}",
+        }
+
+    def set_command(self, name: str, value: float) -> None:
+        """GPIO outputs by interface name; the three always travel together."""
+        outputs = ("gpio/output_1", "gpio/output_2", "gpio/output_3")
+        if name not in outputs:
+            raise InvalidInput(f"{name} is not a command interface of this gripper "
+                               f"(commands: {', '.join(outputs)})")
+        values = self.read()
+        if "gpio/input_1" not in values:
+            raise DeviceError("the gripper sends no GPIO block (no GPIO on this model, or IO "
+                              "is false in the profile)")
+        state = [values[o] == 1.0 for o in outputs]
+        state[outputs.index(name)] = value != 0
+        self.set_gpio((state[0], state[1], state[2]))
+
     def cleanup(self) -> None:
         self._closed = True
         with self._lock:

@@ -1,0 +1,1 @@
+"""Profiles with no hardware protocol: ros2_control's mock_components/GenericSystem."""

@@ -1,0 +1,116 @@
+"""The behaviour of ros2_control's ``mock_components/GenericSystem``, for profiles that have no
+wire protocol (the ros2_control ``<gpio>`` examples).
+
+Commands are mirrored to the state interfaces of the same name (plus
+``position_state_following_offset`` on position, or on ``custom_interface_with_following_offset``);
+states start at their ``initial_value``; ``mock_gpio_commands`` and ``mock_sensor_commands``
+add command interfaces to inject GPIO and sensor readings; ``disable_commands`` stops the
+mirroring; ``calculate_dynamics`` derives velocity from position commands and integrates
+velocity commands.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+from deltoctl.errors import InvalidInput
+from deltoctl.profile.model import Hardware, Profile
+
+STATUS = "system/connection_status"
+
+
+def _flag(hw: Hardware, name: str) -> bool:
+    return hw.params.get(name, "false").lower() == "true"
+
+
+@dataclass
+class GenericIdentity:
+    blocks: list[dict]
+
+    def as_dict(self) -> dict:
+        return {"family": "generic", "plugin": "mock_components/GenericSystem",
+                "blocks": self.blocks}
+
+
+class GenericDriver:
+    family = "generic"
+
+    def __init__(self, profile: Profile, blocks: list[Hardware]) -> None:
+        self.profile = profile
+        self.blocks = blocks
+        self.values: dict[str, float] = {STATUS: 1.0}
+        self.commands: dict[str, Hardware] = {}  # command interface → its block
+        self.stats = {"packets": 0, "errors": 0, "reconnects": 0}
+        self.warnings: list[str] = []
+        self.identity: GenericIdentity | None = None
+        self.connected = True
+        self._last_write: dict[str, float] = {}
+
+    def configure(self) -> GenericIdentity:
+        for hw in self.blocks:
+            gpio_cmds, sensor_cmds = _flag(hw, "mock_gpio_commands"), _flag(hw,
+                                                                           "mock_sensor_commands")
+            for comp in hw.components():
+                for itf in comp.state_interfaces:
+                    initial = itf.initial_value
+                    try:
+                        value = float(initial) if initial is not None else 0.0
+                    except ValueError:
+                        value = 1.0 if initial.lower() == "true" else 0.0
+                    self.values[f"{comp.name}/{itf.name}"] = value
+                    if (comp.kind == "gpio" and gpio_cmds) or (comp.kind == "sensor"
+                                                               and sensor_cmds):
+                        self.commands[f"{comp.name}/{itf.name}"] = hw
+                for itf in comp.command_interfaces:
+                    self.commands[f"{comp.name}/{itf.name}"] = hw
+        self.identity = GenericIdentity([
+            {"name": hw.name, "type": hw.type, "params": dict(hw.params)} for hw in self.blocks])
+        return self.identity
+
+    def read(self) -> dict[str, float]:
+        self.stats["packets"] += 1
+        return self.values
+
+    def set_command(self, name: str, value: float) -> None:
+        hw = self.commands.get(name)
+        if hw is None:
+            raise InvalidInput(f"{name} is not a command interface of {self.profile.name} "
+                               f"(commands: {', '.join(sorted(self.commands))})")
+        if _flag(hw, "disable_commands"):
+            return
+        comp_name, _, itf = name.rpartition("/")
+        now = time.monotonic()
+        offset = float(hw.params.get("position_state_following_offset", "0") or 0)
+        custom = hw.params.get("custom_interface_with_following_offset", "")
+        target = itf
+        if itf == "position" and offset and custom:
+            target = custom
+        elif itf != "position":
+            offset = 0.0
+        if _flag(hw, "calculate_dynamics") and itf in ("position", "velocity"):
+            dt = now - self._last_write.get(name, now)
+            previous = self.values.get(f"{comp_name}/position", 0.0)
+            if itf == "position":
+                self.values[f"{comp_name}/velocity"] = (value - previous) / dt if dt > 0 else 0.0
+            else:
+                self.values[f"{comp_name}/position"] = previous + value * dt
+        self._last_write[name] = now
+        if f"{comp_name}/{target}" in self.values:
+            self.values[f"{comp_name}/{target}"] = value + offset
+
+    def write_positions(self, positions: dict[str, float]) -> None:
+        for joint, value in positions.items():
+            self.set_command(f"{joint}/position", value)
+
+    def detect(self) -> dict:
+        parts = [{"name": c.name, "kind": c.kind,
+                  "states": [i.name for i in c.state_interfaces]}
+                 for hw in self.blocks for c in hw.components()]
+        return {"parts": parts, "checks": [], "summary": f"{len(parts)} simulated parts"}
+
+    def stop(self) -> None:
+        """Nothing moves on its own in the mock: holding the last command is the safe state."""
+
+    def cleanup(self) -> None:
+        self.connected = False
