@@ -140,6 +140,7 @@ def root(
 
 def _register() -> None:
     from deltoctl.cli import (
+        bench_cmd,
         calibrate_cmd,
         completion_cmd,
         device_cmd,
@@ -153,6 +154,7 @@ def _register() -> None:
     device_cmd.register(app)
     motion_cmd.register(app)
     app.add_typer(calibrate_cmd.app, name="calibrate")
+    app.add_typer(bench_cmd.app, name="bench")
     app.command("record")(record_cmd.record)
     app.add_typer(sim_cmd.app, name="sim")
     completion_cmd.register(app)

@@ -99,6 +99,7 @@ class DeltoDriver:
         self._closed = False
         self._gpio_out = (False, False, False)
         self._last_read = 0.0
+        self.timing: dict[str, float] | None = None  # seconds per stage, when benchmarking
 
     # -- lifecycle -----------------------------------------------------------------------------
     def configure(self) -> Identity:
@@ -205,15 +206,24 @@ class DeltoDriver:
             self._start_reconnect()
             return self.values
         self.stats["packets"] += 1
+        timing = self.timing
         try:
-            link.send(codec.encode_data_request(self.codes))
+            t0 = time.perf_counter()
+            request = codec.encode_data_request(self.codes)
+            t1 = time.perf_counter()
+            link.send(request)
             reply = link.recv_frame(DATA_TIMEOUT)
+            t2 = time.perf_counter()
             record = codec.decode_data_reply(reply, model, self.codes, identity.sensor_type or 0)
         except DeviceError as exc:
             self.stats["errors"] += 1
             self._lost(exc)
             return self.values
         self._store(record)
+        if timing is not None:
+            t3 = time.perf_counter()
+            timing["codec"] += (t1 - t0) + (t3 - t2)
+            timing["socket"] += t2 - t1
         return self.values
 
     def _store(self, record: codec.DataRecord) -> None:
