@@ -9,6 +9,7 @@ import sys
 from typing import Annotated, Any
 
 import typer
+from typer._click import exceptions as click_exceptions
 from typer.core import TyperGroup
 
 from deltoctl import __version__
@@ -69,6 +70,14 @@ class DeltoctlGroup(TyperGroup):
         except KeyboardInterrupt:
             typer.echo("deltoctl: interrupted", err=True)
             raise typer.Exit(130) from None
+        except (typer.Exit, typer.Abort, click_exceptions.ClickException):
+            raise
+        except Exception as exc:  # a bug: one line for people, the traceback with -v
+            if ctx.obj is not None and getattr(ctx.obj, "verbose", 0):
+                raise
+            typer.echo(f"deltoctl: internal error: {type(exc).__name__}: {exc} "
+                       "(run with -v for the traceback, and please report it)", err=True)
+            raise typer.Exit(1) from None
 
 
 app = typer.Typer(

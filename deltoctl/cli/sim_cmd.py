@@ -1,6 +1,7 @@
 """``deltoctl sim serve PROFILE``: a simulated device in its own process."""
 
 import contextlib
+import gc
 import json
 import signal
 import threading
@@ -48,6 +49,8 @@ def serve(
     device.input_1 = input_1
     server = DeltoServer(device, host=host, port=port)
     stop = threading.Event()
+    gc.disable()  # a served device answers within microseconds; no collector pauses
+
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     with server:
         endpoint = {"profile": prof.name, "endpoint": server.endpoint,

@@ -5,78 +5,118 @@ temperatures included, as ros2_control's broadcaster publishes them), /<sensor>/
 (geometry_msgs/WrenchStamped per F/T sensor), /gpio (control_msgs/DynamicInterfaceGroupValues,
 with system/connection_status), /diagnostics (link events and loop statistics). The resolved
 profile and the identify result are stored as metadata. ``close()`` always leaves a valid,
-indexed file.
+indexed file. Messages are CDR-encoded from precompiled layouts (record/cdr.py): the recorder
+runs inside the cycle loop.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from operator import itemgetter
 from typing import Any, BinaryIO
 
 from deltoctl.profile.model import Profile
-from deltoctl.record.ros2_msgs import MSGDEFS, header
+from deltoctl.record.cdr import CdrTemplate, CdrWriter
+from deltoctl.record.ros2_msgs import MSGDEFS
 
 FT_AXES = ("force.x", "force.y", "force.z", "torque.x", "torque.y", "torque.z")
 OK, WARN, ERROR = 0, 1, 2
+NAN = float("nan")
+
+
+def _picker(keys: list[str]) -> Callable[[dict], tuple]:
+    """Values of ``keys`` from a dict as a tuple, at C speed (KeyError when one is missing)."""
+    if len(keys) > 1:
+        return itemgetter(*keys)
+    if keys:
+        key = keys[0]
+        return lambda values: (values[key],)
+    return lambda values: ()
 
 
 class McapRecorder:
     def __init__(self, stream: BinaryIO, profile: Profile, metadata: dict[str, dict[str, str]]):
-        from mcap_ros2.writer import Writer
+        from mcap.writer import Writer
+
+        from deltoctl import __version__
 
         self.writer = Writer(stream)
-        self.schemas = {name: self.writer.register_msgdef(name, text)
+        self.writer.start(profile="ros2", library=f"deltoctl {__version__}")
+        self.schemas = {name: self.writer.register_schema(name, "ros2msg", text.encode())
                         for name, text in MSGDEFS.items()}
+        self.channels: dict[str, int] = {}
+        self.sequence: dict[str, int] = {}
         self.profile = profile
-        self.joints = [j for j in profile.joints() if j.state("position")]
-        self.ft_sensors = [s for _, s in profile.components()
-                           if s.kind == "sensor" and s.state("force.x")]
-        self.gpios = [g for _, g in profile.components() if g.kind == "gpio"]
+        self.link_losses = 0
+        self.connected: float | None = None
+        self.closed = False
         for name, data in metadata.items():
             self.writer.add_metadata(name, data)
-        self.counts: dict[str, int] = {}
-        self.connected: float | None = None
-        self.link_losses = 0
-        self.closed = False
+        self._plan()
 
-    def _write(self, topic: str, schema: str, message: dict, t_ns: int) -> None:
-        seq = self.counts.get(topic, 0)
-        self.writer.write_message(topic, self.schemas[schema], message, log_time=t_ns,
-                                  publish_time=t_ns, sequence=seq)
-        self.counts[topic] = seq + 1
+    def _plan(self) -> None:
+        """Per topic: its message layout and the interface names that fill it, in order."""
+        joints = [j for j in self.profile.joints() if j.state("position")]
+        names = [j.name for j in joints]
+        self.topics: list[tuple[str, CdrTemplate, list[str], Callable]] = []
+        n = len(names)
+        js = CdrTemplate().header().const_strings(names)
+        js.var_doubles(n).var_doubles(n).var_doubles(n).done()
+        self._add("/joint_states", "sensor_msgs/msg/JointState", js,
+                  [f"{j}/{k}" for k in ("position", "velocity", "effort") for j in names])
+        dyn = CdrTemplate().header().const_strings(names).const_u32(n)
+        keys = []
+        for j in joints:
+            dyn.const_strings([i.name for i in j.state_interfaces])
+            dyn.var_doubles(len(j.state_interfaces))
+            keys += [f"{j.name}/{i.name}" for i in j.state_interfaces]
+        self._add("/dynamic_joint_states", "control_msgs/msg/DynamicJointState", dyn.done(), keys)
+        for _, sensor in self.profile.components():
+            if sensor.kind == "sensor" and sensor.state("force.x"):
+                wrench = CdrTemplate().header(sensor.params.get("frame_id", sensor.name))
+                wrench.var("d", 6).done()
+                self._add(f"/{sensor.name}/wrench", "geometry_msgs/msg/WrenchStamped", wrench,
+                          [f"{sensor.name}/{axis}" for axis in FT_AXES])
+        groups = [(g.name, [i.name for i in g.state_interfaces])
+                  for _, g in self.profile.components() if g.kind == "gpio"]
+        groups.append(("system", ["connection_status"]))
+        gpio = CdrTemplate().header().const_strings([g for g, _ in groups]).const_u32(len(groups))
+        for _, itfs in groups:
+            gpio.const_strings(itfs).var_doubles(len(itfs))
+        self._add("/gpio", "control_msgs/msg/DynamicInterfaceGroupValues", gpio.done(),
+                  [f"{g}/{i}" for g, itfs in groups for i in itfs])
+
+    def _add(self, topic: str, schema: str, template: CdrTemplate, keys: list[str]) -> None:
+        self._channel(topic, schema)
+        self.topics.append((topic, template, keys, _picker(keys)))
+
+    def _channel(self, topic: str, schema: str) -> int:
+        if topic not in self.channels:
+            self.channels[topic] = self.writer.register_channel(
+                topic, "cdr", self.schemas[schema])
+            self.sequence[topic] = 0
+        return self.channels[topic]
+
+    def _emit(self, topic: str, data: bytes, t_ns: int) -> None:
+        seq = self.sequence[topic]
+        self.writer.add_message(self.channels[topic], log_time=t_ns, data=data,
+                                publish_time=t_ns, sequence=seq)
+        self.sequence[topic] = seq + 1
+
+    @property
+    def counts(self) -> dict[str, int]:
+        return {t: n for t, n in self.sequence.items() if n}
 
     def write(self, values: dict[str, float], t_ns: int) -> None:
-        nan = float("nan")
         get = values.get
-        names = [j.name for j in self.joints]
-        self._write("/joint_states", "sensor_msgs/msg/JointState", {
-            "header": header(t_ns), "name": names,
-            "position": [get(f"{n}/position", nan) for n in names],
-            "velocity": [get(f"{n}/velocity", nan) for n in names],
-            "effort": [get(f"{n}/effort", nan) for n in names],
-        }, t_ns)
-        self._write("/dynamic_joint_states", "control_msgs/msg/DynamicJointState", {
-            "header": header(t_ns), "joint_names": names,
-            "interface_values": [
-                {"interface_names": [i.name for i in j.state_interfaces],
-                 "values": [get(f"{j.name}/{i.name}", nan) for i in j.state_interfaces]}
-                for j in self.joints],
-        }, t_ns)
-        for sensor in self.ft_sensors:
-            v = [get(f"{sensor.name}/{axis}", nan) for axis in FT_AXES]
-            self._write(f"/{sensor.name}/wrench", "geometry_msgs/msg/WrenchStamped", {
-                "header": header(t_ns, sensor.params.get("frame_id", sensor.name)),
-                "wrench": {"force": {"x": v[0], "y": v[1], "z": v[2]},
-                           "torque": {"x": v[3], "y": v[4], "z": v[5]}},
-            }, t_ns)
-        groups = [(g.name, [i.name for i in g.state_interfaces]) for g in self.gpios]
-        groups.append(("system", ["connection_status"]))
-        self._write("/gpio", "control_msgs/msg/DynamicInterfaceGroupValues", {
-            "header": header(t_ns), "interface_groups": [g for g, _ in groups],
-            "interface_values": [{"interface_names": names_,
-                                  "values": [get(f"{g}/{n}", nan) for n in names_]}
-                                 for g, names_ in groups],
-        }, t_ns)
-        status = get("system/connection_status", nan)
+        stamp = (t_ns // 1_000_000_000, t_ns % 1_000_000_000)
+        for topic, template, keys, getter in self.topics:
+            try:
+                picked = getter(values)  # C speed; a missing value falls back to NaN below
+            except KeyError:
+                picked = [get(k, NAN) for k in keys]
+            self._emit(topic, template.pack((*stamp, *picked)), t_ns)
+        status = get("system/connection_status", NAN)
         if self.connected is not None and status != self.connected:
             lost = status == 0.0
             self.link_losses += lost
@@ -86,12 +126,13 @@ class McapRecorder:
 
     def diagnostic(self, t_ns: int, level: int, name: str, message: str,
                    values: dict[str, Any]) -> None:
-        self._write("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", {
-            "header": header(t_ns),
-            "status": [{"level": level, "name": f"deltoctl/{name}", "message": message,
-                        "hardware_id": self.profile.name,
-                        "values": [{"key": k, "value": str(v)} for k, v in values.items()]}],
-        }, t_ns)
+        self._channel("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+        w = CdrWriter().header(t_ns).u32(1)
+        w.u8(level).string(f"deltoctl/{name}").string(message).string(self.profile.name)
+        w.u32(len(values))
+        for key, value in values.items():
+            w.string(key).string(str(value))
+        self._emit("/diagnostics", w.bytes(), t_ns)
 
     def close(self, summary: dict[str, str] | None = None) -> None:
         if self.closed:

@@ -36,6 +36,3 @@ MSGDEFS = {
 }
 
 
-def header(t_ns: int, frame_id: str = "") -> dict:
-    return {"stamp": {"sec": t_ns // 1_000_000_000, "nanosec": t_ns % 1_000_000_000},
-            "frame_id": frame_id}

@@ -78,6 +78,9 @@ class DeltoFirmware:
         self.lock = threading.Lock()
         self.last_step = time.monotonic()
         self.duty_frames = 0
+        self._drift_dt = 0.0
+        self._noise = [self.rng.gauss(0.0, 1.0) for _ in range(4099)]  # a prime-length cycle
+        self._noise_at = 0
 
     # -- simulated time ----------------------------------------------------------------------
     def advance(self, now: float | None = None) -> None:
@@ -91,6 +94,10 @@ class DeltoFirmware:
 
     def step(self, dt: float) -> None:
         for i in range(self.model.motors):
+            if not self.duty[i] and not self.velocity[i]:
+                self.current[i] = 0.0
+                self.temperature[i] -= 0.01 * (self.temperature[i] - 25.0) * dt
+                continue
             duty_pct = self.duty[i] / 10.0 * self.direction[i]
             torque = duty_pct / 100.0 * MAX_VOLTAGE * KT / RM
             self.current[i] = torque / KT * 1000.0
@@ -109,9 +116,13 @@ class DeltoFirmware:
                     self.velocity[i] = 0.0
             amps = self.current[i] / 1000.0
             self.temperature[i] += (2.0 * amps * amps - 0.01 * (self.temperature[i] - 25.0)) * dt
-        for offset in self.ft_offset:
-            for k in range(6):
-                offset[k] += self.rng.gauss(0.0, FT_DRIFT * math.sqrt(dt))
+        self._drift_dt += dt
+        if self._drift_dt >= 0.01:  # the offsets wander slowly: a step each 10 ms is enough
+            sigma = FT_DRIFT * math.sqrt(self._drift_dt)
+            for offset in self.ft_offset:
+                for k in range(6):
+                    offset[k] += self.rng.gauss(0.0, sigma)
+            self._drift_dt = 0.0
 
     # -- the protocol ------------------------------------------------------------------------
     def handle(self, data: bytes) -> bytes | None:
@@ -147,13 +158,17 @@ class DeltoFirmware:
             raise ProtocolError(f"unknown command {cmd:#04x}")
 
     def _ft_raw(self, finger: int, noise: bool = True) -> tuple[float, ...]:
-        values = []
-        for k in range(6):
-            g = GRAVITY[k] if k < 3 else 0.0
-            sigma = FT_NOISE if k < 3 else FT_NOISE / 10
-            values.append(g + self.ft_offset[finger][k]
-                          + (self.rng.gauss(0.0, sigma) if noise else 0.0))
-        return tuple(values)
+        offset = self.ft_offset[finger]
+        base = [GRAVITY[0] + offset[0], GRAVITY[1] + offset[1], GRAVITY[2] + offset[2],
+                offset[3], offset[4], offset[5]]
+        if noise:
+            at = self._noise_at
+            table = self._noise
+            n = len(table)
+            for k in range(6):
+                base[k] += table[(at + k) % n] * (FT_NOISE if k < 3 else FT_NOISE / 10)
+            self._noise_at = (at + 7) % n
+        return tuple(base)
 
     def record(self) -> codec.DataRecord:
         fingers = range(self.model.fingers)

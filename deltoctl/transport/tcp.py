@@ -29,6 +29,8 @@ class TcpLink:
             if hasattr(socket, name):
                 sock.setsockopt(socket.IPPROTO_TCP, getattr(socket, name), value)
         self.sock = sock
+        self._pending = bytearray()
+        self._timeout: float | None = None
 
     def send(self, data: bytes) -> None:
         try:
@@ -36,33 +38,37 @@ class TcpLink:
         except OSError as exc:
             raise LinkLost(f"send to {self.host}:{self.port} failed: {exc}") from None
 
-    def recv_exact(self, n: int, timeout: float) -> bytes:
-        deadline = time.monotonic() + timeout
-        chunks = bytearray()
-        while len(chunks) < n:
+    def recv_frame(self, timeout: float) -> bytes:
+        """One frame prefixed by its 2-byte big-endian total length; usually one recv call."""
+        buf = self._pending
+        deadline = None
+        while True:
+            if len(buf) >= 2:
+                length = (buf[0] << 8) | buf[1]
+                if length < 3:
+                    raise LinkLost(f"bad frame length {length} from {self.host}:{self.port}")
+                if len(buf) >= length:
+                    frame = bytes(buf[:length])
+                    del buf[:length]
+                    return frame
+            if deadline is None:
+                deadline = time.monotonic() + timeout
             remaining = deadline - time.monotonic()
             if remaining <= 0:
-                raise LinkLost(f"no reply from {self.host}:{self.port} within {timeout:g} s "
-                               f"({len(chunks)} of {n} bytes)")
-            self.sock.settimeout(remaining)
+                raise LinkLost(f"no complete reply from {self.host}:{self.port} within "
+                               f"{timeout:g} s ({len(buf)} bytes received)")
+            if timeout != self._timeout:  # a syscall: only when the timeout changes
+                self.sock.settimeout(timeout)
+                self._timeout = timeout
             try:
-                chunk = self.sock.recv(n - len(chunks))
+                chunk = self.sock.recv(65536)
             except TimeoutError:
                 continue
             except OSError as exc:
                 raise LinkLost(f"receive from {self.host}:{self.port} failed: {exc}") from None
             if not chunk:
                 raise LinkLost(f"{self.host}:{self.port} closed the connection")
-            chunks += chunk
-        return bytes(chunks)
-
-    def recv_frame(self, timeout: float) -> bytes:
-        """One length-prefixed frame (2-byte big-endian total length)."""
-        head = self.recv_exact(2, timeout)
-        length = (head[0] << 8) | head[1]
-        if length < 3:
-            raise LinkLost(f"bad frame length {length} from {self.host}:{self.port}")
-        return head + self.recv_exact(length - 2, timeout)
+            buf += chunk
 
     def close(self) -> None:
         with contextlib.suppress(OSError):

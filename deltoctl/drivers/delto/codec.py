@@ -8,13 +8,14 @@ The same functions serve the driver and the emulator. Bad bytes raise ProtocolEr
 from __future__ import annotations
 
 import math
+import re
 import struct
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 from deltoctl.drivers.delto.models import (
     FT_TYPES,
     MODELS,
-    SENSOR_BYTES,
     SENSOR_NONE,
     TACTILE_M,
     TACTILE_S,
@@ -136,12 +137,7 @@ def decode_data_request(data: bytes) -> tuple[int, ...]:
 
 
 def data_reply_length(model: DeltoModel, codes: tuple[int, ...], sensor_type: int) -> int:
-    length = 3 + model.motors * model.bytes_per_motor
-    if FINGERTIP_SENSOR in codes and not model.legacy:
-        length += SENSOR_BYTES.get(sensor_type, 0) * model.fingers
-    if GPIO in codes and not model.legacy:
-        length += 4
-    return length
+    return 3 + _reply_layout(model, codes, sensor_type).size
 
 
 @dataclass
@@ -157,89 +153,105 @@ class DataRecord:
     gpio: tuple[bool, bool, bool, bool] | None = None  # output 1..3, input 1
 
 
+@lru_cache(maxsize=64)
+def _reply_layout(model: DeltoModel, codes: tuple[int, ...], sensor_type: int) -> struct.Struct:
+    """One precompiled struct for a whole GET_DATA reply body: the hot path of every cycle."""
+    fmt = ">" + ("Bhh" if model.legacy else "Bhhhb") * model.motors
+    if FINGERTIP_SENSOR in codes and not model.legacy and sensor_type != SENSOR_NONE:
+        per_finger = {TACTILE_M: "15B", TACTILE_S: "18H"}.get(sensor_type, "6h")
+        fmt += per_finger * model.fingers
+    if GPIO in codes and not model.legacy:
+        fmt += "4B"
+    return struct.Struct(fmt)
+
+
 def decode_data_reply(data: bytes, model: DeltoModel, codes: tuple[int, ...],
                       sensor_type: int) -> DataRecord:
     _check(data, GET_DATA, "GET_DATA reply")
-    expected = data_reply_length(model, codes, sensor_type)
-    if len(data) != expected:
-        raise ProtocolError(f"GET_DATA reply: {len(data)} bytes, expected {expected} for "
+    layout = _reply_layout(model, codes, sensor_type)
+    if len(data) != 3 + layout.size:
+        raise ProtocolError(f"GET_DATA reply: {len(data)} bytes, expected {3 + layout.size} for "
                             f"{model.name} with codes {list(codes)}")
+    raw = layout.unpack_from(data, 3)
     scale = model.position_scale()
     n = model.motors
-    record = DataRecord(position=[0.0] * n, current=[0.0] * n)
-    offset = 3
+    stride = 3 if model.legacy else 5
+    motors = raw[: n * stride]
+    record = DataRecord(position=[p * scale for p in motors[1::stride]],
+                        current=[float(c) for c in motors[2::stride]])
     if model.legacy:
-        for i in range(n):
-            _, pos, cur = struct.unpack_from(">Bhh", data, offset)
-            record.position[i] = pos * scale
-            record.current[i] = float(cur)
-            offset += 5
         return record
-    record.temperature = [0.0] * n
-    record.velocity = [0.0] * n
-    for i in range(n):
-        _, pos, cur, temp, vel = struct.unpack_from(">Bhhhb", data, offset)
-        record.position[i] = pos * scale
-        record.current[i] = float(cur)
-        record.temperature[i] = temp * 0.1
-        record.velocity[i] = vel * RPM_TO_RAD_S
-        offset += 8
+    record.temperature = [t * 0.1 for t in motors[3::5]]
+    record.velocity = [v * RPM_TO_RAD_S for v in motors[4::5]]
+    rest = raw[n * 5:]
     if FINGERTIP_SENSOR in codes and sensor_type != SENSOR_NONE:
-        for _ in range(model.fingers):
+        width = {TACTILE_M: 15, TACTILE_S: 18}.get(sensor_type, 6)
+        for f in range(model.fingers):
+            block = rest[f * width:(f + 1) * width]
             if sensor_type in FT_TYPES:
-                fx, fy, fz, tx, ty, tz = struct.unpack_from(">6h", data, offset)
-                record.ft.append((fx * 0.1, fy * 0.1, fz * 0.1,
-                                  tx * 0.001, ty * 0.001, tz * 0.001))
-            elif sensor_type == TACTILE_M:
-                record.tactile.append(tuple(data[offset:offset + 15]))
-            elif sensor_type == TACTILE_S:
-                record.tactile.append(struct.unpack_from(">18H", data, offset))
-            offset += SENSOR_BYTES[sensor_type]
+                record.ft.append((block[0] * 0.1, block[1] * 0.1, block[2] * 0.1,
+                                  block[3] * 0.001, block[4] * 0.001, block[5] * 0.001))
+            else:
+                record.tactile.append(tuple(block))
+        rest = rest[model.fingers * width:]
     if GPIO in codes:
-        record.gpio = tuple(b != 0 for b in data[offset:offset + 4])  # type: ignore[assignment]
+        record.gpio = (rest[0] != 0, rest[1] != 0, rest[2] != 0, rest[3] != 0)
     return record
-
-
-def _wire(value: float, limit: int = 32767) -> int:
-    return max(-limit - 1, min(limit, round(value)))
 
 
 def encode_data_reply(record: DataRecord, model: DeltoModel, codes: tuple[int, ...],
                       sensor_type: int) -> bytes:
     """The emulator's side: a DataRecord in SI units → the reply frame."""
-    scale = model.position_scale()
-    out = bytearray()
-    for i in range(model.motors):
-        pos = _wire(record.position[i] / scale)
-        cur = _wire(record.current[i])
-        if model.legacy:
-            out += struct.pack(">Bhh", i + 1, pos, cur)
-        else:
-            out += struct.pack(">Bhhhb", i + 1, pos, cur, _wire(record.temperature[i] * 10),
-                               _wire(record.velocity[i] / RPM_TO_RAD_S, 127))
+    scale = 1.0 / model.position_scale()
+    values: list[int] = []
+    if model.legacy:
+        for i in range(model.motors):
+            values += (i + 1, round(record.position[i] * scale), round(record.current[i]))
+    else:
+        to_rpm = 1.0 / RPM_TO_RAD_S
+        for i, (p, c, t, v) in enumerate(zip(record.position, record.current,
+                                              record.temperature, record.velocity)):
+            values += (i + 1, round(p * scale), round(c), round(t * 10), round(v * to_rpm))
     if FINGERTIP_SENSOR in codes and not model.legacy and sensor_type != SENSOR_NONE:
         for f in range(model.fingers):
             if sensor_type in FT_TYPES:
                 fx, fy, fz, tx, ty, tz = record.ft[f]
-                out += struct.pack(">6h", *(_wire(v * 10) for v in (fx, fy, fz)),
-                                   *(_wire(v * 1000) for v in (tx, ty, tz)))
-            elif sensor_type == TACTILE_M:
-                out += bytes(record.tactile[f][:15])
-            elif sensor_type == TACTILE_S:
-                out += struct.pack(">18H", *record.tactile[f][:18])
+                values += (round(fx * 10), round(fy * 10), round(fz * 10),
+                           round(tx * 1000), round(ty * 1000), round(tz * 1000))
+            else:
+                values += record.tactile[f][: 15 if sensor_type == TACTILE_M else 18]
     if GPIO in codes and not model.legacy:
-        out += bytes(1 if b else 0 for b in (record.gpio or (False,) * 4))
-    return frame(GET_DATA, bytes(out))
+        values += (1 if b else 0 for b in (record.gpio or (False,) * 4))
+    layout = _reply_layout(model, codes, sensor_type)
+    try:
+        body = layout.pack(*values)
+    except struct.error:  # a value beyond its field: saturate, as the firmware's int16 does
+        limits = [(-128, 127) if c == "b" else (0, 255) if c == "B" else (-32768, 32767)
+                  if c == "h" else (0, 65535) for c in _field_codes(layout)]
+        body = layout.pack(*(max(lo, min(hi, v)) for v, (lo, hi) in zip(values, limits)))
+    return frame(GET_DATA, body)
+
+
+def _field_codes(layout: struct.Struct) -> str:
+    out = ""
+    for count, code in re.findall(r"(\d*)([a-zA-Z])", layout.format.lstrip("<>")):
+        out += code * int(count or 1)
+    return out
 
 
 # -- commands without a reply -------------------------------------------------------------------
 
+@lru_cache(maxsize=8)
+def _duty_layout(motors: int) -> struct.Struct:
+    return struct.Struct(">HB" + "Bh" * motors)
+
+
 def encode_duty(duties: list[int]) -> bytes:
     """Duty per motor in 0.1 % (±1000 = ±100 %), motor ids 1..N."""
-    payload = bytearray()
+    values: list[int] = [3 + 3 * len(duties), SET_DUTY]
     for i, duty in enumerate(duties):
-        payload += struct.pack(">Bh", i + 1, max(-1000, min(1000, int(duty))))
-    return frame(SET_DUTY, bytes(payload))
+        values += (i + 1, max(-1000, min(1000, int(duty))))
+    return _duty_layout(len(duties)).pack(*values)
 
 
 def decode_duty(data: bytes) -> dict[int, int]:

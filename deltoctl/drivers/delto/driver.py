@@ -99,6 +99,15 @@ class DeltoDriver:
         self._closed = False
         self._gpio_out = (False, False, False)
         self._last_read = 0.0
+        joints = [j.name for j in hw.joints]
+        self._keys = {  # interface names, built once: the cycle only zips values in
+            **{k: [f"{j}/{k}" for j in joints]
+               for k in ("position", "velocity", "effort", "temperature")},
+            "ft": [[f"{s.name}/{axis}" for axis in ("force.x", "force.y", "force.z",
+                                                    "torque.x", "torque.y", "torque.z")]
+                   for s in hw.sensors],
+            "gpio": [f"gpio/{n}" for n in ("output_1", "output_2", "output_3", "input_1")],
+        }
         self.timing: dict[str, float] | None = None  # seconds per stage, when benchmarking
 
     # -- lifecycle -----------------------------------------------------------------------------
@@ -228,29 +237,25 @@ class DeltoDriver:
 
     def _store(self, record: codec.DataRecord) -> None:
         v = self.values
+        keys = self._keys
         now = time.monotonic()
-        dt = now - self._last_read if self._last_read else 0.0
+        n = len(record.position)
+        if record.velocity:
+            v.update(zip(keys["velocity"], record.velocity))
+            v.update(zip(keys["temperature"], record.temperature))
+        else:  # the DG-3F-B sends no velocity: differentiate the position
+            dt = now - self._last_read if self._last_read else 0.0
+            for key, pos_key, pos in zip(keys["velocity"], keys["position"], record.position):
+                previous = v.get(pos_key)
+                v[key] = (pos - previous) / dt if previous is not None and dt > 0 else 0.0
         self._last_read = now
-        for i, joint in enumerate(self.hw.joints[: len(record.position)]):
-            name = joint.name
-            if record.velocity:
-                v[f"{name}/velocity"] = record.velocity[i]
-                v[f"{name}/temperature"] = record.temperature[i]
-            else:  # the DG-3F-B sends no velocity: differentiate the position
-                previous = v.get(f"{name}/position")
-                v[f"{name}/velocity"] = (record.position[i] - previous) / dt \
-                    if previous is not None and dt > 0 else 0.0
-            v[f"{name}/position"] = record.position[i]
-            v[f"{name}/effort"] = record.current[i]
+        v.update(zip(keys["position"][:n], record.position))
+        v.update(zip(keys["effort"][:n], record.current))
         if record.ft and self.identity and self.identity.sensor_type in FT_TYPES:
-            for sensor, values in zip(self.hw.sensors, record.ft):
-                for axis, value in zip(("force.x", "force.y", "force.z",
-                                        "torque.x", "torque.y", "torque.z"), values):
-                    v[f"{sensor.name}/{axis}"] = value
+            for sensor_keys, values in zip(keys["ft"], record.ft):
+                v.update(zip(sensor_keys, values))
         if record.gpio is not None:
-            for name, value in zip(("output_1", "output_2", "output_3", "input_1"),
-                                   record.gpio):
-                v[f"gpio/{name}"] = 1.0 if value else 0.0
+            v.update(zip(keys["gpio"], (1.0 if b else 0.0 for b in record.gpio)))
         v[STATUS] = 1.0
 
     def write_efforts(self, efforts: dict[str, float]) -> None:
