@@ -93,3 +93,18 @@ def test_completion_of_verbs_profiles_and_parts():
     assert "--format" in _complete("deltoctl profile export --fo")
     parts = _complete("deltoctl profile show rrbot-gpio flange_")
     assert parts == ["flange_digital_IOs", "flange_analog_IOs", "flange_vacuum"]
+
+
+def test_start_up_imports_only_what_the_verb_needs():
+    """Protocol, transport, xacro and mcap modules load only in the verbs that use them."""
+    heavy = ("deltoctl.drivers", "deltoctl.transport", "deltoctl.sim", "mcap", "xacro",
+             "serial", "smbus2", "rich", "yaml")
+    for args in (["--version"], ["profile", "list"]):
+        out = subprocess.run([sys.executable, "-X", "importtime", "-m", "deltoctl", *args],
+                             capture_output=True, text=True, check=True)
+        imported = {line.rsplit("|", 1)[-1].strip() for line in out.stderr.splitlines()}
+        loaded = sorted(m for m in imported if m.split(".")[0] in heavy
+                        or m.startswith(heavy))
+        if args == ["profile", "list"]:  # a cold cache parses the YAML catalog
+            loaded = [m for m in loaded if not m.startswith("yaml")]
+        assert loaded == [], f"{args}: {loaded}"

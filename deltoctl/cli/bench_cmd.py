@@ -1,14 +1,10 @@
 """``deltoctl bench loop``: the read+write cycle against ``sim serve`` in another process,
 recording to MCAP, with the time per cycle split by stage."""
 
-import json
-import os
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -16,10 +12,16 @@ from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, info
 from deltoctl.errors import DeviceError
 
+if TYPE_CHECKING:
+    import subprocess
+
 app = typer.Typer(help="Benchmarks that ship with deltoctl.", no_args_is_help=True)
 
 
-def _serve(profile: str) -> tuple[subprocess.Popen, str]:
+def _serve(profile: str) -> tuple["subprocess.Popen", str]:
+    import json
+    import subprocess
+
     proc = subprocess.Popen([sys.executable, "-m", "deltoctl", "sim", "serve", profile,
                              "--json"], stdout=subprocess.PIPE, text=True)
     line = proc.stdout.readline() if proc.stdout else ""
@@ -76,6 +78,9 @@ def bench_loop(
         "--unpaced", help="Seconds of the unpaced run (0: skip).")] = 5.0,
 ) -> None:
     """DG-5F-R with F/T and IO over loopback TCP, recording to MCAP: paced and unpaced."""
+    import os
+    import tempfile
+
     from deltoctl.core.session import Session
 
     opts = options(ctx)
@@ -113,3 +118,7 @@ def bench_loop(
         info(f"           µs per cycle: {stages}; CPU {r['cpu_us_per_cycle']:.1f}")
     info("  goals: " + ", ".join(f"{k}={'yes' if v else 'NO'}"
                                  for k, v in results["goals"].items()))
+
+
+def register(root: typer.Typer) -> None:
+    root.add_typer(app, name="bench")

@@ -1,10 +1,6 @@
 """``deltoctl calibrate ft``: tare the fingertip F/T sensors and check what is left."""
 
-import json
-import math
-import statistics
 import time
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Annotated
 
@@ -47,6 +43,11 @@ def calibrate_ft(
 ) -> None:
     """Tare (SET_FT_SENSOR_OFFSET), then check the residual over N samples; exit 1 when over
     tolerance. The report is saved as calibration-<model>-<address>-<time>.json."""
+    import json
+    import math
+    import statistics
+    from datetime import datetime, timezone
+
     opts = options(ctx)
     if samples < 2:
         raise InvalidInput("--samples must be at least 2")
@@ -104,3 +105,7 @@ def calibrate_ft(
         raise DeviceError(f"residual over tolerance after the tare on: {', '.join(bad)}",
                           hint="check the firmware (OFFSET needs v2.3 or later) and that "
                                "nothing touches the fingertips")
+
+
+def register(root: typer.Typer) -> None:
+    root.add_typer(app, name="calibrate")

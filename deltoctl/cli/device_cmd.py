@@ -1,8 +1,5 @@
 """The lifecycle verbs on a device: connect, identify, detect, gpio, stream."""
 
-import fnmatch
-import signal
-import statistics
 import time
 from typing import Annotated, Any
 
@@ -53,6 +50,8 @@ def connect(
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Reach the device, time round trips, and run the lifecycle to active and back."""
+    import statistics
+
     opts = options(ctx)
     session = open_session(opts, allow_model_mismatch)
     with session:
@@ -166,6 +165,8 @@ def gpio_set(
 
 
 def _select(names: list[str], patterns: list[str]) -> list[str]:
+    import fnmatch
+
     if not patterns:
         return names
     globs = [p for item in patterns for p in item.split(",") if p]
@@ -186,6 +187,8 @@ def stream(
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Stream state interfaces: a live table on a terminal, NDJSON with --json or when piped."""
+    import signal
+
     opts = options(ctx)
     if rate <= 0:
         raise InvalidInput("--rate must be positive")

@@ -53,8 +53,35 @@ def hoist_global_options(args: list[str]) -> list[str]:
     return head + hoisted + tail
 
 
+# verb → the module of deltoctl.cli whose register(app) adds it. A module is imported only
+# when one of its verbs runs: every line of a bring-up script pays for what it imports.
+VERBS = {
+    "profile": "profile_cmd", "connect": "device_cmd", "identify": "device_cmd",
+    "detect": "device_cmd", "home": "motion_cmd", "jog": "motion_cmd",
+    "calibrate": "calibrate_cmd", "gpio": "device_cmd", "stream": "device_cmd",
+    "record": "record_cmd", "sim": "sim_cmd", "bench": "bench_cmd",
+    "completion": "completion_cmd",
+}
+
+
 class DeltoctlGroup(TyperGroup):
-    """Hoists global options and turns DeltoctlError into one line and its exit code."""
+    """Loads verbs on demand, hoists global options, and turns DeltoctlError into one line
+    and its exit code."""
+
+    def list_commands(self, ctx: Any) -> list[str]:
+        return list(VERBS)
+
+    def get_command(self, ctx: Any, cmd_name: str) -> Any:
+        if cmd_name not in self.commands and cmd_name in VERBS:
+            import importlib
+
+            from typer.main import get_group
+
+            module = importlib.import_module(f"deltoctl.cli.{VERBS[cmd_name]}")
+            holder = typer.Typer()
+            module.register(holder)
+            self.commands.update(get_group(holder).commands)
+        return self.commands.get(cmd_name)
 
     def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
         return super().parse_args(ctx, hoist_global_options(list(args)))
@@ -145,31 +172,6 @@ def root(
     except DeltoctlError as exc:
         typer.echo(f"deltoctl: error: {exc.message}", err=True)
         raise typer.Exit(exc.exit_code) from None
-
-
-def _register() -> None:
-    from deltoctl.cli import (
-        bench_cmd,
-        calibrate_cmd,
-        completion_cmd,
-        device_cmd,
-        motion_cmd,
-        profile_cmd,
-        record_cmd,
-        sim_cmd,
-    )
-
-    app.add_typer(profile_cmd.app, name="profile")
-    device_cmd.register(app)
-    motion_cmd.register(app)
-    app.add_typer(calibrate_cmd.app, name="calibrate")
-    app.add_typer(bench_cmd.app, name="bench")
-    app.command("record")(record_cmd.record)
-    app.add_typer(sim_cmd.app, name="sim")
-    completion_cmd.register(app)
-
-
-_register()
 
 
 def main() -> None:

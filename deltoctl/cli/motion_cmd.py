@@ -1,8 +1,6 @@
 """Motion verbs: home and jog. Confirmation on a terminal unless --yes; refused (exit 5)
 outside limits or without confirmation; duty 0 on the way out, Ctrl-C included."""
 
-import math
-import signal
 import sys
 from typing import Annotated
 
@@ -56,6 +54,8 @@ def _progress(opts: Options, label: str):  # type: ignore[no-untyped-def]
 
 
 def _move(opts: Options, session, targets: dict[str, float], velocity, label: str):  # type: ignore[no-untyped-def]
+    import signal
+
     from deltoctl.core.motion import MoveResult, move_to
 
     signal.signal(signal.SIGTERM, signal.default_int_handler)
@@ -123,6 +123,8 @@ def jog(
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Move one joint by DELTA (or --to POS), within its limits and the profile's jog step."""
+    import math
+
     from deltoctl.core.motion import check_target
 
     opts = options(ctx)

@@ -213,3 +213,7 @@ def export_cmd(
     prof = options(ctx).load_profile(profile)
     text = to_yaml(prof) if fmt == "yaml" else to_urdf(prof, macro=fmt == "xacro")
     _write(text, output)
+
+
+def register(root: typer.Typer) -> None:
+    root.add_typer(app, name="profile")

@@ -1,6 +1,5 @@
 """``deltoctl record OUT.mcap``: interface values to MCAP (ROS 2 encoding)."""
 
-import signal
 import time
 from pathlib import Path
 from typing import Annotated
@@ -25,6 +24,8 @@ def record(
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Record every state interface; Ctrl-C, SIGTERM or --duration end with a valid file."""
+    import signal
+
     from deltoctl import __version__
     from deltoctl.core.loop import CycleLoop
     from deltoctl.profile.exporter import to_yaml
@@ -79,3 +80,7 @@ def record(
         info(f"warning: the link was lost {recorder.link_losses} time(s); the gaps are marked "
              "on /diagnostics")
         raise typer.Exit(WARNINGS)
+
+
+def register(root: typer.Typer) -> None:
+    root.command("record")(record)

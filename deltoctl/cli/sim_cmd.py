@@ -1,10 +1,6 @@
 """``deltoctl sim serve PROFILE``: a simulated device in its own process."""
 
 import contextlib
-import gc
-import json
-import signal
-import threading
 from typing import Annotated
 
 import typer
@@ -33,6 +29,11 @@ def serve(
         = False,
 ) -> None:
     """Serve a simulated device until Ctrl-C or SIGTERM; prints its endpoint (JSON with --json)."""
+    import gc
+    import json
+    import signal
+    import threading
+
     from deltoctl.sim.delto import DeltoServer, firmware_for_profile
 
     opts = options(ctx)
@@ -64,3 +65,7 @@ def serve(
         sys.stdout.flush()
         with contextlib.suppress(KeyboardInterrupt):
             stop.wait()
+
+
+def register(root: typer.Typer) -> None:
+    root.add_typer(app, name="sim")
