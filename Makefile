@@ -12,9 +12,7 @@ $(BIN)/deltoctl: pyproject.toml
 
 demo: $(BIN)/deltoctl
 	$(BIN)/deltoctl profile list
-	$(BIN)/deltoctl profile show dg-5f-right
-	$(BIN)/deltoctl profile validate profiles/*.yaml
-	$(BIN)/deltoctl profile export dg-5f-right --format xacro | head -n 20
+	DELTOCTL=$(BIN)/deltoctl examples/bringup.sh
 
 test: $(BIN)/deltoctl
 	$(BIN)/ruff check deltoctl tests bench
@@ -22,6 +20,7 @@ test: $(BIN)/deltoctl
 
 bench: $(BIN)/deltoctl
 	$(BIN)/python bench/startup.py
+	$(BIN)/deltoctl bench loop
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info
