@@ -174,3 +174,26 @@ def test_sim_serve_in_another_process(tmp_path):
     finally:
         proc.terminate()
         assert proc.wait(timeout=5) == 0
+
+
+def test_truncated_and_late_replies_are_counted_and_recovered(gripper):
+    server = gripper("dg-4f")
+    with Session(load_profile("dg-4f"), [server.endpoint]) as session:
+        driver = session.driver
+        driver.read()
+        server.firmware.faults.truncate_next = True
+        assert driver.read()["system/connection_status"] == 0.0  # half a frame: timed out
+        assert driver.stats["errors"] == 1
+        deadline = time.monotonic() + 5
+        while driver.read()["system/connection_status"] == 0.0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert driver.connected
+        server.firmware.faults.delay = 0.7  # beyond the 0.5 s data timeout
+        driver.read()
+        assert driver.stats["errors"] == 2
+        server.firmware.faults.delay = 0.0
+
+
+def test_sim_serve_faults_from_the_command_line(cli):
+    result = cli("sim", "serve", "dg-4f", "--stall", "j_dg_9_9")
+    assert result.exit_code == 2 and "no joint 'j_dg_9_9'" in result.stderr

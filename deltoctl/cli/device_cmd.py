@@ -176,11 +176,15 @@ def _select(names: list[str], patterns: list[str]) -> list[str]:
     return chosen
 
 
+RateOpt = Annotated[float, typer.Option("--rate", "-r", help="Samples per second.")]
+DurationOpt = Annotated[float | None, typer.Option(
+    "--duration", "-d", help="Stop after this many seconds (default: Ctrl-C or SIGTERM).")]
+
+
 def stream(
     ctx: typer.Context,
-    rate: Annotated[float, typer.Option("--rate", "-r", help="Samples per second.")] = 50.0,
-    duration: Annotated[float | None, typer.Option(
-        "--duration", "-d", help="Stop after this many seconds (default: until Ctrl-C).")] = None,
+    rate: RateOpt = 50.0,
+    duration: DurationOpt = None,
     interfaces: Annotated[list[str] | None, typer.Option(
         "--interfaces", "-i", help="Glob(s) of interface names, e.g. 'rj_dg_1_*/position'.")]
         = None,
@@ -188,6 +192,8 @@ def stream(
 ) -> None:
     """Stream state interfaces: a live table on a terminal, NDJSON with --json or when piped."""
     import signal
+
+    from deltoctl.core.loop import CycleLoop
 
     opts = options(ctx)
     if rate <= 0:
@@ -198,9 +204,6 @@ def stream(
         driver = session.driver
         names = _select([*session.profile.state_interfaces(), "system/connection_status"],
                         list(interfaces or []))
-        period = 1.0 / rate
-        start = time.monotonic()
-        next_at = start
         live = None
         if not as_lines:
             from rich.live import Live
@@ -209,7 +212,7 @@ def stream(
             live.start()
         samples = 0
         try:
-            while duration is None or time.monotonic() - start < duration:
+            for _ in CycleLoop(rate, duration):
                 values = driver.read()
                 sample = {n: values.get(n) for n in names}
                 samples += 1
@@ -217,12 +220,6 @@ def stream(
                     emit_json_line({"t": time.time_ns(), "values": sample})
                 else:
                     live.update(_live_table(sample), refresh=True)
-                next_at += period
-                delay = next_at - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
-                else:
-                    next_at = time.monotonic()
         except KeyboardInterrupt:
             pass
         finally:

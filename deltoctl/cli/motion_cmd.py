@@ -12,6 +12,9 @@ from deltoctl.cli.output import emit_json, info
 from deltoctl.errors import DeviceError, InvalidInput, Refused
 from deltoctl.units import parse_quantity
 
+VelocityOpt = Annotated[str | None, typer.Option(
+    "--velocity", help="Setpoint speed, e.g. 0.5 or 20deg (per second).")]
+
 
 def register(app: typer.Typer) -> None:
     app.command("home")(home)
@@ -33,6 +36,13 @@ def _quantity(text: str, what: str) -> float:
         return parse_quantity(text)
     except ValueError as exc:
         raise InvalidInput(f"{what}: {exc}") from None
+
+
+def _speed(velocity: str | None) -> float | None:
+    speed = _quantity(velocity, "--velocity") if velocity else None
+    if speed is not None and speed <= 0:
+        raise InvalidInput("--velocity must be positive")
+    return speed
 
 
 def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
@@ -91,8 +101,7 @@ def _move(opts: Options, session, targets: dict[str, float], velocity, label: st
 
 def home(
     ctx: typer.Context,
-    velocity: Annotated[str | None, typer.Option(
-        "--velocity", help="Setpoint speed, e.g. 0.5 or 20deg (per second).")] = None,
+    velocity: VelocityOpt = None,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Drive every joint to the profile's home pose (zero unless the profile says otherwise)."""
@@ -104,7 +113,7 @@ def home(
     targets = {j.name: profile.safety.home_pose.get(j.name, 0.0) for j in joints}
     for joint in joints:
         check_target(profile, joint, targets[joint.name], None)
-    speed = _quantity(velocity, "--velocity") if velocity else None
+    speed = _speed(velocity)
     _confirm(opts, f"home {len(targets)} joints of {profile.name}")
     with open_session(opts, allow_model_mismatch) as session:
         _move(opts, session, targets, speed, "home")
@@ -118,8 +127,7 @@ def jog(
     delta: Annotated[str | None, typer.Argument(
         help="Relative move, e.g. 0.1, -5deg.")] = None,
     to: Annotated[str | None, typer.Option("--to", help="Absolute target instead.")] = None,
-    velocity: Annotated[str | None, typer.Option(
-        "--velocity", help="Setpoint speed, e.g. 0.5 or 20deg (per second).")] = None,
+    velocity: VelocityOpt = None,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Move one joint by DELTA (or --to POS), within its limits and the profile's jog step."""
@@ -136,9 +144,7 @@ def jog(
         raise InvalidInput(f"{joint} has no effort or position command interface to move it")
     if (delta is None) == (to is None):
         raise InvalidInput("give either DELTA or --to POS")
-    speed = _quantity(velocity, "--velocity") if velocity else None
-    if speed is not None and speed <= 0:
-        raise InvalidInput("--velocity must be positive")
+    speed = _speed(velocity)
     with open_session(opts, allow_model_mismatch) as session:
         start = session.driver.read()[f"{joint}/position"]
         target = _quantity(to, "--to") if to is not None else start + _quantity(delta, "DELTA")

@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from deltoctl.cli.context import options
-from deltoctl.cli.device_cmd import AllowMismatch, open_session
+from deltoctl.cli.device_cmd import AllowMismatch, DurationOpt, RateOpt, open_session
 from deltoctl.cli.output import emit_json, info
 from deltoctl.errors import WARNINGS, InvalidInput
 
@@ -17,10 +17,8 @@ STATS_PERIOD = 1.0  # s between loop-statistics diagnostics
 def record(
     ctx: typer.Context,
     output: Annotated[Path, typer.Argument(help="The .mcap file to write.")],
-    rate: Annotated[float, typer.Option("--rate", "-r", help="Samples per second.")] = 100.0,
-    duration: Annotated[float | None, typer.Option(
-        "--duration", "-d", help="Stop after this many seconds (default: Ctrl-C/SIGTERM).")]
-        = None,
+    rate: RateOpt = 100.0,
+    duration: DurationOpt = None,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Record every state interface; Ctrl-C, SIGTERM or --duration end with a valid file."""

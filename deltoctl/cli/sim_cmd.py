@@ -27,6 +27,10 @@ def serve(
         help="Send the short GET_VERSION reply of old firmware.")] = False,
     input_1: Annotated[bool, typer.Option("--input-1", help="Drive gpio/input_1 high.")]
         = False,
+    delay: Annotated[float, typer.Option(help="Fault: seconds added before every reply.")]
+        = 0.0,
+    stall: Annotated[list[str] | None, typer.Option(
+        help="Fault: a joint that cannot move (repeatable).")] = None,
 ) -> None:
     """Serve a simulated device until Ctrl-C or SIGTERM; prints its endpoint (JSON with --json)."""
     import gc
@@ -48,6 +52,12 @@ def serve(
     device = firmware_for_profile(prof, model_id=model, firmware=(major, minor),
                                   short_version=short_version)
     device.input_1 = input_1
+    device.faults.delay = delay
+    joints = [j.name for h in prof.hardware if prof.family_of(h) == "delto" for j in h.joints]
+    for name in stall or []:
+        if name not in joints:
+            raise InvalidInput(f"--stall: {prof.name} has no joint {name!r}")
+        device.faults.stalled.add(joints.index(name))
     server = DeltoServer(device, host=host, port=port)
     stop = threading.Event()
     gc.disable()  # a served device answers within microseconds; no collector pauses

@@ -12,6 +12,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from deltoctl.core.loop import CycleLoop
 from deltoctl.drivers.delto.models import KT
 from deltoctl.errors import DeviceError, Refused
 from deltoctl.profile.model import Component, Profile
@@ -61,17 +62,16 @@ def move_to(driver, targets: dict[str, float], profile: Profile,  # type: ignore
     first_error = max((abs(targets[j] - setpoints[j]) for j in targets), default=0.0) or 1.0
     if timeout is None:
         timeout = profile.safety.home_timeout or (first_error / speed + 5.0)
-    period = 1.0 / RATE
-    start = next_at = time.monotonic()
     settled_for = 0
     errors: dict[str, float] = {}
-    while True:
+    loop = CycleLoop(RATE)
+    step = speed / RATE
+    for _ in loop:
         values = driver.read()
         efforts = {}
         moving = False
         for joint, target in targets.items():
             sp = setpoints[joint]
-            step = speed * period
             setpoints[joint] = sp + max(-step, min(step, target - sp))
             pos = values[f"{joint}/position"]
             vel = values.get(f"{joint}/velocity", 0.0)
@@ -84,17 +84,11 @@ def move_to(driver, targets: dict[str, float], profile: Profile,  # type: ignore
         if progress:
             progress(max(0.0, 1.0 - worst / first_error))
         settled_for = settled_for + 1 if worst <= tolerance and not moving else 0
-        elapsed = time.monotonic() - start
-        if settled_for >= SETTLE_CYCLES:
-            driver.stop()
-            return MoveResult(True, elapsed, errors, [])
-        if elapsed > timeout:
-            driver.stop()
-            return MoveResult(False, elapsed, errors,
-                              [j for j, e in errors.items() if e > tolerance])
-        next_at += period
-        delay = next_at - time.monotonic()
-        if delay > 0:
-            time.sleep(delay)
-        else:
-            next_at = time.monotonic()
+        elapsed = time.monotonic() - loop.stats.started
+        if settled_for >= SETTLE_CYCLES or elapsed > timeout:
+            break
+    driver.stop()
+    if settled_for >= SETTLE_CYCLES:
+        return MoveResult(True, elapsed, errors, [])
+    unsettled = [j for j, e in errors.items() if e > tolerance] or list(targets)
+    return MoveResult(False, elapsed, errors, unsettled)
