@@ -114,3 +114,15 @@ def test_direction_maps_follow_firmware():
     assert DG3F_B.direction((3, 5)) == (-1,) * 12
     assert DG3F_B.direction((3, 6)) == (1,) * 12
     assert MODELS[0x4F02].direction((1, 0)) == (1,) * 18
+
+
+def test_effort_to_duty_and_current_limiter():
+    from deltoctl.drivers.delto.models import CurrentLimiter, effort_to_duty_percent
+
+    assert effort_to_duty_percent(0.5) == pytest.approx(0.5 * 13.875 / 1.15 / 12.0 * 100)
+    assert effort_to_duty_percent(2.0) == 100.0 and effort_to_duty_percent(-2.0) == -100.0
+    limiter = CurrentLimiter()
+    assert limiter(0.2, 100.0) == 0.2  # below the limit: untouched
+    shrunk = [limiter(0.2, 400.0) for _ in range(3)]  # latched above 170 mA: shrinking
+    assert shrunk[0] < 0.2 and shrunk[2] < shrunk[0]
+    assert limiter(0.2, 50.0) == 0.2  # released below 130 mA, integral cleared

@@ -40,13 +40,6 @@ class Limits:
     velocity: float | None = None
     effort: float | None = None
 
-    def clamp(self, value: float) -> float:
-        if self.lower is not None:
-            value = max(self.lower, value)
-        if self.upper is not None:
-            value = min(self.upper, value)
-        return value
-
     def contains(self, value: float, tol: float = 1e-9) -> bool:
         return not (
             (self.lower is not None and value < self.lower - tol)

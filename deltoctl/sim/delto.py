@@ -77,7 +77,6 @@ class DeltoFirmware:
         self.direction = model.direction(firmware)  # the motors' wiring for this firmware
         self.lock = threading.Lock()
         self.last_step = time.monotonic()
-        self.duty_frames = 0
         self._drift_dt = 0.0
         self._noise = [self.rng.gauss(0.0, 1.0) for _ in range(4099)]  # a prime-length cycle
         self._noise_at = 0
@@ -143,7 +142,6 @@ class DeltoFirmware:
                 for motor, duty in codec.decode_duty(data).items():
                     if 1 <= motor <= self.model.motors:
                         self.duty[motor - 1] = duty
-                self.duty_frames += 1
                 return None
             if cmd == codec.SET_GPIO:
                 if self.model.gpio:

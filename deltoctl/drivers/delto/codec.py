@@ -61,9 +61,6 @@ class FrameReader:
             del self._buffer[:length]
         return frames
 
-    def pending(self) -> int:
-        return len(self._buffer)
-
 
 def _check(data: bytes, cmd: int, what: str) -> None:
     if len(data) < 3:

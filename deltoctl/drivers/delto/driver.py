@@ -97,7 +97,6 @@ class DeltoDriver:
         self._lock = threading.RLock()
         self._reconnecting = False
         self._closed = False
-        self._gpio_out = (False, False, False)
         self._last_read = 0.0
         joints = [j.name for j in hw.joints]
         self._keys = {  # interface names, built once: the cycle only zips values in
@@ -283,7 +282,6 @@ class DeltoDriver:
     def set_gpio(self, outputs: tuple[bool, bool, bool]) -> None:
         if self.model is None or not self.model.gpio:
             raise DeviceError(f"{self.model.name if self.model else 'this gripper'} has no GPIO")
-        self._gpio_out = outputs
         self._send(codec.encode_gpio(outputs))
 
     def tare_ft(self) -> None:

@@ -9,12 +9,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-# SensorType byte of GET_VERSION, and the bytes each finger takes in a GET_DATA reply.
+# SensorType byte of GET_VERSION.
 SENSOR_NONE, FT_6AXIS, FT_3AXIS, TACTILE_M, FT_4AXIS, TACTILE_S = 0, 1, 2, 3, 4, 5
 SENSOR_NAMES = {SENSOR_NONE: "none", FT_6AXIS: "ft_6axis", FT_3AXIS: "ft_3axis",
                 TACTILE_M: "tactile_m", FT_4AXIS: "ft_4axis", TACTILE_S: "tactile_s"}
-SENSOR_BYTES = {SENSOR_NONE: 0, FT_6AXIS: 12, FT_3AXIS: 12, TACTILE_M: 15, FT_4AXIS: 12,
-                TACTILE_S: 36}
 FT_TYPES = (FT_6AXIS, FT_3AXIS, FT_4AXIS)
 
 # Effort (N·m) → duty, and the current limiter (derived from the helper library; verify).
@@ -92,10 +90,6 @@ def effort_to_duty_percent(effort: float) -> float:
     """Torque command (N·m) → duty %, clamped (ConvertDuty of the helper library)."""
     duty = effort * (RM / KT) / MAX_VOLTAGE * 100.0
     return max(-MAX_ABS_DUTY, min(MAX_ABS_DUTY, duty))
-
-
-def duty_percent_to_effort(duty: float) -> float:
-    return duty / 100.0 * MAX_VOLTAGE * KT / RM
 
 
 class CurrentLimiter:
