@@ -101,3 +101,10 @@ def test_record_to_an_unwritable_path(cli):
     result = cli("--sim", "-p", "dg-4f", "record", "/nonexistent/dir/x.mcap", "-d", "0.1")
     assert result.exit_code == 2
     assert "cannot write" in result.stderr
+
+
+def test_unreachable_device_leaves_no_file(cli, tmp_path):
+    out = tmp_path / "never.mcap"
+    result = cli("-p", "dg-4f", "-t", "tcp://127.0.0.1:9", "record", str(out), "-d", "0.1")
+    assert result.exit_code == 4
+    assert not out.exists()

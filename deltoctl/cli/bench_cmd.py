@@ -10,7 +10,7 @@ import typer
 
 from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, info
-from deltoctl.errors import DeviceError
+from deltoctl.errors import DeviceError, InvalidInput
 
 if TYPE_CHECKING:
     import subprocess
@@ -70,22 +70,23 @@ def _run(session, rate: float, duration: float, mcap_path: Path) -> dict:  # typ
 @app.command("loop")
 def bench_loop(
     ctx: typer.Context,
-    profile: Annotated[str, typer.Option("--profile-name", help="Delto profile.")] =
-        "dg-5f-right",
     rate: Annotated[float, typer.Option("--rate", help="Requested cycle rate, Hz.")] = 1000.0,
     duration: Annotated[float, typer.Option("--duration", help="Seconds per run.")] = 10.0,
     unpaced: Annotated[float, typer.Option(
         "--unpaced", help="Seconds of the unpaced run (0: skip).")] = 5.0,
 ) -> None:
-    """DG-5F-R with F/T and IO over loopback TCP, recording to MCAP: paced and unpaced."""
+    """A Delto profile (default dg-5f-right: F/T and IO) over loopback TCP, recording to MCAP:
+    paced, then unpaced."""
     import os
     import tempfile
 
     from deltoctl.core.session import Session
 
     opts = options(ctx)
-    prof = opts.load_profile(profile)
-    proc, endpoint = _serve(profile)
+    if rate <= 0 or duration <= 0 or unpaced < 0:
+        raise InvalidInput("--rate and --duration must be positive, --unpaced not negative")
+    prof = opts.load_profile(opts.profile or "dg-5f-right")
+    proc, endpoint = _serve(str(prof.source))
     results = {"profile": prof.name, "endpoint": endpoint, "python": sys.version.split()[0]}
     try:
         with tempfile.TemporaryDirectory() as tmp, Session(prof, [endpoint]) as session:

@@ -14,6 +14,13 @@ from deltoctl.errors import WARNINGS, InvalidInput
 STATS_PERIOD = 1.0  # s between loop-statistics diagnostics
 
 
+def _create(path: Path):  # type: ignore[no-untyped-def]
+    try:
+        return path.open("wb")
+    except OSError as exc:
+        raise InvalidInput(f"cannot write {path}: {exc.strerror}") from None
+
+
 def record(
     ctx: typer.Context,
     output: Annotated[Path, typer.Argument(help="The .mcap file to write.")],
@@ -32,12 +39,11 @@ def record(
     opts = options(ctx)
     if rate <= 0:
         raise InvalidInput("--rate must be positive")
-    try:
-        stream = output.open("wb")
-    except OSError as exc:
-        raise InvalidInput(f"cannot write {output}: {exc.strerror}") from None
+    if not output.parent.is_dir():
+        raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
     signal.signal(signal.SIGTERM, signal.default_int_handler)
-    with stream, open_session(opts, allow_model_mismatch) as session:
+    # the file is created once the device answers: an unreachable device leaves no empty file
+    with open_session(opts, allow_model_mismatch) as session, _create(output) as stream:
         driver = session.driver
         ident = {k: str(v) for k, v in driver.identity.as_dict().items()}
         recorder = McapRecorder(stream, session.profile, {

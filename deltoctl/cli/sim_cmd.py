@@ -44,9 +44,17 @@ def serve(
     prof = opts.load_profile(profile)
     try:
         major, minor = (int(x) for x in firmware.split("."))
+    except ValueError:
+        raise InvalidInput(f"--firmware {firmware!r} is not MAJOR.MINOR (e.g. 2.8)") from None
+    try:
         model = int(model_id, 0) if model_id else None
     except ValueError:
-        raise InvalidInput(f"bad --firmware {firmware!r} or --model-id {model_id!r}") from None
+        raise InvalidInput(f"--model-id {model_id!r} is not a number (e.g. 0x5F22)") from None
+    from deltoctl.drivers.delto.models import MODELS
+
+    if model is not None and model not in MODELS:
+        raise InvalidInput(f"--model-id {model:#06x} is not a Delto model "
+                           f"({', '.join(f'{m:#06x}' for m in MODELS)})")
     if not any(prof.family_of(h) == "delto" for h in prof.hardware):
         raise InvalidInput(f"no simulator for profile {prof.name!r} yet (supported: delto)")
     device = firmware_for_profile(prof, model_id=model, firmware=(major, minor),

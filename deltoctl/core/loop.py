@@ -14,6 +14,7 @@ class LoopStats:
     deadline_misses: int = 0  # a cycle that started a whole period late
     lateness: list[float] = field(default_factory=list)  # s, actual − scheduled start
     started: float = field(default_factory=time.monotonic)
+    ended: float | None = None  # when the loop stopped; None while it runs
     packets: int = 0
     errors: int = 0
 
@@ -24,7 +25,7 @@ class LoopStats:
         return ordered[min(len(ordered) - 1, int(q / 100 * len(ordered)))]
 
     def summary(self) -> dict[str, float | int]:
-        elapsed = max(time.monotonic() - self.started, 1e-9)
+        elapsed = max((self.ended or time.monotonic()) - self.started, 1e-9)
         return {
             "requested_rate": self.rate,
             "real_rate": round(self.cycles / elapsed, 2),
@@ -58,6 +59,7 @@ class CycleLoop:
         try:
             yield from self._cycles()
         finally:
+            self.stats.ended = time.monotonic()
             if gc_was_enabled:
                 gc.enable()
 
