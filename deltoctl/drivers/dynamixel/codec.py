@@ -1,0 +1,227 @@
+"""Dynamixel Protocol 2.0, sans-I/O: instruction packets out, status packets in.
+
+Packet: ``FF FF FD 00 | ID | LEN_L LEN_H | INST | params | CRC_L CRC_H``; a status packet has
+INST 0x55 and an ERR byte before its params. LEN counts INST, params and the CRC. Between INST
+and the CRC every ``FF FF FD`` is stuffed to ``FF FF FD FD``; the CRC (CRC-16/BUYPASS: poly
+0x8005, init 0, no reflection) covers the stuffed packet. Reference: bioscara-mh5-dynamixel.md §3.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+from deltoctl.errors import ProtocolError
+
+HEADER = b"\xff\xff\xfd\x00"
+BROADCAST_ID = 0xFE
+MAX_ID = 0xFC
+
+PING, READ, WRITE, REG_WRITE, ACTION = 0x01, 0x02, 0x03, 0x04, 0x05
+FACTORY_RESET, REBOOT, CLEAR, STATUS = 0x06, 0x08, 0x10, 0x55
+SYNC_READ, SYNC_WRITE, FAST_SYNC_READ = 0x82, 0x83, 0x8A
+BULK_READ, BULK_WRITE, FAST_BULK_READ = 0x92, 0x93, 0x9A
+
+STATUS_ERRORS = {1: "result fail", 2: "instruction error", 3: "CRC error",
+                 4: "data range error", 5: "data length error", 6: "data limit error",
+                 7: "access error"}
+HARDWARE_ERRORS = {0: "input voltage", 2: "overheating", 3: "motor encoder",
+                   4: "electrical shock", 5: "overload"}
+
+
+def _crc_table() -> list[int]:
+    table = []
+    for byte in range(256):
+        crc = byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x8005) if crc & 0x8000 else crc << 1
+        table.append(crc & 0xFFFF)
+    return table
+
+
+_TABLE = _crc_table()
+
+
+def crc16(data: bytes, crc: int = 0) -> int:
+    for byte in data:
+        crc = ((crc << 8) ^ _TABLE[((crc >> 8) ^ byte) & 0xFF]) & 0xFFFF
+    return crc
+
+
+def stuff(body: bytes) -> bytes:
+    return body.replace(b"\xff\xff\xfd", b"\xff\xff\xfd\xfd")
+
+
+def unstuff(body: bytes) -> bytes:
+    return body.replace(b"\xff\xff\xfd\xfd", b"\xff\xff\xfd")
+
+
+def packet(device_id: int, instruction: int, params: bytes = b"") -> bytes:
+    """An instruction (or, with STATUS, a status) packet with stuffing and CRC."""
+    if not 0 <= device_id <= BROADCAST_ID or device_id in (0xFD,):
+        raise ValueError(f"ID {device_id} is not 0..252 or 254 (broadcast)")
+    body = stuff(bytes([instruction]) + params)
+    head = HEADER + bytes([device_id]) + struct.pack("<H", len(body) + 2)
+    crc = crc16(head + body)
+    return head + body + struct.pack("<H", crc)
+
+
+def _u16(value: int) -> bytes:
+    return struct.pack("<H", value)
+
+
+# -- instructions ---------------------------------------------------------------------------------
+
+def ping(device_id: int = BROADCAST_ID) -> bytes:
+    return packet(device_id, PING)
+
+
+def read(device_id: int, address: int, length: int) -> bytes:
+    return packet(device_id, READ, _u16(address) + _u16(length))
+
+
+def write(device_id: int, address: int, data: bytes) -> bytes:
+    return packet(device_id, WRITE, _u16(address) + data)
+
+
+def reg_write(device_id: int, address: int, data: bytes) -> bytes:
+    return packet(device_id, REG_WRITE, _u16(address) + data)
+
+
+def action(device_id: int = BROADCAST_ID) -> bytes:
+    return packet(device_id, ACTION)
+
+
+def factory_reset(device_id: int, option: int = 0xFF) -> bytes:
+    """option 0xFF: all; 0x01: all but the ID; 0x02: all but the ID and the baud rate."""
+    if device_id == BROADCAST_ID and option == 0xFF:
+        raise ValueError("a broadcast factory reset of everything is refused by the firmware")
+    return packet(device_id, FACTORY_RESET, bytes([option]))
+
+
+def reboot(device_id: int) -> bytes:
+    return packet(device_id, REBOOT)
+
+
+def clear_multi_turn(device_id: int) -> bytes:
+    return packet(device_id, CLEAR, b"\x01\x44\x58\x4c\x22")
+
+
+def sync_read(address: int, length: int, ids: Iterable[int], fast: bool = False) -> bytes:
+    return packet(BROADCAST_ID, FAST_SYNC_READ if fast else SYNC_READ,
+                  _u16(address) + _u16(length) + bytes(ids))
+
+
+def sync_write(address: int, length: int, data: dict[int, bytes]) -> bytes:
+    params = bytearray(_u16(address) + _u16(length))
+    for device_id, values in data.items():
+        if len(values) != length:
+            raise ValueError(f"sync write to ID {device_id}: {len(values)} bytes, not {length}")
+        params += bytes([device_id]) + values
+    return packet(BROADCAST_ID, SYNC_WRITE, bytes(params))
+
+
+def bulk_read(requests: Iterable[tuple[int, int, int]], fast: bool = False) -> bytes:
+    params = b"".join(bytes([i]) + _u16(a) + _u16(n) for i, a, n in requests)
+    return packet(BROADCAST_ID, FAST_BULK_READ if fast else BULK_READ, params)
+
+
+def bulk_write(writes: Iterable[tuple[int, int, bytes]]) -> bytes:
+    params = b"".join(bytes([i]) + _u16(a) + _u16(len(d)) + d for i, a, d in writes)
+    return packet(BROADCAST_ID, BULK_WRITE, params)
+
+
+# -- status packets -------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Status:
+    id: int
+    error: int
+    params: bytes
+
+    @property
+    def alert(self) -> bool:
+        """Bit 7: read Hardware Error Status (70) for the cause."""
+        return bool(self.error & 0x80)
+
+    def error_text(self) -> str | None:
+        code = self.error & 0x7F
+        if not code and not self.alert:
+            return None
+        words = [STATUS_ERRORS.get(code, f"error {code}")] if code else []
+        if self.alert:
+            words.append("hardware alert")
+        return ", ".join(words)
+
+
+def hardware_error_text(bits: int) -> list[str]:
+    return [name for bit, name in HARDWARE_ERRORS.items() if bits >> bit & 1]
+
+
+def status(device_id: int, error: int = 0, params: bytes = b"") -> bytes:
+    """The emulator's side: a status packet."""
+    return packet(device_id, STATUS, bytes([error]) + params)
+
+
+class PacketReader:
+    """Finds packets in a byte stream: ``feed(data)`` returns (id, instruction, body) tuples
+    whose CRC checks; a bad CRC raises ProtocolError (the bytes are dropped)."""
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+
+    def feed(self, data: bytes) -> list[tuple[int, int, bytes]]:
+        self._buf += data
+        out = []
+        while True:
+            start = self._buf.find(HEADER)
+            if start < 0:
+                del self._buf[: max(0, len(self._buf) - 3)]  # keep a possible partial header
+                return out
+            del self._buf[:start]
+            if len(self._buf) < 7:
+                return out
+            length = self._buf[5] | (self._buf[6] << 8)
+            total = 7 + length
+            if length < 3:
+                del self._buf[:4]
+                raise ProtocolError(f"packet length {length} is too short")
+            if len(self._buf) < total:
+                return out
+            raw = bytes(self._buf[:total])
+            del self._buf[:total]
+            crc = raw[-2] | (raw[-1] << 8)
+            if crc16(raw[:-2]) != crc:
+                raise ProtocolError(f"CRC mismatch from ID {raw[4]}: got {crc:#06x}, "
+                                    f"expected {crc16(raw[:-2]):#06x}")
+            body = unstuff(raw[7:-2])
+            out.append((raw[4], body[0], body[1:]))
+
+    def reset(self) -> None:
+        self._buf.clear()
+
+
+def decode_status(device_id: int, instruction: int, body: bytes) -> Status:
+    if instruction != STATUS:
+        raise ProtocolError(f"expected a status packet from ID {device_id}, got instruction "
+                            f"{instruction:#04x}")
+    if not body:
+        raise ProtocolError(f"status packet from ID {device_id} has no error byte")
+    return Status(device_id, body[0], bytes(body[1:]))
+
+
+def decode_fast_sync(status_: Status, length: int, ids: list[int]) -> dict[int, tuple[int, bytes]]:
+    """A Fast Sync Read reply: one status (ID 0xFE) with [ERR, ID, data, CRC] per servo."""
+    out: dict[int, tuple[int, bytes]] = {}
+    data = status_.error.to_bytes(1, "little") + status_.params
+    stride = length + 4
+    for k, expected in enumerate(ids):
+        block = data[k * stride:(k + 1) * stride]
+        if len(block) < length + 2:
+            break
+        if block[1] != expected:
+            raise ProtocolError(f"fast sync read: block {k} is from ID {block[1]}, "
+                                f"expected {expected}")
+        out[expected] = (block[0], bytes(block[2:2 + length]))
+    return out
