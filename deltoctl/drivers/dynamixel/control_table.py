@@ -1,0 +1,89 @@
+"""The XL430-W250 control table as data (ROBOTIS e-manual; reference §3.3).
+
+One row per item: address, size in bytes, name, access (R or RW), area, default. EEPROM items
+(addresses below 64) are writable only while Torque Enable is 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Item:
+    address: int
+    size: int
+    name: str
+    access: str = "RW"  # "R" or "RW"
+    default: int = 0
+    signed: bool = False
+
+    @property
+    def eeprom(self) -> bool:
+        return self.address < 64
+
+
+XL430_W250 = 1060
+
+XL430: tuple[Item, ...] = (
+    Item(0, 2, "Model Number", "R", XL430_W250),
+    Item(2, 4, "Model Information", "R"),
+    Item(6, 1, "Firmware Version", "R", 46),
+    Item(7, 1, "ID", default=1),
+    Item(8, 1, "Baud Rate", default=1),
+    Item(9, 1, "Return Delay Time", default=250),
+    Item(10, 1, "Drive Mode"),
+    Item(11, 1, "Operating Mode", default=3),
+    Item(12, 1, "Secondary ID", default=255),
+    Item(13, 1, "Protocol Type", default=2),
+    Item(20, 4, "Homing Offset", signed=True),
+    Item(24, 4, "Moving Threshold", default=10),
+    Item(31, 1, "Temperature Limit", default=72),
+    Item(32, 2, "Max Voltage Limit", default=140),
+    Item(34, 2, "Min Voltage Limit", default=60),
+    Item(36, 2, "PWM Limit", default=885),
+    Item(44, 4, "Velocity Limit", default=265),
+    Item(48, 4, "Max Position Limit", default=4095),
+    Item(52, 4, "Min Position Limit", default=0),
+    Item(60, 1, "Startup Configuration"),
+    Item(63, 1, "Shutdown", default=52),
+    Item(64, 1, "Torque Enable"),
+    Item(65, 1, "LED"),
+    Item(68, 1, "Status Return Level", default=2),
+    Item(69, 1, "Registered Instruction", "R"),
+    Item(70, 1, "Hardware Error Status", "R"),
+    Item(76, 2, "Velocity I Gain", default=1000),
+    Item(78, 2, "Velocity P Gain", default=100),
+    Item(80, 2, "Position D Gain", default=4000),
+    Item(82, 2, "Position I Gain", default=0),
+    Item(84, 2, "Position P Gain", default=640),
+    Item(88, 2, "Feedforward 2nd Gain"),
+    Item(90, 2, "Feedforward 1st Gain"),
+    Item(98, 1, "Bus Watchdog"),
+    Item(100, 2, "Goal PWM", signed=True),
+    Item(104, 4, "Goal Velocity", signed=True),
+    Item(108, 4, "Profile Acceleration"),
+    Item(112, 4, "Profile Velocity"),
+    Item(116, 4, "Goal Position", signed=True),
+    Item(120, 2, "Realtime Tick", "R"),
+    Item(122, 1, "Moving", "R"),
+    Item(123, 1, "Moving Status", "R"),
+    Item(124, 2, "Present PWM", "R", signed=True),
+    Item(126, 2, "Present Load", "R", signed=True),
+    Item(128, 4, "Present Velocity", "R", signed=True),
+    Item(132, 4, "Present Position", "R", signed=True),
+    Item(136, 4, "Velocity Trajectory", "R", signed=True),
+    Item(140, 4, "Position Trajectory", "R", signed=True),
+    Item(144, 2, "Present Input Voltage", "R"),
+    Item(146, 1, "Present Temperature", "R"),
+    Item(147, 1, "Backup Ready", "R"),
+)
+
+BY_NAME = {item.name: item for item in XL430}
+TABLE_SIZE = 148
+BAUD_RATES = {0: 9600, 1: 57600, 2: 115200, 3: 1_000_000, 4: 2_000_000, 5: 3_000_000,
+              6: 4_000_000, 7: 4_500_000}
+
+
+def item_at(address: int) -> Item | None:
+    return next((i for i in XL430 if i.address <= address < i.address + i.size), None)

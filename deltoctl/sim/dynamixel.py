@@ -1,0 +1,295 @@
+"""A Dynamixel bus of XL430 servos: Protocol 2.0 answered from each servo's control table,
+behind a pseudo-terminal that pyserial (and so dynamixel-sdk) opens as a serial port.
+
+Each servo keeps the XL430 control table (EEPROM and RAM, access rights, EEPROM refused while
+torque is on), moves to its goal with a time-based or velocity-based profile, reports
+temperature and voltage, and honours Status Return Level, broadcast semantics, REG_WRITE and
+ACTION, reboot and factory reset. Faults: a missing servo, a corrupted CRC, no reply, a wrong
+baud rate.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import struct
+import threading
+import time
+import tty
+from dataclasses import dataclass, field
+
+from deltoctl.drivers.dynamixel import codec
+from deltoctl.drivers.dynamixel.control_table import BY_NAME, TABLE_SIZE, XL430, item_at
+from deltoctl.errors import ProtocolError
+
+ACCESS_ERROR, DATA_LENGTH_ERROR, INSTRUCTION_ERROR, RESULT_FAIL = 7, 5, 2, 1
+MAX_RPM_UNITS = 265  # velocity limit default, 0.229 rpm units
+RAW_PER_REV = 4096
+
+
+def _addr(name: str) -> int:
+    return BY_NAME[name].address
+
+
+class Servo:
+    def __init__(self, device_id: int, firmware: int = 46) -> None:
+        self.memory = bytearray(TABLE_SIZE)
+        self.factory_reset(0xFF)
+        self.set("ID", device_id)
+        self.set("Firmware Version", firmware)
+        self.set("Present Position", 2047)
+        self.set("Goal Position", 2047)
+        self.set("Present Input Voltage", 120)
+        self.set("Present Temperature", 30)
+        self.registered: tuple[int, bytes] | None = None
+        self.position = 2047.0
+        self._move: tuple[float, float, float, float] | None = None  # start, goal, t0, duration
+
+    # -- the table ---------------------------------------------------------------------------
+    def get(self, name: str) -> int:
+        item = BY_NAME[name]
+        raw = bytes(self.memory[item.address:item.address + item.size])
+        return int.from_bytes(raw, "little", signed=item.signed)
+
+    def set(self, name: str, value: int) -> None:
+        item = BY_NAME[name]
+        self.memory[item.address:item.address + item.size] = value.to_bytes(
+            item.size, "little", signed=item.signed)
+
+    @property
+    def id(self) -> int:
+        return self.memory[7]
+
+    def factory_reset(self, option: int) -> None:
+        keep = {"ID": self.memory[7], "Baud Rate": self.memory[8]} if any(self.memory) else {}
+        for item in XL430:
+            self.set(item.name, item.default)
+        if option in (0x01, 0x02) and keep:
+            self.memory[7] = keep["ID"]
+        if option == 0x02 and keep:
+            self.memory[8] = keep["Baud Rate"]
+
+    def reboot(self) -> None:
+        for item in XL430:
+            if not item.eeprom and item.access == "RW":
+                self.set(item.name, item.default)
+        self.set("Hardware Error Status", 0)
+        self.set("Goal Position", round(self.position))
+        self._move = None
+
+    def read(self, address: int, length: int) -> tuple[int, bytes]:
+        self.update()
+        if address + length > TABLE_SIZE or length == 0:
+            return ACCESS_ERROR, b""
+        return 0, bytes(self.memory[address:address + length])
+
+    def write(self, address: int, data: bytes) -> int:
+        if address + len(data) > TABLE_SIZE or not data:
+            return ACCESS_ERROR
+        torque_on = self.memory[64] == 1
+        for offset in range(len(data)):
+            item = item_at(address + offset)
+            if item is None or item.access != "RW" or (item.eeprom and torque_on):
+                return ACCESS_ERROR
+        if self.memory[70] and address <= 64 < address + len(data) and data[64 - address]:
+            return RESULT_FAIL  # a shut-down servo comes back only by reboot
+        self.update()
+        self.memory[address:address + len(data)] = data
+        if address <= 116 < address + len(data):
+            self._start_move()
+        return 0
+
+    # -- motion ----------------------------------------------------------------------------------
+    def _start_move(self) -> None:
+        goal = float(self.get("Goal Position"))
+        if self.memory[64] != 1:
+            return
+        time_based = self.memory[10] & 0x04
+        profile = self.get("Profile Velocity")
+        distance = abs(goal - self.position)
+        if time_based:
+            duration = profile / 1000.0
+        else:
+            units = profile or MAX_RPM_UNITS
+            rev_per_s = units * 0.229 / 60.0
+            duration = distance / (rev_per_s * RAW_PER_REV)
+        self._move = (self.position, goal, time.monotonic(), duration)
+
+    def update(self) -> None:
+        if self._move is not None and self.memory[64] == 1:
+            start, goal, t0, duration = self._move
+            fraction = 1.0 if duration <= 0 else min(1.0, (time.monotonic() - t0) / duration)
+            previous = self.position
+            self.position = start + (goal - start) * fraction
+            velocity = 0.0 if duration <= 0 else (goal - start) / duration  # raw/s
+            self.set("Present Velocity", round(velocity * 60 / RAW_PER_REV / 0.229)
+                     if fraction < 1.0 else 0)
+            self.set("Moving", 1 if fraction < 1.0 else 0)
+            if fraction >= 1.0:
+                self._move = None
+            self.set("Present Load", 50 if previous != self.position else 0)
+        self.set("Present Position", round(self.position))
+
+
+@dataclass
+class BusFaults:
+    missing: set[int] = field(default_factory=set)  # IDs that never answer
+    corrupt_crc: set[int] = field(default_factory=set)  # IDs whose replies carry a bad CRC
+    no_reply: bool = False  # the whole bus is silent
+    baud_mismatch: bool = False  # the servos listen at another baud rate
+
+
+class DynamixelBus:
+    """The servos on one bus: instruction packets in, the bytes of their replies out."""
+
+    def __init__(self, servos: list[Servo]) -> None:
+        self.servos = {s.id: s for s in servos}
+        self.faults = BusFaults()
+
+    def _present(self, device_id: int) -> Servo | None:
+        servo = self.servos.get(device_id)
+        return None if servo is None or device_id in self.faults.missing else servo
+
+    def _status(self, servo: Servo, error: int = 0, params: bytes = b"") -> bytes:
+        data = codec.status(servo.id, error, params)
+        if servo.id in self.faults.corrupt_crc:
+            data = data[:-1] + bytes([data[-1] ^ 0xFF])
+        return data
+
+    def _answers(self, servo: Servo, instruction: int) -> bool:
+        level = servo.memory[68]
+        return instruction == codec.PING or level == 2 or (level == 1 and instruction in (
+            codec.READ, codec.SYNC_READ, codec.BULK_READ))
+
+    def handle(self, device_id: int, instruction: int, params: bytes) -> bytes:
+        if self.faults.no_reply or self.faults.baud_mismatch:
+            return b""
+        broadcast = device_id == codec.BROADCAST_ID
+        if instruction == codec.PING:
+            targets = sorted(self.servos) if broadcast else [device_id]
+            return b"".join(self._status(s, 0, struct.pack("<HB", s.get("Model Number"),
+                                                           s.get("Firmware Version")))
+                            for i in targets if (s := self._present(i)))
+        if instruction in (codec.SYNC_READ, codec.SYNC_WRITE, codec.BULK_READ,
+                           codec.BULK_WRITE):
+            return self._group(instruction, params)
+        targets = list(self.servos) if broadcast else [device_id]
+        replies = []
+        for i in targets:
+            servo = self._present(i)
+            if servo is None:
+                continue
+            error, data = self._single(servo, instruction, params)
+            if not broadcast and self._answers(servo, instruction):
+                replies.append(self._status(servo, error, data))
+        return b"".join(replies)
+
+    def _single(self, servo: Servo, instruction: int, params: bytes) -> tuple[int, bytes]:
+        if instruction == codec.READ and len(params) == 4:
+            address, length = struct.unpack("<HH", params)
+            return servo.read(address, length)
+        if instruction in (codec.WRITE, codec.REG_WRITE) and len(params) > 2:
+            address = params[0] | params[1] << 8
+            if instruction == codec.REG_WRITE:
+                servo.registered = (address, bytes(params[2:]))
+                servo.memory[69] = 1
+                return 0, b""
+            return servo.write(address, bytes(params[2:])), b""
+        if instruction == codec.ACTION:
+            if servo.registered is None:
+                return RESULT_FAIL, b""
+            address, data = servo.registered
+            servo.registered, servo.memory[69] = None, 0
+            return servo.write(address, data), b""
+        if instruction == codec.REBOOT:
+            servo.reboot()
+            return 0, b""
+        if instruction == codec.FACTORY_RESET and len(params) == 1:
+            servo.factory_reset(params[0])
+            return 0, b""
+        if instruction == codec.CLEAR:
+            return (RESULT_FAIL if servo.memory[122] else 0), b""
+        return INSTRUCTION_ERROR, b""
+
+    def _group(self, instruction: int, params: bytes) -> bytes:
+        replies = []
+        if instruction in (codec.SYNC_READ, codec.SYNC_WRITE):
+            address, length = struct.unpack_from("<HH", params)
+            body = params[4:]
+            if instruction == codec.SYNC_READ:
+                for i in body:
+                    servo = self._present(i)
+                    if servo is not None:
+                        error, data = servo.read(address, length)
+                        replies.append(self._status(servo, error, data))
+            else:
+                for k in range(0, len(body), length + 1):
+                    servo = self._present(body[k])
+                    if servo is not None:
+                        servo.write(address, bytes(body[k + 1:k + 1 + length]))
+        elif instruction == codec.BULK_READ:
+            for k in range(0, len(params), 5):
+                device_id, address, length = struct.unpack_from("<BHH", params, k)
+                servo = self._present(device_id)
+                if servo is not None:
+                    error, data = servo.read(address, length)
+                    replies.append(self._status(servo, error, data))
+        else:
+            k = 0
+            while k + 5 <= len(params):
+                device_id, address, length = struct.unpack_from("<BHH", params, k)
+                servo = self._present(device_id)
+                if servo is not None:
+                    servo.write(address, bytes(params[k + 5:k + 5 + length]))
+                k += 5 + length
+        return b"".join(replies)
+
+
+class DynamixelPtyServer:
+    """Serves a bus on a pseudo-terminal; ``port`` is the path a serial client opens."""
+
+    def __init__(self, bus: DynamixelBus) -> None:
+        self.bus = bus
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.master)
+        tty.setraw(self.slave)
+        self.port = os.ttyname(self.slave)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._serve, name="dxl-sim", daemon=True)
+
+    def start(self) -> DynamixelPtyServer:
+        self._thread.start()
+        return self
+
+    def _serve(self) -> None:
+        import select
+
+        reader = codec.PacketReader()
+        while not self._stop.is_set():
+            if not select.select([self.master], [], [], 0.1)[0]:
+                continue
+            try:
+                data = os.read(self.master, 4096)
+            except OSError:
+                return
+            try:
+                packets = reader.feed(data)
+            except ProtocolError:
+                continue  # a corrupted instruction is ignored, as a servo would
+            for device_id, instruction, params in packets:
+                reply = self.bus.handle(device_id, instruction, params)
+                if reply:
+                    os.write(self.master, reply)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=1)
+        for fd in (self.master, self.slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+    def __enter__(self) -> DynamixelPtyServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

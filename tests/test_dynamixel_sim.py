@@ -1,0 +1,90 @@
+"""The XL430 bus emulator, driven by ROBOTIS' dynamixel-sdk over a pseudo-terminal."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+
+sdk = pytest.importorskip("dynamixel_sdk")
+
+
+def eventually(predicate, timeout: float = 2.0) -> bool:
+    """Writes without a reply land when the emulator thread has read them."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+@pytest.fixture
+def bus():
+    servos = DynamixelBus([Servo(i) for i in (11, 12, 13)])
+    with DynamixelPtyServer(servos) as server:
+        port = sdk.PortHandler(server.port)
+        assert port.openPort() and port.setBaudRate(1000000)
+        yield servos, port, sdk.PacketHandler(2.0)
+        port.closePort()
+
+
+def test_sdk_pings_reads_and_writes(bus):
+    _servos, port, ph = bus
+    model, result, error = ph.ping(port, 12)
+    assert (model, result, error) == (1060, sdk.COMM_SUCCESS, 0)
+    found, result = ph.broadcastPing(port)
+    assert result == sdk.COMM_SUCCESS and sorted(found) == [11, 12, 13]
+    assert found[11] == [1060, 46]
+    value, result, _ = ph.read2ByteTxRx(port, 13, 0)
+    assert (value, result) == (1060, sdk.COMM_SUCCESS)
+    # EEPROM is refused while torque is on
+    assert ph.write1ByteTxRx(port, 11, 64, 1)[0] == sdk.COMM_SUCCESS
+    assert ph.write1ByteTxRx(port, 11, 11, 1)[1] == 7  # access error
+    assert ph.write1ByteTxRx(port, 11, 0, 5)[1] == 7  # read-only item
+    # a time-based profile: 200 ms to the goal
+    assert ph.write1ByteTxRx(port, 12, 10, 4)[0] == sdk.COMM_SUCCESS
+    ph.write1ByteTxRx(port, 12, 64, 1)
+    ph.write4ByteTxRx(port, 12, 112, 200)
+    ph.write4ByteTxRx(port, 12, 116, 3000)
+    time.sleep(0.3)
+    position, result, _ = ph.read4ByteTxRx(port, 12, 132)
+    assert (position, result) == (3000, sdk.COMM_SUCCESS)
+
+
+def test_sdk_group_sync_read_and_write(bus):
+    servos, port, ph = bus
+    writer = sdk.GroupSyncWrite(port, ph, 64, 1)
+    for i in (11, 12, 13):
+        writer.addParam(i, [1])
+    assert writer.txPacket() == sdk.COMM_SUCCESS
+    assert eventually(lambda: all(s.memory[64] == 1 for s in servos.servos.values()))
+    reader = sdk.GroupSyncRead(port, ph, 126, 10)
+    for i in (11, 12, 13):
+        reader.addParam(i)
+    assert reader.txRxPacket() == sdk.COMM_SUCCESS
+    assert reader.getData(13, 132, 4) == 2047
+
+
+def test_faults_missing_servo_and_bad_crc(bus):
+    servos, port, ph = bus
+    servos.faults.missing.add(12)
+    assert ph.ping(port, 12)[1] == sdk.COMM_RX_TIMEOUT
+    servos.faults.missing.clear()
+    servos.faults.corrupt_crc.add(13)
+    assert ph.ping(port, 13)[1] == sdk.COMM_RX_CORRUPT
+
+
+def test_status_return_level_and_reboot(bus):
+    servos, port, ph = bus
+    servo = servos.servos[11]
+    servo.memory[68] = 1  # reads only
+    assert ph.write1ByteTxOnly(port, 11, 65, 1) == sdk.COMM_SUCCESS
+    assert eventually(lambda: servo.memory[65] == 1)
+    servo.memory[70] = 0x20  # overload: shut down
+    servo.memory[68] = 2
+    assert ph.write1ByteTxRx(port, 11, 64, 1)[1] == 1  # result fail until reboot
+    assert ph.reboot(port, 11)[0] == sdk.COMM_SUCCESS
+    assert servo.memory[70] == 0 and servo.memory[65] == 0
