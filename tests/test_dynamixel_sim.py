@@ -88,3 +88,32 @@ def test_status_return_level_and_reboot(bus):
     assert ph.write1ByteTxRx(port, 11, 64, 1)[1] == 1  # result fail until reboot
     assert ph.reboot(port, 11)[0] == sdk.COMM_SUCCESS
     assert servo.memory[70] == 0 and servo.memory[65] == 0
+
+
+def test_sim_serve_mh5_serves_both_buses(tmp_path):
+    import json
+    import subprocess
+    import sys
+    from urllib.parse import urlsplit
+
+    proc = subprocess.Popen([sys.executable, "-m", "deltoctl", "sim", "serve", "mh5", "--json"],
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        buses = json.loads(proc.stdout.readline())["buses"]
+        assert set(buses) == {"upper_body", "lower_body"}
+        ph = sdk.PacketHandler(2.0)
+        found = {}
+        for name, url in buses.items():
+            parts = urlsplit(url)
+            assert parts.scheme == "serial" and "baud=2000000" in parts.query
+            port = sdk.PortHandler(parts.path)
+            assert port.openPort() and port.setBaudRate(1000000)
+            ids, result = ph.broadcastPing(port)
+            port.closePort()
+            assert result == sdk.COMM_SUCCESS
+            found[name] = sorted(ids)
+        assert found["upper_body"] == [31, 32, 33, 34, 41, 42, 43, 44, 51, 52]
+        assert found["lower_body"] == [11, 12, 13, 14, 15, 16, 21, 22, 23, 24, 25, 26]
+    finally:
+        proc.terminate()
+        assert proc.wait(timeout=5) == 0

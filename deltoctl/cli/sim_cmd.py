@@ -32,16 +32,43 @@ def serve(
     stall: Annotated[list[str] | None, typer.Option(
         help="Fault: a joint that cannot move (repeatable).")] = None,
 ) -> None:
-    """Serve a simulated device until Ctrl-C or SIGTERM; prints its endpoint (JSON with --json)."""
+    """Serve a simulated device until Ctrl-C or SIGTERM; prints each bus's endpoint (TCP, or a
+    pseudo-terminal for a Dynamixel bus), as JSON with --json."""
     import gc
     import json
     import signal
+    import sys
     import threading
-
-    from deltoctl.sim.delto import DeltoServer, firmware_for_profile
 
     opts = options(ctx)
     prof = opts.load_profile(profile)
+    families = {prof.family_of(h) for h in prof.hardware}
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    gc.disable()  # a served device answers within microseconds; no collector pauses
+    with contextlib.ExitStack() as stack:
+        if "delto" in families:
+            info = _serve_delto(stack, prof, host, port, firmware, model_id, short_version,
+                                input_1, delay, stall)
+        elif "dynamixel" in families:
+            info = _serve_dynamixel(stack, prof)
+        else:
+            raise InvalidInput(f"no simulator for profile {prof.name!r} yet "
+                               "(supported: delto, dynamixel)")
+        if opts.json:
+            typer.echo(json.dumps(info))
+        else:
+            typer.echo("\n".join(f"{bus}: {url}" for bus, url in info["buses"].items()))
+        sys.stdout.flush()
+        with contextlib.suppress(KeyboardInterrupt):
+            stop.wait()
+
+
+def _serve_delto(stack, prof, host, port, firmware, model_id, short_version,  # type: ignore[no-untyped-def]
+                 input_1, delay, stall) -> dict:
+    from deltoctl.drivers.delto.models import MODELS
+    from deltoctl.sim.delto import DeltoServer, firmware_for_profile
+
     try:
         major, minor = (int(x) for x in firmware.split("."))
     except ValueError:
@@ -50,39 +77,39 @@ def serve(
         model = int(model_id, 0) if model_id else None
     except ValueError:
         raise InvalidInput(f"--model-id {model_id!r} is not a number (e.g. 0x5F22)") from None
-    from deltoctl.drivers.delto.models import MODELS
-
     if model is not None and model not in MODELS:
         raise InvalidInput(f"--model-id {model:#06x} is not a Delto model "
                            f"({', '.join(f'{m:#06x}' for m in MODELS)})")
-    if not any(prof.family_of(h) == "delto" for h in prof.hardware):
-        raise InvalidInput(f"no simulator for profile {prof.name!r} yet (supported: delto)")
     device = firmware_for_profile(prof, model_id=model, firmware=(major, minor),
                                   short_version=short_version)
     device.input_1 = input_1
     device.faults.delay = delay
-    joints = [j.name for h in prof.hardware if prof.family_of(h) == "delto" for j in h.joints]
+    hw = next(h for h in prof.hardware if prof.family_of(h) == "delto")
+    joints = [j.name for j in hw.joints]
     for name in stall or []:
         if name not in joints:
             raise InvalidInput(f"--stall: {prof.name} has no joint {name!r}")
         device.faults.stalled.add(joints.index(name))
-    server = DeltoServer(device, host=host, port=port)
-    stop = threading.Event()
-    gc.disable()  # a served device answers within microseconds; no collector pauses
+    server = stack.enter_context(DeltoServer(device, host=host, port=port))
+    return {"profile": prof.name, "endpoint": server.endpoint,
+            "buses": {hw.bus or "gripper": server.endpoint}, "model": device.model.name,
+            "firmware": firmware}
 
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    with server:
-        endpoint = {"profile": prof.name, "endpoint": server.endpoint,
-                    "model": device.model.name, "firmware": firmware}
-        if opts.json:
-            typer.echo(json.dumps(endpoint), nl=True)
-        else:
-            typer.echo(server.endpoint)
-        import sys
 
-        sys.stdout.flush()
-        with contextlib.suppress(KeyboardInterrupt):
-            stop.wait()
+def _serve_dynamixel(stack, prof) -> dict:  # type: ignore[no-untyped-def]
+    """One pseudo-terminal per Dynamixel bus of the profile, its servos at the joints' IDs."""
+    from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+
+    buses = {}
+    for hw in prof.hardware:
+        if prof.family_of(hw) != "dynamixel":
+            continue
+        servos = [Servo(j.address) for j in hw.joints if j.address is not None]
+        server = stack.enter_context(DynamixelPtyServer(DynamixelBus(servos)))
+        url = prof.buses.get(hw.bus or "", "")
+        query = url.split("?", 1)[1] if "?" in url else "baud=1000000"
+        buses[hw.bus or hw.name] = f"serial://{server.port}?{query}"
+    return {"profile": prof.name, "buses": buses}
 
 
 def register(root: typer.Typer) -> None:
