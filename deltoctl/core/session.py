@@ -37,6 +37,9 @@ class Session:
         self.hw = self._driven_block(profile)
         self.sim = None
         self.lifecycle = Lifecycle()
+        if profile.family_of(self.hw) == "dynamixel":
+            self._open_dynamixel(targets, sim)
+            return
         if profile.family_of(self.hw) == "generic":  # simulated only: no transport
             from deltoctl.drivers.generic.driver import GenericDriver
 
@@ -54,11 +57,35 @@ class Session:
     @staticmethod
     def _driven_block(profile: Profile) -> Hardware:
         for hw in profile.hardware:
-            if profile.family_of(hw) in ("delto", "generic"):
+            if profile.family_of(hw) in ("delto", "generic", "dynamixel"):
                 return hw
         families = sorted({profile.family_of(h) or "none" for h in profile.hardware})
         raise InvalidInput(f"profile {profile.name!r} has no block deltoctl can drive yet "
-                           f"(families: {', '.join(families)}; supported: delto, generic)")
+                           f"(families: {', '.join(families)}; supported: delto, generic, "
+                           "dynamixel)")
+
+    def _open_dynamixel(self, targets: list[str], sim: bool) -> None:
+        """One driver per Dynamixel bus; with --sim, a pseudo-terminal bus for each."""
+        from deltoctl.drivers.dynamixel.driver import BusesDriver, DynamixelDriver
+
+        drivers = []
+        servers = []
+        for hw in self.profile.hardware:
+            if self.profile.family_of(hw) != "dynamixel":
+                continue
+            if sim:
+                from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+
+                servos = [Servo(j.address) for j in hw.joints if j.address is not None]
+                server = DynamixelPtyServer(DynamixelBus(servos)).start()
+                servers.append(server)
+                url = f"serial://{server.port}?baud=1000000"
+            else:
+                url = resolve_target(self.profile, hw, targets)
+            drivers.append(DynamixelDriver(self.profile, hw, url))
+        self.sim = _Servers(servers) if servers else None
+        self.url = ", ".join(d.url for d in drivers)
+        self.driver = BusesDriver(drivers)
 
     def _start_sim(self, options: dict[str, Any]):  # type: ignore[no-untyped-def]
         from deltoctl.sim.delto import DeltoServer, firmware_for_profile
@@ -97,3 +124,14 @@ class Session:
             if self.sim is not None:
                 self.sim.close()
                 self.sim = None
+
+
+class _Servers:
+    """Several simulator servers closed together."""
+
+    def __init__(self, servers: list) -> None:
+        self.servers = servers
+
+    def close(self) -> None:
+        for server in self.servers:
+            server.close()

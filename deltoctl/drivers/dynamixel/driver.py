@@ -1,0 +1,234 @@
+"""A Dynamixel Protocol 2.0 bus: ping and identify the profile's servos, and the MH5's
+present load/velocity/position sync read (126, 10), with conversions and statistics."""
+
+from __future__ import annotations
+
+import struct
+
+from deltoctl.drivers.dynamixel import codec
+from deltoctl.errors import DeltoctlError, DeviceError, ProtocolError
+from deltoctl.profile.model import Hardware, Profile
+
+RAD_PER_RAW = 0.001533980787886  # 2π/4096
+CENTER = 2047
+RAD_S_PER_RAW = 0.023980823922402  # 0.229 rpm
+LOAD_SCALE = 0.0014
+RETRIES = 3
+TV_EVERY = 50  # one voltage/temperature read per this many position reads
+
+
+class DynamixelDriver:
+    family = "dynamixel"
+
+    def __init__(self, profile: Profile, hw: Hardware, url: str) -> None:
+        self.profile, self.hw, self.url = profile, hw, url
+        self.joints = {j.address: j for j in hw.joints if j.address is not None}
+        self.port = None
+        self.reader = codec.PacketReader()
+        self.values: dict[str, float] = {}
+        self.present: dict[int, tuple[int, int]] = {}  # id → (model, firmware)
+        self.stats = {"packets": 0, "errors": 0, "reconnects": 0}
+        self.warnings: list[str] = []
+        self.identity = None
+        self.connected = False
+        self._reads = 0
+
+    # -- wire ------------------------------------------------------------------------------------
+    def _exchange(self, packet: bytes, replies: int, timeout: float = 0.05) -> list[codec.Status]:
+        import time
+
+        assert self.port is not None
+        self.port.reset_input_buffer()
+        self.reader.reset()
+        self.port.write(packet)
+        got: list[codec.Status] = []
+        deadline = time.monotonic() + timeout
+        while len(got) < replies and time.monotonic() < deadline:
+            data = self.port.read(self.port.in_waiting or 1)
+            if data:
+                got += [codec.decode_status(*p) for p in self.reader.feed(data)]
+        return got
+
+    def ping(self, device_id: int) -> tuple[int, int] | None:
+        for _ in range(RETRIES):
+            self.stats["packets"] += 1
+            try:
+                replies = self._exchange(codec.ping(device_id), 1)
+            except ProtocolError:
+                replies = []
+            if replies and replies[0].id == device_id and len(replies[0].params) >= 3:
+                model, firmware = struct.unpack_from("<HB", replies[0].params)
+                return model, firmware
+            self.stats["errors"] += 1
+        return None
+
+    # -- lifecycle -------------------------------------------------------------------------------
+    def configure(self):  # type: ignore[no-untyped-def]
+        from deltoctl.transport.serial_port import open_serial
+
+        self.port = open_serial(self.url)
+        for device_id in self.joints:
+            found = self.ping(device_id)
+            if found is not None:
+                self.present[device_id] = found
+        missing = [self.joints[i].name for i in self.joints if i not in self.present]
+        if not self.present:
+            raise DeviceError(f"no servo of {self.hw.name!r} answers on {self.url}",
+                              hint="check power, the baud rate and the IDs")
+        if missing:
+            self.warnings.append(f"{self.hw.name}: no answer from {', '.join(missing)}")
+        self.connected = True
+        self.identity = _Identity(self)
+        return self.identity
+
+    def read(self) -> dict[str, float]:
+        ids = list(self.present)
+        if self._reads % TV_EVERY == 0:
+            self._read_voltage_temperature(ids)
+        self._reads += 1
+        self.stats["packets"] += 1
+        try:
+            replies = self._exchange(codec.sync_read(126, 10, ids), len(ids))
+        except (ProtocolError, DeltoctlError):
+            replies = []
+        if len(replies) < len(ids):
+            self.stats["errors"] += 1
+        for st in replies:
+            joint = self.joints.get(st.id)
+            if joint is None or len(st.params) < 10:
+                continue
+            load, velocity, position = struct.unpack("<hii", st.params[:10])
+            self.values[f"{joint.name}/position"] = (position - CENTER) * RAD_PER_RAW + joint.offset
+            self.values[f"{joint.name}/velocity"] = velocity * RAD_S_PER_RAW
+            self.values[f"{joint.name}/effort"] = load * LOAD_SCALE
+        return self.values
+
+    def _read_voltage_temperature(self, ids: list[int]) -> None:
+        """The slow loop: Present Input Voltage (144, 0.1 V) and Temperature (146, °C)."""
+        self.stats["packets"] += 1
+        try:
+            replies = self._exchange(codec.sync_read(144, 3, ids), len(ids))
+        except (ProtocolError, DeltoctlError):
+            replies = []
+        if len(replies) < len(ids):
+            self.stats["errors"] += 1
+        for st in replies:
+            joint = self.joints.get(st.id)
+            if joint is not None and len(st.params) >= 3:
+                voltage, temperature = struct.unpack("<Hb", st.params[:3])
+                self.values[f"{joint.name}/voltage"] = voltage / 10.0
+                self.values[f"{joint.name}/temperature"] = float(temperature)
+
+    def detect(self) -> dict:
+        replies = self._exchange(codec.ping(), 253, timeout=0.2)
+        found = {st.id: struct.unpack_from("<HB", st.params)[0] for st in replies
+                 if len(st.params) >= 3}
+        expected = {i: 1060 for i in self.joints}
+        missing = sorted(set(expected) - set(found))
+        unexpected = sorted(set(found) - set(expected))
+        wrong = sorted(i for i in set(found) & set(expected) if found[i] != expected[i])
+        checks = [{"what": f"{self.hw.name}: servos", "profile": sorted(expected),
+                   "device": sorted(found),
+                   "match": not (missing or unexpected or wrong)}]
+        return {"bus": self.url, "found": found, "missing": missing, "unexpected": unexpected,
+                "wrong_model": wrong, "checks": checks,
+                "summary": f"{self.hw.name}: {len(found)} servos answer "
+                           f"({len(missing)} missing, {len(unexpected)} unexpected)"}
+
+    def stop(self) -> None:
+        """Read-only sessions leave the torque as it was: a humanoid must not drop."""
+
+    def cleanup(self) -> None:
+        if self.port is not None:
+            self.port.close()
+            self.port = None
+        self.connected = False
+
+
+class _Identity:
+    def __init__(self, driver: DynamixelDriver) -> None:
+        self.driver = driver
+
+    def as_dict(self) -> dict:
+        d = self.driver
+        return {"bus": d.url, "servos": {
+            d.joints[i].name: {"id": i, "model_number": m, "firmware": f,
+                               "model_match": m == 1060}
+            for i, (m, f) in sorted(d.present.items())}}
+
+
+class BusesDriver:
+    """Several buses of one profile (the MH5 has two) behind the one driver interface."""
+
+    family = "dynamixel"
+
+    def __init__(self, drivers: list[DynamixelDriver]) -> None:
+        self.drivers = drivers
+        self.values: dict[str, float] = {}
+        self.identity: _Buses | None = None
+
+    @property
+    def stats(self) -> dict[str, int]:
+        return {k: sum(d.stats[k] for d in self.drivers) for k in ("packets", "errors",
+                                                                      "reconnects")}
+
+    @property
+    def warnings(self) -> list[str]:
+        return [w for d in self.drivers for w in d.warnings]
+
+    @property
+    def connected(self) -> bool:
+        return all(d.connected for d in self.drivers)
+
+    def configure(self) -> _Buses:
+        for d in self.drivers:
+            d.configure()
+        self.identity = _Buses(self.drivers)
+        return self.identity
+
+    def read(self) -> dict[str, float]:
+        for d in self.drivers:
+            self.values.update(d.read())
+        self.values["system/connection_status"] = 1.0 if self.connected else 0.0
+        return self.values
+
+    def _read_voltage_temperature(self, ids: list[int]) -> None:
+        """The slow loop: Present Input Voltage (144, 0.1 V) and Temperature (146, °C)."""
+        self.stats["packets"] += 1
+        try:
+            replies = self._exchange(codec.sync_read(144, 3, ids), len(ids))
+        except (ProtocolError, DeltoctlError):
+            replies = []
+        if len(replies) < len(ids):
+            self.stats["errors"] += 1
+        for st in replies:
+            joint = self.joints.get(st.id)
+            if joint is not None and len(st.params) >= 3:
+                voltage, temperature = struct.unpack("<Hb", st.params[:3])
+                self.values[f"{joint.name}/voltage"] = voltage / 10.0
+                self.values[f"{joint.name}/temperature"] = float(temperature)
+
+    def detect(self) -> dict:
+        results = [d.detect() for d in self.drivers]
+        return {"buses": {d.hw.name: {k: v for k, v in r.items() if k not in ("checks",
+                                                                             "summary")}
+                          for d, r in zip(self.drivers, results)},
+                "checks": [c for r in results for c in r["checks"]],
+                "summary": "; ".join(r["summary"] for r in results)}
+
+    def stop(self) -> None:
+        for d in self.drivers:
+            d.stop()
+
+    def cleanup(self) -> None:
+        for d in self.drivers:
+            d.cleanup()
+
+
+class _Buses:
+    def __init__(self, drivers: list[DynamixelDriver]) -> None:
+        self.drivers = drivers
+
+    def as_dict(self) -> dict:
+        return {"family": "dynamixel", "buses": {d.hw.name: d.identity.as_dict()
+                                                 for d in self.drivers if d.identity}}

@@ -1,0 +1,68 @@
+"""The verbs on the mh5 profile, through pyserial, against the XL430 bus emulator on ptys."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from deltoctl.profile.catalog import load_profile
+from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+
+
+def test_identify_detect_stream_with_sim(cli):
+    result = cli("--sim", "-p", "mh5", "identify", "--json")
+    assert result.exit_code == 0, result.stderr
+    buses = json.loads(result.stdout)["buses"]
+    servos = {**buses["upper_body"]["servos"], **buses["lower_body"]["servos"]}
+    assert len(servos) == 22 and servos["l_kne_p"]["id"] == 14
+    assert all(s["model_number"] == 1060 for s in servos.values())
+    assert cli("--sim", "-p", "mh5", "detect").exit_code == 0
+    result = cli("--sim", "-p", "mh5", "stream", "-d", "0.1", "--json", "-i", "l_kne_p/*")
+    sample = json.loads(result.stdout.splitlines()[0])["values"]
+    assert sample["l_kne_p/position"] == pytest.approx(1.570796326794897)  # the offset
+    assert sample["l_kne_p/voltage"] == 12.0 and sample["l_kne_p/temperature"] == 30.0
+
+
+@pytest.fixture
+def mh5_buses():
+    profile = load_profile("mh5")
+    servers = {}
+    for hw in profile.hardware:
+        if profile.family_of(hw) == "dynamixel":
+            bus = DynamixelBus([Servo(j.address) for j in hw.joints])
+            servers[hw.bus] = DynamixelPtyServer(bus).start()
+    yield servers
+    for server in servers.values():
+        server.close()
+
+
+def _targets(servers):
+    return [a for bus, s in servers.items()
+            for a in ("-t", f"{bus}=serial://{s.port}?baud=2000000")]
+
+
+def test_detect_names_a_missing_servo(cli, mh5_buses):
+    mh5_buses["lower_body"].bus.faults.missing.add(24)
+    result = cli("-p", "mh5", *_targets(mh5_buses), "detect", "--json")
+    assert result.exit_code == 3
+    report = json.loads(result.stdout)
+    assert report["buses"]["lower_body"]["missing"] == [24]
+    identify = cli("-p", "mh5", *_targets(mh5_buses), "identify")
+    assert identify.exit_code == 3 and "r_kne_p" in identify.stderr
+
+
+def test_corrupted_replies_count_as_errors_not_exceptions(cli, mh5_buses):
+    mh5_buses["upper_body"].bus.faults.corrupt_crc.add(51)
+    result = cli("-p", "mh5", *_targets(mh5_buses), "stream", "-d", "0.1", "--json",
+                 "-i", "head_*/position")
+    assert "Traceback" not in result.stderr
+    assert result.exit_code == 3  # head_p never answered a ping: a warning
+    assert "head_p" in result.stderr
+
+
+def test_unopenable_port_is_unreachable(cli):
+    result = cli("-p", "mh5", "-t", "upper_body=serial:///dev/nonexistent?baud=2000000",
+                 "identify")
+    assert result.exit_code == 4
+    assert "cannot open /dev/nonexistent" in result.stderr
