@@ -66,3 +66,15 @@ def test_unopenable_port_is_unreachable(cli):
                  "identify")
     assert result.exit_code == 4
     assert "cannot open /dev/nonexistent" in result.stderr
+
+
+def test_jog_turns_torque_on_and_reaches_the_goal(cli, mh5_buses):
+    servo = mh5_buses["upper_body"].bus.servos[52]  # head_y
+    result = cli("-p", "mh5", *_targets(mh5_buses), "jog", "head_y", "10deg", "--velocity",
+                 "40deg", "--yes", "--json")
+    assert result.exit_code == 0, result.stderr
+    assert json.loads(result.stdout)["settled"] is True
+    assert servo.memory[64] == 1 and servo.memory[10] & 0x04  # torque on, time-based profile
+    assert servo.get("Goal Position") == round(0.17453292519943295 / 0.001533980787886 + 2047)
+    refused = cli("-p", "mh5", *_targets(mh5_buses), "jog", "head_y", "30deg", "--yes")
+    assert refused.exit_code == 5  # larger than max_jog_step (20°)

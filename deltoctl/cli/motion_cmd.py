@@ -66,14 +66,19 @@ def _progress(opts: Options, label: str):  # type: ignore[no-untyped-def]
 def _move(opts: Options, session, targets: dict[str, float], velocity, label: str):  # type: ignore[no-untyped-def]
     import signal
 
-    from deltoctl.core.motion import MoveResult, move_to
+    from deltoctl.core.motion import DEFAULT_TOLERANCE, MoveResult, move_to
 
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     bar, progress = _progress(opts, label)
     try:
-        if session.driver.family == "generic":  # position commands, mirrored at once
-            session.driver.write_positions(targets)
+        driver = session.driver
+        if driver.family == "generic":  # position commands, mirrored at once
+            driver.write_positions(targets)
             result = MoveResult(True, 0.0, {j: 0.0 for j in targets}, [])
+        elif driver.family == "dynamixel":  # the servos run their own position loop
+            safety = session.profile.safety
+            result = driver.move_to(targets, velocity, safety.home_tolerance or DEFAULT_TOLERANCE,
+                                    safety.home_timeout or 5.0)
         else:
             result = move_to(session.driver, targets, session.profile, velocity=velocity,
                              progress=progress)

@@ -32,6 +32,7 @@ class DynamixelDriver:
         self.identity = None
         self.connected = False
         self._reads = 0
+        self.torque_enabled: set[int] = set()
 
     # -- wire ------------------------------------------------------------------------------------
     def _exchange(self, packet: bytes, replies: int, timeout: float = 0.05) -> list[codec.Status]:
@@ -135,8 +136,26 @@ class DynamixelDriver:
                 "summary": f"{self.hw.name}: {len(found)} servos answer "
                            f"({len(missing)} missing, {len(unexpected)} unexpected)"}
 
+    def send_goals(self, goals: dict[str, float], seconds: float) -> None:
+        """Torque on, then a time-based profile to each goal: the PV writer (108, 12):
+        acceleration 0, profile velocity = the move's duration in ms, goal position."""
+        by_name = {j.name: i for i, j in self.joints.items() if i in self.present}
+        ids = {by_name[name]: rad for name, rad in goals.items() if name in by_name}
+        if not ids:
+            return
+        self.port.write(codec.sync_write(10, 1, {i: b"\x04" for i in ids}))  # time-based
+        self.port.write(codec.sync_write(64, 1, {i: b"\x01" for i in ids}))
+        self.torque_enabled.update(ids)
+        ms = max(1, round(seconds * 1000))
+        data = {}
+        for i, rad in ids.items():
+            raw = round((rad - self.joints[i].offset) / RAD_PER_RAW + CENTER)
+            data[i] = struct.pack("<IIi", 0, ms, raw)
+        self.port.write(codec.sync_write(108, 12, data))
+        self.stats["packets"] += 3
+
     def stop(self) -> None:
-        """Read-only sessions leave the torque as it was: a humanoid must not drop."""
+        """Leave the torque as it was found: a humanoid must not drop when a verb ends."""
 
     def cleanup(self) -> None:
         if self.port is not None:
@@ -215,6 +234,31 @@ class BusesDriver:
                           for d, r in zip(self.drivers, results)},
                 "checks": [c for r in results for c in r["checks"]],
                 "summary": "; ".join(r["summary"] for r in results)}
+
+    def move_to(self, targets: dict[str, float], velocity: float | None, tolerance: float,
+                timeout: float):  # type: ignore[no-untyped-def]
+        """Time-profiled moves on every bus; returns once all joints are within tolerance."""
+        import time
+
+        from deltoctl.core.motion import DEFAULT_VELOCITY, MoveResult
+
+        values = self.read()
+        distance = max((abs(t - values.get(f"{j}/position", t)) for j, t in targets.items()),
+                       default=0.0)
+        seconds = max(0.1, distance / (velocity or DEFAULT_VELOCITY))
+        for d in self.drivers:
+            d.send_goals(targets, seconds)
+        start = time.monotonic()
+        errors: dict[str, float] = {}
+        while time.monotonic() - start < seconds + timeout:
+            values = self.read()
+            errors = {j: abs(t - values.get(f"{j}/position", float("inf")))
+                      for j, t in targets.items()}
+            if max(errors.values(), default=0.0) <= tolerance:
+                return MoveResult(True, time.monotonic() - start, errors, [])
+            time.sleep(0.02)
+        return MoveResult(False, time.monotonic() - start, errors,
+                          [j for j, e in errors.items() if e > tolerance])
 
     def stop(self) -> None:
         for d in self.drivers:
