@@ -87,38 +87,32 @@ class DynamixelDriver:
         if self._reads % TV_EVERY == 0:
             self._read_voltage_temperature(ids)
         self._reads += 1
-        self.stats["packets"] += 1
-        try:
-            replies = self._exchange(codec.sync_read(126, 10, ids), len(ids))
-        except (ProtocolError, DeltoctlError):
-            replies = []
-        if len(replies) < len(ids):
-            self.stats["errors"] += 1
-        for st in replies:
-            joint = self.joints.get(st.id)
-            if joint is None or len(st.params) < 10:
-                continue
+        for st in self._sync_read(126, 10, ids):  # the PVL loop
+            joint = self.joints[st.id]
             load, velocity, position = struct.unpack("<hii", st.params[:10])
             self.values[f"{joint.name}/position"] = (position - CENTER) * RAD_PER_RAW + joint.offset
             self.values[f"{joint.name}/velocity"] = velocity * RAD_S_PER_RAW
             self.values[f"{joint.name}/effort"] = load * LOAD_SCALE
         return self.values
 
-    def _read_voltage_temperature(self, ids: list[int]) -> None:
-        """The slow loop: Present Input Voltage (144, 0.1 V) and Temperature (146, °C)."""
+    def _sync_read(self, address: int, length: int, ids: list[int]) -> list[codec.Status]:
+        """One sync read; a missing or corrupted reply counts as an error, never raises."""
         self.stats["packets"] += 1
         try:
-            replies = self._exchange(codec.sync_read(144, 3, ids), len(ids))
+            replies = self._exchange(codec.sync_read(address, length, ids), len(ids))
         except (ProtocolError, DeltoctlError):
             replies = []
         if len(replies) < len(ids):
             self.stats["errors"] += 1
-        for st in replies:
-            joint = self.joints.get(st.id)
-            if joint is not None and len(st.params) >= 3:
-                voltage, temperature = struct.unpack("<Hb", st.params[:3])
-                self.values[f"{joint.name}/voltage"] = voltage / 10.0
-                self.values[f"{joint.name}/temperature"] = float(temperature)
+        return [st for st in replies if st.id in self.joints and len(st.params) >= length]
+
+    def _read_voltage_temperature(self, ids: list[int]) -> None:
+        """The slow loop: Present Input Voltage (144, 0.1 V) and Temperature (146, °C)."""
+        for st in self._sync_read(144, 3, ids):
+            name = self.joints[st.id].name
+            voltage, temperature = struct.unpack("<Hb", st.params[:3])
+            self.values[f"{name}/voltage"] = voltage / 10.0
+            self.values[f"{name}/temperature"] = float(temperature)
 
     def detect(self) -> dict:
         replies = self._exchange(codec.ping(), 253, timeout=0.2)
@@ -210,22 +204,6 @@ class BusesDriver:
             self.values.update(d.read())
         self.values["system/connection_status"] = 1.0 if self.connected else 0.0
         return self.values
-
-    def _read_voltage_temperature(self, ids: list[int]) -> None:
-        """The slow loop: Present Input Voltage (144, 0.1 V) and Temperature (146, °C)."""
-        self.stats["packets"] += 1
-        try:
-            replies = self._exchange(codec.sync_read(144, 3, ids), len(ids))
-        except (ProtocolError, DeltoctlError):
-            replies = []
-        if len(replies) < len(ids):
-            self.stats["errors"] += 1
-        for st in replies:
-            joint = self.joints.get(st.id)
-            if joint is not None and len(st.params) >= 3:
-                voltage, temperature = struct.unpack("<Hb", st.params[:3])
-                self.values[f"{joint.name}/voltage"] = voltage / 10.0
-                self.values[f"{joint.name}/temperature"] = float(temperature)
 
     def detect(self) -> dict:
         results = [d.detect() for d in self.drivers]
