@@ -148,6 +148,30 @@ class DynamixelDriver:
         self.port.write(codec.sync_write(108, 12, data))
         self.stats["packets"] += 3
 
+    def set_torque(self, joints: list[str], on: bool) -> list[str]:
+        """Torque Enable (64) for these joints of this bus; returns the ones it reached."""
+        ids = {i: j.name for i, j in self.joints.items() if j.name in joints and i in self.present}
+        if ids:
+            self.port.write(codec.sync_write(64, 1, {i: bytes([int(on)]) for i in ids}))
+            self.stats["packets"] += 1
+        return list(ids.values())
+
+    def reboot(self, joints: list[str]) -> list[str]:
+        """REBOOT each servo (clears a shutdown); returns the ones that acknowledged."""
+        done = []
+        for i, joint in self.joints.items():
+            if joint.name in joints and i in self.present:
+                self.stats["packets"] += 1
+                try:
+                    replies = self._exchange(codec.reboot(i), 1, timeout=0.5)
+                except ProtocolError:
+                    replies = []
+                if replies and replies[0].error == 0:
+                    done.append(joint.name)
+                else:
+                    self.stats["errors"] += 1
+        return done
+
     def stop(self) -> None:
         """Leave the torque as it was found: a humanoid must not drop when a verb ends."""
 
@@ -237,6 +261,12 @@ class BusesDriver:
             time.sleep(0.02)
         return MoveResult(False, time.monotonic() - start, errors,
                           [j for j, e in errors.items() if e > tolerance])
+
+    def set_torque(self, joints: list[str], on: bool) -> list[str]:
+        return [j for d in self.drivers for j in d.set_torque(joints, on)]
+
+    def reboot(self, joints: list[str]) -> list[str]:
+        return [j for d in self.drivers for j in d.reboot(joints)]
 
     def stop(self) -> None:
         for d in self.drivers:
