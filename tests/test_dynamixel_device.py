@@ -8,6 +8,7 @@ import pytest
 
 from deltoctl.profile.catalog import load_profile
 from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+from tests.test_dynamixel_sim import eventually
 
 
 def test_identify_detect_stream_with_sim(cli):
@@ -74,7 +75,7 @@ def test_jog_turns_torque_on_and_reaches_the_goal(cli, mh5_buses):
                  "40deg", "--yes", "--json")
     assert result.exit_code == 0, result.stderr
     assert json.loads(result.stdout)["settled"] is True
-    assert servo.memory[64] == 1 and servo.memory[10] & 0x04  # torque on, time-based profile
+    assert eventually(lambda: servo.memory[64] == 1 and servo.memory[10] & 0x04)
     assert servo.get("Goal Position") == round(0.17453292519943295 / 0.001533980787886 + 2047)
     refused = cli("-p", "mh5", *_targets(mh5_buses), "jog", "head_y", "30deg", "--yes")
     assert refused.exit_code == 5  # larger than max_jog_step (20°)
@@ -87,11 +88,12 @@ def test_torque_by_group_and_reboot_after_a_shutdown(cli, mh5_buses):
     result = cli("-p", "mh5", *targets, "torque", "on", "arms", "--yes", "--json")
     assert result.exit_code == 0, result.stderr
     assert len(json.loads(result.stdout)["joints"]) == 8
-    assert all(upper[i].memory[64] == 1 for i in (31, 32, 33, 34, 41, 42, 43, 44))
+    assert eventually(lambda: all(upper[i].memory[64] == 1
+                                  for i in (31, 32, 33, 34, 41, 42, 43, 44)))
     assert upper[51].memory[64] == 0 and lower[11].memory[64] == 0  # head, legs untouched
     assert cli("-p", "mh5", *targets, "torque", "on", "head").exit_code == 5  # no --yes
     assert cli("-p", "mh5", *targets, "torque", "off", "l_sho_p").exit_code == 0
-    assert upper[34].memory[64] == 0
+    assert eventually(lambda: upper[34].memory[64] == 0)
     lower[24].memory[70] = 0x20  # overload shutdown on r_kne_p
     result = cli("-p", "mh5", *targets, "reboot", "right_leg", "--json")
     assert result.exit_code == 0

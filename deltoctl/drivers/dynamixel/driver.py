@@ -146,6 +146,7 @@ class DynamixelDriver:
             raw = round((rad - self.joints[i].offset) / RAD_PER_RAW + CENTER)
             data[i] = struct.pack("<IIi", 0, ms, raw)
         self.port.write(codec.sync_write(108, 12, data))
+        self.port.flush()
         self.stats["packets"] += 3
 
     def set_torque(self, joints: list[str], on: bool) -> list[str]:
@@ -153,6 +154,7 @@ class DynamixelDriver:
         ids = {i: j.name for i, j in self.joints.items() if j.name in joints and i in self.present}
         if ids:
             self.port.write(codec.sync_write(64, 1, {i: bytes([int(on)]) for i in ids}))
+            self.port.flush()  # a sync write has no reply: be sure it left before returning
             self.stats["packets"] += 1
         return list(ids.values())
 
