@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
@@ -21,6 +22,16 @@ def cli():
         return runner.invoke(app, list(args), **kwargs)
 
     return run
+
+
+def eventually(predicate, timeout: float = 2.0) -> bool:
+    """For writes without a reply: true once an emulator thread has applied them."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
 
 
 needs_samples = pytest.mark.skipif(not SAMPLES.is_dir(), reason="../shared/data is not present")

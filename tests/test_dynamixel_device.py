@@ -8,7 +8,7 @@ import pytest
 
 from deltoctl.profile.catalog import load_profile
 from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
-from tests.test_dynamixel_sim import eventually
+from tests.conftest import eventually
 
 
 def test_identify_detect_stream_with_sim(cli):

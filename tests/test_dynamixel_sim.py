@@ -7,18 +7,9 @@ import time
 import pytest
 
 from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+from tests.conftest import eventually
 
 sdk = pytest.importorskip("dynamixel_sdk")
-
-
-def eventually(predicate, timeout: float = 2.0) -> bool:
-    """Writes without a reply land when the emulator thread has read them."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.01)
-    return True
 
 
 @pytest.fixture
