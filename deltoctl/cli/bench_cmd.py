@@ -123,3 +123,81 @@ def bench_loop(
 
 def register(root: typer.Typer) -> None:
     root.add_typer(app, name="bench")
+
+
+_SERVE_BUS = """
+import sys, threading
+from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+server = DynamixelPtyServer(DynamixelBus([Servo(i) for i in range(1, {n} + 1)])).start()
+print(server.port, flush=True)
+sys.stdin.read()
+"""
+
+
+@app.command("dynamixel")
+def bench_dynamixel(
+    ctx: typer.Context,
+    servos: Annotated[int, typer.Option(help="Servos on the bus.")] = 11,
+    duration: Annotated[float, typer.Option(help="Seconds per client.")] = 3.0,
+) -> None:
+    """Sync read of present load/velocity/position (126, 10) from N servos of an emulated
+    bus in another process: deltoctl's driver against dynamixel-sdk's GroupSyncRead."""
+    import subprocess
+
+    from deltoctl.drivers.dynamixel.driver import DynamixelDriver
+    from deltoctl.profile.model import Component, Hardware, Profile
+
+    opts = options(ctx)
+    if servos < 1 or duration <= 0:
+        raise InvalidInput("--servos and --duration must be positive")
+    proc = subprocess.Popen([sys.executable, "-c", _SERVE_BUS.format(n=servos)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        pty = proc.stdout.readline().strip() if proc.stdout else ""
+        hw = Hardware("bus", family="dynamixel", joints=[
+            Component("joint", f"j{i}", address=i) for i in range(1, servos + 1)])
+        driver = DynamixelDriver(Profile("bench", hardware=[hw]), hw,
+                                 f"serial://{pty}?baud=1000000")
+        driver.configure()
+        ids = list(range(1, servos + 1))
+        cycles, start = 0, time.perf_counter()
+        while time.perf_counter() - start < duration:
+            driver._sync_read(126, 10, ids)
+            cycles += 1
+        ours = cycles / (time.perf_counter() - start)
+        errors = driver.stats["errors"]
+        driver.cleanup()
+        results = {"servos": servos, "deltoctl_hz": round(ours, 1), "deltoctl_errors": errors}
+        try:
+            import dynamixel_sdk as sdk
+        except ImportError:
+            sdk = None
+        if sdk is not None:
+            port = sdk.PortHandler(pty)
+            port.openPort()
+            port.setBaudRate(1000000)
+            group = sdk.GroupSyncRead(port, sdk.PacketHandler(2.0), 126, 10)
+            for i in ids:
+                group.addParam(i)
+            cycles, failed, start = 0, 0, time.perf_counter()
+            while time.perf_counter() - start < duration:
+                failed += group.txRxPacket() != sdk.COMM_SUCCESS
+                cycles += 1
+            theirs = cycles / (time.perf_counter() - start)
+            port.closePort()
+            results.update({"dynamixel_sdk_hz": round(theirs, 1),
+                            "dynamixel_sdk_errors": failed, "ratio": round(ours / theirs, 2),
+                            "goal_ratio_ge_2": ours >= 2 * theirs})
+    finally:
+        if proc.stdin:
+            proc.stdin.close()
+        proc.wait(timeout=5)
+    if opts.json:
+        emit_json(results)
+        return
+    info(f"sync read 126/10 of {servos} servos, emulator in another process:")
+    info(f"  deltoctl       {results['deltoctl_hz']:8.1f} cycles/s "
+         f"({results['deltoctl_errors']} errors)")
+    if "dynamixel_sdk_hz" in results:
+        info(f"  dynamixel-sdk  {results['dynamixel_sdk_hz']:8.1f} cycles/s "
+             f"({results['dynamixel_sdk_errors']} errors)   ratio {results['ratio']:.2f}")

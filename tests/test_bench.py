@@ -1,0 +1,25 @@
+"""The shipped benchmarks run and report their figures (their numbers are not asserted)."""
+
+from __future__ import annotations
+
+import json
+
+
+def test_bench_loop_reports_stages(cli):
+    result = cli("bench", "loop", "--rate", "200", "--duration", "0.3", "--unpaced", "0.2",
+                 "--json")
+    assert result.exit_code == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert set(report["paced"]["stage_us_per_cycle"]) == {"codec", "socket", "write",
+                                                           "recording"}
+    assert report["paced"]["cycles"] > 0 and report["unpaced"]["cycles"] > 0
+    assert set(report["goals"]) == {"achieved_rate_ge_99_5_percent", "p99_lateness_le_0_5_ms",
+                                    "unpaced_ge_5_khz"}
+
+
+def test_bench_dynamixel_compares_with_the_sdk(cli):
+    result = cli("bench", "dynamixel", "--duration", "0.3", "--json")
+    assert result.exit_code == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["deltoctl_hz"] > 0 and report["deltoctl_errors"] == 0
+    assert "ratio" in report  # dynamixel-sdk is a test dependency
