@@ -12,6 +12,13 @@ from tests.conftest import eventually
 sdk = pytest.importorskip("dynamixel_sdk")
 
 
+@pytest.fixture(autouse=True)
+def _patient_sdk(monkeypatch):
+    """The emulator shares this process with the test: give the SDK the reply timeouts of a
+    slow USB adapter (a 50 ms latency timer) so that a busy machine does not fail the test."""
+    monkeypatch.setattr(sdk.port_handler, "LATENCY_TIMER", 50)
+
+
 @pytest.fixture
 def bus():
     servos = DynamixelBus([Servo(i) for i in (11, 12, 13)])

@@ -35,7 +35,7 @@ class DynamixelDriver:
         self.torque_enabled: set[int] = set()
 
     # -- wire ------------------------------------------------------------------------------------
-    def _exchange(self, packet: bytes, replies: int, timeout: float = 0.05) -> list[codec.Status]:
+    def _exchange(self, packet: bytes, replies: int, timeout: float = 0.1) -> list[codec.Status]:
         import time
 
         assert self.port is not None
@@ -115,7 +115,7 @@ class DynamixelDriver:
             self.values[f"{name}/temperature"] = float(temperature)
 
     def detect(self) -> dict:
-        replies = self._exchange(codec.ping(), 253, timeout=0.2)
+        replies = self._exchange(codec.ping(), 253, timeout=0.3)
         found = {st.id: struct.unpack_from("<HB", st.params)[0] for st in replies
                  if len(st.params) >= 3}
         expected = {i: 1060 for i in self.joints}
