@@ -14,14 +14,16 @@ AllowMismatch = Annotated[bool, typer.Option(
     help="Go on when the gripper reports another model than the profile (exit 3).")]
 
 
-def open_session(opts: Options, allow_model_mismatch: bool = False):  # type: ignore[no-untyped-def]
+def open_session(opts: Options, allow_model_mismatch: bool = False,  # type: ignore[no-untyped-def]
+                 profile: Any = None):
+    """A session on the selected profile (pass ``profile`` when the verb loaded it already)."""
     from deltoctl.core.session import Session
 
-    return Session(opts.load_profile(), opts.target, sim=opts.sim,
+    return Session(profile or opts.load_profile(), opts.target, sim=opts.sim,
                    allow_model_mismatch=allow_model_mismatch)
 
 
-def _finish(session: Any) -> None:
+def finish(session: Any) -> None:
     """Exit 3 when the verb finished but with warnings (a model mismatch allowed, reconnects)."""
     warnings = list(session.driver.warnings)
     if session.driver.stats.get("reconnects"):
@@ -76,7 +78,7 @@ def connect(
         info(f"connected to {session.url}: round trip median {result['rtt_ms']['median']} ms "
              f"(min {result['rtt_ms']['min']}, max {result['rtt_ms']['max']}, n={len(rtts)})")
         info("lifecycle: " + " → ".join(session.lifecycle.history))
-    _finish(session)
+    finish(session)
 
 
 def identify(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
@@ -90,7 +92,7 @@ def identify(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) ->
         emit_json(ident)
     else:
         table(None, ["field", "value"], [[k, v] for k, v in ident.items()])
-    _finish(session)
+    finish(session)
 
 
 def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
@@ -111,7 +113,7 @@ def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> N
     if mismatches:
         info(f"warning: the device differs from the profile in: {', '.join(mismatches)}")
         raise typer.Exit(WARNINGS)
-    _finish(session)
+    finish(session)
 
 
 def _gpio_names(profile: Any) -> list[str]:
@@ -227,7 +229,7 @@ def stream(
                 live.stop()
     if not opts.quiet:
         info(f"{samples} samples of {len(names)} interfaces")
-    _finish(session)
+    finish(session)
 
 
 def _live_table(sample: dict[str, Any]):  # type: ignore[no-untyped-def]

@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from deltoctl.cli.context import Options, options
-from deltoctl.cli.device_cmd import AllowMismatch, _finish, open_session
+from deltoctl.cli.device_cmd import AllowMismatch, finish, open_session
 from deltoctl.cli.output import emit_json, info
 from deltoctl.errors import DeviceError, InvalidInput, Refused
 from deltoctl.units import parse_quantity
@@ -22,7 +22,7 @@ def register(app: typer.Typer) -> None:
     app.command("jog", context_settings={"ignore_unknown_options": True})(jog)
 
 
-def _confirm(opts: Options, what: str) -> None:
+def confirm_motion(opts: Options, what: str) -> None:
     if opts.yes:
         return
     if not sys.stdin.isatty():
@@ -66,22 +66,10 @@ def _progress(opts: Options, label: str):  # type: ignore[no-untyped-def]
 def _move(opts: Options, session, targets: dict[str, float], velocity, label: str):  # type: ignore[no-untyped-def]
     import signal
 
-    from deltoctl.core.motion import DEFAULT_TOLERANCE, MoveResult, move_to
-
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     bar, progress = _progress(opts, label)
     try:
-        driver = session.driver
-        if driver.family == "generic":  # position commands, mirrored at once
-            driver.write_positions(targets)
-            result = MoveResult(True, 0.0, {j: 0.0 for j in targets}, [])
-        elif driver.family == "dynamixel":  # the servos run their own position loop
-            safety = session.profile.safety
-            result = driver.move_to(targets, velocity, safety.home_tolerance or DEFAULT_TOLERANCE,
-                                    safety.home_timeout or 5.0)
-        else:
-            result = move_to(session.driver, targets, session.profile, velocity=velocity,
-                             progress=progress)
+        result = session.driver.move(targets, session.profile, velocity, progress)
     finally:
         session.driver.stop()
         if bar is not None:
@@ -119,10 +107,10 @@ def home(
     for joint in joints:
         check_target(profile, joint, targets[joint.name], None)
     speed = _speed(velocity)
-    _confirm(opts, f"home {len(targets)} joints of {profile.name}")
-    with open_session(opts, allow_model_mismatch) as session:
+    confirm_motion(opts, f"home {len(targets)} joints of {profile.name}")
+    with open_session(opts, allow_model_mismatch, profile) as session:
         _move(opts, session, targets, speed, "home")
-    _finish(session)
+    finish(session)
 
 
 def jog(
@@ -150,11 +138,11 @@ def jog(
     if (delta is None) == (to is None):
         raise InvalidInput("give either DELTA or --to POS")
     speed = _speed(velocity)
-    with open_session(opts, allow_model_mismatch) as session:
+    with open_session(opts, allow_model_mismatch, profile) as session:
         start = session.driver.read()[f"{joint}/position"]
         target = _quantity(to, "--to") if to is not None else start + _quantity(delta, "DELTA")
         check_target(profile, comp, target, start)
-        _confirm(opts, f"jog {joint} from {start:.4f} to {target:.4f} "
+        confirm_motion(opts, f"jog {joint} from {start:.4f} to {target:.4f} "
                        f"({math.degrees(target - start):+.1f}°)")
         _move(opts, session, {joint: target}, speed, f"jog {joint}")
-    _finish(session)
+    finish(session)

@@ -44,15 +44,16 @@ def torque(
     target: TargetArg = "all",
 ) -> None:
     """Switch servo torque on or off for a joint or a group."""
-    from deltoctl.cli.motion_cmd import _confirm
+    from deltoctl.cli.motion_cmd import confirm_motion
 
     opts = options(ctx)
     if state not in ("on", "off"):
         raise InvalidInput(f"state must be on or off, got {state!r}")
-    joints = select_joints(opts.load_profile(), target)
+    profile = opts.load_profile()
+    joints = select_joints(profile, target)
     if state == "on":
-        _confirm(opts, f"torque on for {len(joints)} joint(s): they hold their position")
-    with open_session(opts) as session:
+        confirm_motion(opts, f"torque on for {len(joints)} joint(s): they hold their position")
+    with open_session(opts, profile=profile) as session:
         if session.driver.family != "dynamixel":
             raise InvalidInput("torque is for servo buses (the dynamixel family)")
         done = session.driver.set_torque(joints, state == "on")
@@ -62,8 +63,9 @@ def torque(
 def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
     """Reboot servos (clears a shutdown after a hardware error; torque comes back off)."""
     opts = options(ctx)
-    joints = select_joints(opts.load_profile(), target)
-    with open_session(opts) as session:
+    profile = opts.load_profile()
+    joints = select_joints(profile, target)
+    with open_session(opts, profile=profile) as session:
         if session.driver.family != "dynamixel":
             raise InvalidInput("reboot is for servo buses (the dynamixel family)")
         done = session.driver.reboot(joints)

@@ -3,8 +3,6 @@ and its lifecycle, and the safe state on the way out (duty 0 / stop), whatever h
 
 from __future__ import annotations
 
-from typing import Any
-
 from deltoctl.core.lifecycle import Lifecycle
 from deltoctl.errors import InvalidInput
 from deltoctl.profile.model import Hardware, Profile
@@ -32,7 +30,7 @@ class Session:
     """``with Session(profile, opts) as s: s.driver.read()``."""
 
     def __init__(self, profile: Profile, targets: list[str], sim: bool = False,
-                 allow_model_mismatch: bool = False, sim_options: dict[str, Any] | None = None):
+                 allow_model_mismatch: bool = False):
         self.profile = profile
         self.hw = self._driven_block(profile)
         self.sim = None
@@ -48,7 +46,7 @@ class Session:
                                                   if profile.family_of(h) == "generic"])
             return
         if sim:
-            self.sim = self._start_sim(sim_options or {})
+            self.sim = self._start_sim()
             self.url = self.sim.endpoint
         else:
             self.url = resolve_target(profile, self.hw, targets)
@@ -87,10 +85,10 @@ class Session:
         self.url = ", ".join(d.url for d in drivers)
         self.driver = BusesDriver(drivers)
 
-    def _start_sim(self, options: dict[str, Any]):  # type: ignore[no-untyped-def]
+    def _start_sim(self):  # type: ignore[no-untyped-def]
         from deltoctl.sim.delto import DeltoServer, firmware_for_profile
 
-        return DeltoServer(firmware_for_profile(self.profile, **options)).start()
+        return DeltoServer(firmware_for_profile(self.profile)).start()
 
     def _make_driver(self, allow_model_mismatch: bool):  # type: ignore[no-untyped-def]
         from deltoctl.drivers.delto.driver import DeltoDriver

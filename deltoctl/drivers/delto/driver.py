@@ -274,6 +274,13 @@ class DeltoDriver:
         duties += [0] * (self.model.motors - len(duties))
         self._send(codec.encode_duty(duties))
 
+    def move(self, targets: dict[str, float], profile: Profile, velocity: float | None = None,
+             progress=None):  # type: ignore[no-untyped-def]
+        """A current-bounded position loop on the effort interface (core/motion.py)."""
+        from deltoctl.core.motion import move_to
+
+        return move_to(self, targets, profile, velocity=velocity, progress=progress)
+
     def stop(self) -> None:
         """The safe state: duty 0 on every motor."""
         if self.model is not None:

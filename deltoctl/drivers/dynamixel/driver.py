@@ -239,12 +239,16 @@ class BusesDriver:
                 "checks": [c for r in results for c in r["checks"]],
                 "summary": "; ".join(r["summary"] for r in results)}
 
-    def move_to(self, targets: dict[str, float], velocity: float | None, tolerance: float,
-                timeout: float):  # type: ignore[no-untyped-def]
-        """Time-profiled moves on every bus; returns once all joints are within tolerance."""
+    def move(self, targets: dict[str, float], profile: Profile, velocity: float | None = None,
+             progress=None):  # type: ignore[no-untyped-def]
+        """Time-profiled moves on every bus (the servos run their own position loop); returns
+        once all joints are within tolerance."""
         import time
 
-        from deltoctl.core.motion import DEFAULT_VELOCITY, MoveResult
+        from deltoctl.core.motion import DEFAULT_TOLERANCE, DEFAULT_VELOCITY, MoveResult
+
+        tolerance = profile.safety.home_tolerance or DEFAULT_TOLERANCE
+        timeout = profile.safety.home_timeout or 5.0
 
         values = self.read()
         distance = max((abs(t - values.get(f"{j}/position", t)) for j, t in targets.items()),

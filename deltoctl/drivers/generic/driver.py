@@ -99,9 +99,14 @@ class GenericDriver:
         if f"{comp_name}/{target}" in self.values:
             self.values[f"{comp_name}/{target}"] = value + offset
 
-    def write_positions(self, positions: dict[str, float]) -> None:
-        for joint, value in positions.items():
+    def move(self, targets: dict[str, float], profile: Profile, velocity: float | None = None,
+             progress=None):  # type: ignore[no-untyped-def]
+        """Position commands, mirrored to the states at once."""
+        from deltoctl.core.motion import MoveResult
+
+        for joint, value in targets.items():
             self.set_command(f"{joint}/position", value)
+        return MoveResult(True, 0.0, {j: 0.0 for j in targets}, [])
 
     def detect(self) -> dict:
         parts = [{"name": c.name, "kind": c.kind,
