@@ -105,6 +105,8 @@ def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> N
         emit_json({k: v for k, v in result.items() if k != "summary"})
     else:
         info(result["summary"])
+        if "grid" in result:
+            typer.echo(result["grid"])
         if checks:
             table(None, ["check", "profile", "device", "match"],
                   [[c["what"], c["profile"], c["device"], "yes" if c["match"] else "NO"]

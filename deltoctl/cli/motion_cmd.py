@@ -95,21 +95,82 @@ def _move(opts: Options, session, targets: dict[str, float], velocity, label: st
 def home(
     ctx: typer.Context,
     velocity: VelocityOpt = None,
+    joint: Annotated[list[str] | None, typer.Option(
+        "--joint", "-j", autocompletion=_complete_joint,
+        help="Home only this joint (repeatable; default: all).")] = None,
+    force: Annotated[bool, typer.Option(
+        help="Home again joints that are homed already (homing joints only).")] = False,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
-    """Drive every joint to the profile's home pose (zero unless the profile says otherwise)."""
+    """Drive every joint to the profile's home pose (zero unless the profile says otherwise);
+    joints with a `home` command interface run their homing routine instead, in the profile's
+    homing order."""
     from deltoctl.core.motion import check_target
 
     opts = options(ctx)
     profile = opts.load_profile()
+    homing = [j.name for j in profile.joints() if j.command("home")]
+    if homing:
+        _home_routine(opts, profile, homing, joint or [], force)
+        return
     joints = [j for j in profile.joints() if j.command("effort") or j.command("position")]
+    if joint:
+        joints = [j for j in joints if j.name in _known(profile, joint)]
     targets = {j.name: profile.safety.home_pose.get(j.name, 0.0) for j in joints}
-    for joint in joints:
-        check_target(profile, joint, targets[joint.name], None)
+    for comp in joints:
+        check_target(profile, comp, targets[comp.name], None)
     speed = _speed(velocity)
     confirm_motion(opts, f"home {len(targets)} joints of {profile.name}")
     with open_session(opts, allow_model_mismatch, profile) as session:
         _move(opts, session, targets, speed, "home")
+    finish(session)
+
+
+def _known(profile, names: list[str]) -> list[str]:  # type: ignore[no-untyped-def]
+    joints = [j.name for j in profile.joints()]
+    for name in names:
+        if name not in joints:
+            raise InvalidInput(f"{profile.name} has no joint {name!r}")
+    return names
+
+
+def _home_routine(opts: Options, profile, homing: list[str], chosen: list[str],  # type: ignore[no-untyped-def]
+                  force: bool) -> None:
+    """Each joint runs into its hard stop, one at a time, in the profile's homing order."""
+    import signal
+
+    order = [j for j in profile.safety.homing_order if j in homing]
+    order += [j for j in homing if j not in order]
+    if chosen:
+        order = [j for j in order if j in _known(profile, chosen)]
+    confirm_motion(opts, f"home {', '.join(order)} of {profile.name} one at a time, each "
+                   "running into its hard stop")
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    bar = None
+    tasks: dict[str, int] = {}
+    if not (opts.json or opts.quiet) and sys.stderr.isatty():
+        from rich.progress import Progress
+
+        bar = Progress(transient=False)
+        tasks = {j: bar.add_task(f"{j}: waiting", total=1.0) for j in order}
+        bar.start()
+
+    def progress(name: str, status: str, fraction: float) -> None:
+        if bar is not None:
+            bar.update(tasks[name], completed=fraction, description=f"{name}: {status}")
+        elif not (opts.json or opts.quiet):
+            info(f"{name}: {status}")
+
+    with open_session(opts, profile=profile) as session:
+        try:
+            outcome = session.driver.home(order, force, progress)
+        finally:
+            if bar is not None:
+                bar.stop()
+        values = session.driver.read()
+    report = {"homed": outcome, "positions": {j: values.get(f"{j}/position") for j in order}}
+    if opts.json:
+        emit_json(report)
     finish(session)
 
 
@@ -139,6 +200,8 @@ def jog(
         raise InvalidInput("give either DELTA or --to POS")
     speed = _speed(velocity)
     with open_session(opts, allow_model_mismatch, profile) as session:
+        if hasattr(session.driver, "check_motion"):
+            session.driver.check_motion([joint])  # e.g. not homed: refused before asking
         start = session.driver.read()[f"{joint}/position"]
         target = _quantity(to, "--to") if to is not None else start + _quantity(delta, "DELTA")
         check_target(profile, comp, target, start)

@@ -31,9 +31,16 @@ def serve(
         = 0.0,
     stall: Annotated[list[str] | None, typer.Option(
         help="Fault: a joint that cannot move (repeatable).")] = None,
+    missing: Annotated[list[str] | None, typer.Option(
+        help="Fault: a joint (servo, I2C joint) that never answers (repeatable).")] = None,
+    who_am_i: Annotated[str, typer.Option(
+        help="WHO_AM_I of a simulated LSM6DS3: 0x69 (LSM6DS3), 0x6A (LSM6DS3TR-C), or "
+             "another value to rehearse a wrong part.")] = "0x6A",
+    orientation: Annotated[str, typer.Option(
+        help="The IMU's roll,pitch in degrees (gravity follows).")] = "0,0",
 ) -> None:
-    """Serve a simulated device until Ctrl-C or SIGTERM; prints each bus's endpoint (TCP, or a
-    pseudo-terminal for a Dynamixel bus), as JSON with --json."""
+    """Serve a simulated device until Ctrl-C or SIGTERM; prints each bus's endpoint (TCP, a
+    pseudo-terminal for a Dynamixel bus, i2c+tcp:// for an I2C bus), as JSON with --json."""
     import gc
     import json
     import signal
@@ -50,11 +57,20 @@ def serve(
         if "delto" in families:
             info = _serve_delto(stack, prof, host, port, firmware, model_id, short_version,
                                 input_1, delay, stall)
-        elif "dynamixel" in families:
-            info = _serve_dynamixel(stack, prof)
+        elif families & {"dynamixel", "bioscara", "lsm6ds3"}:
+            info = {"profile": prof.name, "buses": {}}
+            missing_ids = _joint_addresses(prof, missing or [], "--missing")
+            if "dynamixel" in families:
+                info["buses"].update(_serve_dynamixel(stack, prof,
+                                                      missing_ids.get("dynamixel", set())))
+            if families & {"bioscara", "lsm6ds3"}:
+                blocked = _joint_addresses(prof, stall or [], "--stall").get("bioscara", set())
+                info["buses"].update(_serve_i2c(stack, prof, host,
+                                                missing_ids.get("bioscara", set()), blocked,
+                                                who_am_i, orientation))
         else:
             raise InvalidInput(f"no simulator for profile {prof.name!r} yet "
-                               "(supported: delto, dynamixel)")
+                               "(supported: delto, dynamixel, bioscara, lsm6ds3)")
         if opts.json:
             typer.echo(json.dumps(info))
         else:
@@ -96,7 +112,21 @@ def _serve_delto(stack, prof, host, port, firmware, model_id, short_version,  # 
             "firmware": firmware}
 
 
-def _serve_dynamixel(stack, prof) -> dict:  # type: ignore[no-untyped-def]
+def _joint_addresses(prof, names: list[str], option: str) -> dict[str, set[int]]:  # type: ignore[no-untyped-def]
+    """The bus addresses of the named joints (Dynamixel IDs, I2C addresses) by family."""
+    from deltoctl.profile.validate import part_address
+
+    found: dict[str, set[int]] = {}
+    for name in names:
+        hw_comp = next(((h, c) for h, c in prof.components() if c.name == name), None)
+        address = part_address(prof, *hw_comp) if hw_comp else None
+        if address is None:
+            raise InvalidInput(f"{option}: {prof.name} has no joint {name!r} with a bus address")
+        found.setdefault(prof.family_of(hw_comp[0]), set()).add(address)
+    return found
+
+
+def _serve_dynamixel(stack, prof, missing: set[int]) -> dict:  # type: ignore[no-untyped-def]
     """One pseudo-terminal per Dynamixel bus of the profile, its servos at the joints' IDs."""
     from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
 
@@ -104,12 +134,41 @@ def _serve_dynamixel(stack, prof) -> dict:  # type: ignore[no-untyped-def]
     for hw in prof.hardware:
         if prof.family_of(hw) != "dynamixel":
             continue
-        servos = [Servo(j.address) for j in hw.joints if j.address is not None]
-        server = stack.enter_context(DynamixelPtyServer(DynamixelBus(servos)))
+        bus = DynamixelBus([Servo(j.address) for j in hw.joints if j.address is not None])
+        bus.faults.missing |= missing
+        server = stack.enter_context(DynamixelPtyServer(bus))
         url = prof.buses.get(hw.bus or "", "")
         query = url.split("?", 1)[1] if "?" in url else "baud=1000000"
         buses[hw.bus or hw.name] = f"serial://{server.port}?{query}"
-    return {"profile": prof.name, "buses": buses}
+    return buses
+
+
+def _serve_i2c(stack, prof, host: str, missing: set[int], blocked: set[int],  # type: ignore[no-untyped-def]
+               who_am_i: str, orientation: str) -> dict:
+    """The profile's I2C devices on one simulated bus, served over loopback TCP."""
+    import math
+
+    from deltoctl.drivers.lsm6ds3.codec import WHO_AM_I
+    from deltoctl.sim.bioscara import JointFirmware
+    from deltoctl.sim.i2c_bus import I2CSocketServer, bus_for_profile
+    from deltoctl.sim.lsm6ds3 import Lsm6ds3Chip
+
+    try:
+        who = int(who_am_i, 0)
+        angles = [math.radians(float(x)) for x in orientation.split(",")]
+    except ValueError:
+        raise InvalidInput("--who-am-i takes a number (0x6A), --orientation ROLL,PITCH in "
+                           "degrees") from None
+    bus = bus_for_profile(prof, missing=tuple(missing))
+    for address, device in bus.devices.items():
+        if isinstance(device, Lsm6ds3Chip):
+            device.registers[WHO_AM_I] = who
+            device.set_orientation(*angles[:3])
+        elif isinstance(device, JointFirmware) and address in blocked:
+            device.blocked = True
+    server = stack.enter_context(I2CSocketServer(bus, host=host))
+    names = {h.bus for h in prof.hardware if prof.family_of(h) in ("bioscara", "lsm6ds3")}
+    return {name or "i2c": server.url for name in names}
 
 
 def register(root: typer.Typer) -> None:

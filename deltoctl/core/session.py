@@ -7,6 +7,8 @@ from deltoctl.core.lifecycle import Lifecycle
 from deltoctl.errors import InvalidInput
 from deltoctl.profile.model import Hardware, Profile
 
+DRIVEN = ("delto", "generic", "dynamixel", "bioscara", "lsm6ds3")  # families with a driver
+
 
 def resolve_target(profile: Profile, hw: Hardware, targets: list[str]) -> str:
     """``--target`` values ``[BUS=]URL`` override the profile's bus URLs."""
@@ -35,10 +37,18 @@ class Session:
         self.hw = self._driven_block(profile)
         self.sim = None
         self.lifecycle = Lifecycle()
-        if profile.family_of(self.hw) == "dynamixel":
-            self._open_dynamixel(targets, sim)
+        self._sim_i2c = None
+        family = profile.family_of(self.hw)
+        if family in ("dynamixel", "lsm6ds3"):
+            self._open_buses(targets, sim)
             return
-        if profile.family_of(self.hw) == "generic":  # simulated only: no transport
+        if family == "bioscara":
+            from deltoctl.drivers.bioscara.driver import BioscaraDriver
+
+            smbus, self.url = self._i2c(self.hw, targets, sim)
+            self.driver = BioscaraDriver(profile, self.hw, self.url, smbus)
+            return
+        if family == "generic":  # simulated only: no transport
             from deltoctl.drivers.generic.driver import GenericDriver
 
             self.url = "mock://" + profile.name
@@ -55,20 +65,37 @@ class Session:
     @staticmethod
     def _driven_block(profile: Profile) -> Hardware:
         for hw in profile.hardware:
-            if profile.family_of(hw) in ("delto", "generic", "dynamixel"):
+            if profile.family_of(hw) in DRIVEN:
                 return hw
         families = sorted({profile.family_of(h) or "none" for h in profile.hardware})
         raise InvalidInput(f"profile {profile.name!r} has no block deltoctl can drive yet "
-                           f"(families: {', '.join(families)}; supported: delto, generic, "
-                           "dynamixel)")
+                           f"(families: {', '.join(families)}; supported: "
+                           f"{', '.join(DRIVEN)})")
 
-    def _open_dynamixel(self, targets: list[str], sim: bool) -> None:
-        """One driver per Dynamixel bus; with --sim, a pseudo-terminal bus for each."""
+    def _i2c(self, hw: Hardware, targets: list[str], sim: bool):  # type: ignore[no-untyped-def]
+        """``(smbus, url)`` for an I2C block: the in-process simulated bus with --sim (one
+        per session, every simulated I2C device of the profile on it), else the target."""
+        if not sim:
+            return None, resolve_target(self.profile, hw, targets)
+        if self._sim_i2c is None:
+            from deltoctl.sim.i2c_bus import bus_for_profile
+
+            self._sim_i2c = bus_for_profile(self.profile)
+        return self._sim_i2c, f"i2c+sim://{self.profile.name}"
+
+    def _open_buses(self, targets: list[str], sim: bool) -> None:
+        """One driver per Dynamixel bus (with --sim, a pseudo-terminal bus for each), and
+        one per I2C sensor block."""
         from deltoctl.drivers.dynamixel.driver import BusesDriver, DynamixelDriver
+        from deltoctl.drivers.lsm6ds3.driver import Lsm6ds3Driver
 
-        drivers = []
+        drivers: list = []
         servers = []
         for hw in self.profile.hardware:
+            if self.profile.family_of(hw) == "lsm6ds3":
+                smbus, url = self._i2c(hw, targets, sim)
+                drivers.append(Lsm6ds3Driver(self.profile, hw, url, smbus))
+                continue
             if self.profile.family_of(hw) != "dynamixel":
                 continue
             if sim:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import struct
 
 from deltoctl.drivers.dynamixel import codec
-from deltoctl.errors import DeltoctlError, DeviceError, ProtocolError
+from deltoctl.errors import DeltoctlError, DeviceError, ProtocolError, Unreachable
 from deltoctl.profile.model import Hardware, Profile
 
 RAD_PER_RAW = 0.001533980787886  # 2π/4096
@@ -197,14 +197,18 @@ class _Identity:
 
 
 class BusesDriver:
-    """Several buses of one profile (the MH5 has two) behind the one driver interface."""
+    """Every bus of one profile (the MH5: two Dynamixel buses and the I2C IMU) behind the one
+    driver interface. An I2C sensor whose bus cannot be reached is left out with a warning:
+    the servos do not depend on it."""
 
     family = "dynamixel"
 
-    def __init__(self, drivers: list[DynamixelDriver]) -> None:
+    def __init__(self, drivers: list) -> None:
         self.drivers = drivers
+        self.servo_buses = [d for d in drivers if isinstance(d, DynamixelDriver)]
         self.values: dict[str, float] = {}
         self.identity: _Buses | None = None
+        self.skipped: list[str] = []
 
     @property
     def stats(self) -> dict[str, int]:
@@ -213,15 +217,21 @@ class BusesDriver:
 
     @property
     def warnings(self) -> list[str]:
-        return [w for d in self.drivers for w in d.warnings]
+        return self.skipped + [w for d in self.drivers for w in d.warnings]
 
     @property
     def connected(self) -> bool:
         return all(d.connected for d in self.drivers)
 
     def configure(self) -> _Buses:
-        for d in self.drivers:
-            d.configure()
+        for d in list(self.drivers):
+            try:
+                d.configure()
+            except Unreachable as exc:
+                if d in self.servo_buses:
+                    raise
+                self.skipped.append(f"{d.hw.name} left out: {exc.message}")
+                self.drivers.remove(d)
         self.identity = _Buses(self.drivers)
         return self.identity
 
@@ -254,7 +264,7 @@ class BusesDriver:
         distance = max((abs(t - values.get(f"{j}/position", t)) for j, t in targets.items()),
                        default=0.0)
         seconds = max(0.1, distance / (velocity or DEFAULT_VELOCITY))
-        for d in self.drivers:
+        for d in self.servo_buses:
             d.send_goals(targets, seconds)
         start = time.monotonic()
         errors: dict[str, float] = {}
@@ -269,10 +279,10 @@ class BusesDriver:
                           [j for j, e in errors.items() if e > tolerance])
 
     def set_torque(self, joints: list[str], on: bool) -> list[str]:
-        return [j for d in self.drivers for j in d.set_torque(joints, on)]
+        return [j for d in self.servo_buses for j in d.set_torque(joints, on)]
 
     def reboot(self, joints: list[str]) -> list[str]:
-        return [j for d in self.drivers for j in d.reboot(joints)]
+        return [j for d in self.servo_buses for j in d.reboot(joints)]
 
     def stop(self) -> None:
         for d in self.drivers:
@@ -284,7 +294,7 @@ class BusesDriver:
 
 
 class _Buses:
-    def __init__(self, drivers: list[DynamixelDriver]) -> None:
+    def __init__(self, drivers: list) -> None:
         self.drivers = drivers
 
     def as_dict(self) -> dict:

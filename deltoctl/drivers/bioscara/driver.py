@@ -1,0 +1,392 @@
+"""The Bioscara arm: four uStepper joints on one I2C bus (reference §1.2-1.6).
+
+Joints read position, velocity and their flags every cycle; motion needs the joint homed and
+enabled; homing runs each joint into its hard stop in the profile's order and stores the
+offset in the joint (HOMEOFFSET), so it survives a host restart while the joint is powered.
+A verb leaves every joint it commanded stopped and disabled (back-drivable), as the Bioscara
+hardware interface does on deactivate.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from deltoctl.drivers.bioscara import codec
+from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Refused, Unreachable
+from deltoctl.profile.model import Component, Hardware, Profile
+from deltoctl.transport.i2c import I2CBus, NoAnswer
+
+POLL_HOMING = 0.1  # s between flag polls while homing, as the Bioscara driver does
+POLL_MOVE = 0.02
+TOLERANCE = 1e-3  # rad or m: the closed-loop steppers settle far closer than this
+SCAN = range(0x08, 0x78)  # the addresses i2cdetect scans
+
+
+class Joint:
+    """The master side of one joint: its register commands, flags and transmission."""
+
+    def __init__(self, bus: I2CBus, comp: Component) -> None:
+        p = comp.params
+        try:
+            self.address = int(str(p["i2c_address"]), 16)
+            self.reduction = float(p["reduction"])
+            self.low, self.high = float(p["min"]), float(p["max"])
+            self.drive, self.hold = int(p["drive_current"]), int(p["hold_current"])
+            self.stall_threshold = int(p["stall_threshold"])
+            self.max_acceleration = float(p["max_acceleration"])
+            self.max_velocity = float(p["max_velocity"])
+        except (KeyError, ValueError) as exc:
+            raise InvalidInput(f"joint {comp.name}: param {exc} is missing or not a number "
+                               "(i2c_address, reduction, min, max, drive_current, hold_current, "
+                               "stall_threshold, max_acceleration, max_velocity)") from None
+        home = comp.command("home")
+        self.homing = {k: float(v) for k, v in (home.params if home else {}).items()}
+        self.bus, self.name = bus, comp.name
+        self.offset = 0.0
+        self.flags = codec.INITIAL_FLAGS
+        self.mode: str | None = None  # the command interface in use
+        self._position = codec.read_request(codec.ANGLEMOVED)
+        self._rpm = codec.read_request(codec.GETENCODERRPM)
+        self._ping = codec.read_request(codec.PING)
+
+    # flags
+    @property
+    def homed(self) -> bool:
+        return not self.flags & codec.NOTHOMED
+
+    @property
+    def stalled(self) -> bool:
+        return bool(self.flags & codec.STALL)
+
+    @property
+    def busy(self) -> bool:
+        return bool(self.flags & codec.BUSY)
+
+    # wire
+    def command(self, request: bytes) -> int:
+        self.flags = self.bus.transfer(self.address, request, 1)[0]
+        return self.flags
+
+    def _get(self, request: bytes) -> float:
+        value, self.flags = codec.decode_float(self.bus.transfer(self.address, request, 5))
+        return value
+
+    def ping(self) -> int:
+        self.flags = codec.decode_ping(self.bus.transfer(self.address, self._ping, 2))
+        return self.flags
+
+    def position(self) -> float:
+        return codec.from_motor_degrees(self._get(self._position), self.reduction, self.offset)
+
+    def velocity(self) -> float:
+        return codec.from_motor_rpm(self._get(self._rpm), self.reduction)
+
+    def read_home_offset(self) -> float:
+        return self._get(codec.read_request(codec.HOMEOFFSET))
+
+    # commands
+    def activate(self) -> None:
+        """Enable (drive, hold), stall guard, and the joint's acceleration and velocity."""
+        self.command(codec.setup(self.drive, self.hold))
+        if self.stall_threshold > 0:
+            self.command(codec.write_u8(codec.ENABLESTALLGUARD, self.stall_threshold))
+        self.set_limits(self.max_acceleration, self.max_velocity)
+
+    def set_limits(self, acceleration: float, velocity: float) -> None:
+        scale = abs(self.reduction)  # joint units → motor degrees
+        self.command(codec.write_float(codec.SETMAXACCELERATION,
+                                       codec.to_motor_degrees(acceleration, scale, 0.0)))
+        self.command(codec.write_float(codec.SETMAXVELOCITY,
+                                       codec.to_motor_degrees(velocity, scale, 0.0)))
+
+    def stop(self) -> None:
+        self.command(codec.write_u8(codec.STOP, 0))
+
+    def disable(self) -> None:
+        """stop → hold current 0 → drive current 0 → freewheel: back-drivable."""
+        self.stop()
+        self.command(codec.write_u8(codec.SETHOLDCURRENT, 0))
+        self.command(codec.write_u8(codec.SETCURRENT, 0))
+        self.command(codec.write_u8(codec.SETBRAKEMODE, 0))
+        self.mode = None
+
+    def claim(self, mode: str) -> None:
+        """One command interface per joint; position and velocity only once homed."""
+        if self.mode not in (None, mode):
+            raise Refused(f"{self.name} is commanded through {self.mode}; stop it before "
+                          f"commanding {mode}")
+        if mode != "home" and not self.homed:
+            raise Refused(f"{self.name} is not homed: position and velocity commands are "
+                          "refused", hint="run `deltoctl home` first")
+        if self.busy:
+            raise Refused(f"{self.name} is busy with a blocking command ({codec.ERRORS[-109]})")
+        self.mode = mode
+
+    def set_position(self, position: float) -> None:
+        self.claim("position")
+        self._after_motion(self.command(codec.write_float(
+            codec.MOVETOANGLE, codec.to_motor_degrees(position, self.reduction, self.offset))))
+
+    def set_velocity(self, velocity: float) -> None:
+        """A velocity set point; the joint's deadman stops it unless one comes every 50 ms."""
+        self.claim("velocity")
+        self._after_motion(self.command(codec.write_float(
+            codec.SETRPM, codec.to_motor_rpm(velocity, self.reduction))))
+
+    def _after_motion(self, flags: int) -> None:
+        if flags & codec.NOTENABLED:
+            raise DeviceError(f"{self.name} is {codec.ERRORS[-3]}")
+
+    def start_homing(self) -> None:
+        """HOME toward the hard stop the homing speed points at; that stop becomes the offset."""
+        speed = self.homing.get("speed", 0.0)
+        if not speed:
+            raise InvalidInput(f"{self.name}: the home interface has no speed param")
+        self.claim("home")
+        self.activate()
+        self.set_limits(self.homing.get("acceleration", self.max_acceleration),
+                        self.max_velocity)
+        self.offset = self.high if speed > 0 else self.low
+        self.command(codec.home(codec.to_motor_rpm(speed, self.reduction),
+                                int(self.homing.get("threshold", 0)),
+                                int(self.homing.get("current", self.drive))))
+
+    def finish_homing(self) -> None:
+        self.set_limits(self.max_acceleration, self.max_velocity)
+        self.stop()
+        if not self.ping() & codec.NOTHOMED:
+            self.command(codec.write_float(codec.HOMEOFFSET, self.offset))
+        self.disable()
+
+
+class BioscaraDriver:
+    family = "bioscara"
+    extra_states = ("flags",)  # recorded beside each joint's state interfaces
+
+    def __init__(self, profile: Profile, hw: Hardware, url: str, smbus=None) -> None:  # type: ignore[no-untyped-def]
+        self.profile, self.hw, self.url = profile, hw, url
+        self._smbus = smbus  # an SMBus-compatible object (a simulator); else opened from url
+        self.bus: I2CBus | None = None
+        self.joints: dict[str, Joint] = {}
+        self.present: list[Joint] = []
+        self.values: dict[str, float] = {}
+        self.warnings: list[str] = []
+        self.identity: _Identity | None = None
+        self.connected = False
+        self.touched: set[str] = set()  # joints this session commanded, stopped at the end
+
+    @property
+    def stats(self) -> dict[str, int]:
+        bus = self.bus.stats if self.bus else {"packets": 0, "errors": 0}
+        return {"packets": bus["packets"], "errors": bus["errors"], "reconnects": 0}
+
+    def configure(self) -> _Identity:
+        from deltoctl.transport.i2c import open_smbus
+
+        self.bus = I2CBus(self._smbus or open_smbus(self.url), self.url)
+        self.joints = {c.name: Joint(self.bus, c) for c in self.hw.joints}
+        for joint in self.joints.values():
+            try:
+                joint.ping()
+            except NoAnswer:
+                continue
+            if joint.homed:  # the offset survived in the joint while it stayed powered
+                joint.offset = joint.read_home_offset()
+            self.present.append(joint)
+        missing = [j.name for j in self.joints.values() if j not in self.present]
+        if not self.present:
+            raise Unreachable(f"no joint of {self.hw.name!r} answers on {self.url}",
+                              hint="check the joints' power and the I2C wiring")
+        if missing:
+            self.warnings.append(f"no answer from {', '.join(missing)}")
+        self.connected = True
+        self.identity = _Identity(self)
+        return self.identity
+
+    def read(self) -> dict[str, float]:
+        values = self.values
+        ok = True
+        for joint in self.present:
+            name = joint.name
+            try:
+                values[name + "/position"] = joint.position()
+                values[name + "/velocity"] = joint.velocity()
+            except DeltoctlError:
+                ok = False
+                continue
+            values[name + "/home"] = 0.0 if joint.flags & codec.NOTHOMED else 1.0
+            values[name + "/flags"] = float(joint.flags)
+        self.connected = ok
+        values["system/connection_status"] = 1.0 if ok else 0.0
+        return values
+
+    def joint(self, name: str) -> Joint:
+        joint = self.joints.get(name)
+        if joint is None or joint not in self.present:
+            raise DeviceError(f"joint {name!r} does not answer on {self.url}")
+        return joint
+
+    def set_command(self, name: str, value: float) -> None:
+        """``jN/position`` or ``jN/velocity``: one command mode per joint, homed first."""
+        joint_name, _, interface = name.partition("/")
+        joint = self.joint(joint_name)
+        self.touched.add(joint_name)
+        if joint.mode is None:
+            joint.activate()
+        if interface == "position":
+            joint.set_position(value)
+        elif interface == "velocity":
+            joint.set_velocity(value)
+        else:
+            raise InvalidInput(f"{name} is not a position or velocity command interface")
+
+    # -- detect ------------------------------------------------------------------------------------
+    def detect(self) -> dict:
+        assert self.bus is not None
+        found = [a for a in SCAN if self.bus.probe(a)]
+        expected = {j.address: j.name for j in self.joints.values()}
+        missing = [expected[a] for a in sorted(set(expected) - set(found))]
+        unexpected = [f"{a:#04x}" for a in found if a not in expected]
+        checks = [{"what": f"{name} at {addr:#04x}", "profile": "joint",
+                   "device": "answers" if addr in found else "no answer",
+                   "match": addr in found} for addr, name in sorted(expected.items())]
+        checks += [{"what": f"device at {a}", "profile": "—", "device": "answers",
+                    "match": False} for a in unexpected]
+        return {"bus": self.url, "found": [f"{a:#04x}" for a in found], "missing": missing,
+                "unexpected": unexpected, "grid": i2cdetect_grid(found), "checks": checks,
+                "summary": f"{self.hw.name}: {len(found)} of {len(expected)} joints answer on "
+                           f"{self.url}" + (f" (missing: {', '.join(missing)})" if missing
+                                            else "")}
+
+    # -- motion ------------------------------------------------------------------------------------
+    def check_motion(self, names: list[str]) -> None:
+        for name in names:
+            joint = self.joint(name)
+            if not joint.homed:
+                raise Refused(f"{name} is not homed: it may not move",
+                              hint="run `deltoctl home` first")
+
+    def move(self, targets: dict[str, float], profile: Profile, velocity: float | None = None,
+             progress: Callable[[float], None] | None = None):  # type: ignore[no-untyped-def]
+        """Position moves (the joints run their own profiles); fails naming a stalled joint,
+        which is left disabled."""
+        from deltoctl.core.motion import MoveResult
+
+        self.check_motion(list(targets))
+        tolerance = profile.safety.home_tolerance or TOLERANCE
+        start = self.read()
+        first = max((abs(t - start[f"{j}/position"]) for j, t in targets.items()),
+                    default=0.0) or 1.0
+        for name, target in targets.items():
+            joint = self.joint(name)
+            self.touched.add(name)
+            joint.activate()
+            if velocity:
+                joint.set_limits(joint.max_acceleration, min(velocity, joint.max_velocity))
+            joint.set_position(target)
+        began = time.monotonic()
+        timeout = profile.safety.home_timeout or 30.0
+        errors: dict[str, float] = {}
+        while True:
+            values = self.read()
+            for name in targets:
+                if self.joints[name].stalled:
+                    self._stalled(name)
+            errors = {j: abs(t - values[f"{j}/position"]) for j, t in targets.items()}
+            worst = max(errors.values(), default=0.0)
+            if progress:
+                progress(max(0.0, 1.0 - worst / first))
+            elapsed = time.monotonic() - began
+            if worst <= tolerance or elapsed > timeout:
+                break
+            time.sleep(POLL_MOVE)
+        unsettled = [j for j, e in errors.items() if e > tolerance]
+        return MoveResult(not unsettled, elapsed, errors, unsettled)
+
+    def _stalled(self, name: str) -> None:
+        joint = self.joints[name]
+        position = self.values.get(f"{name}/position", float("nan"))
+        joint.disable()
+        raise DeviceError(f"{name} stalled at {position:.4f} and was stopped; it is disabled",
+                          hint="clear the obstruction, then jog again (enabling clears STALL)")
+
+    def home(self, names: list[str], force: bool = False,
+             progress: Callable[[str, str, float], None] | None = None) -> dict[str, str]:
+        """Home each joint in turn (start, poll BUSY every 100 ms, store the offset);
+        Ctrl-C or a timeout aborts the running one with STOP. Returns joint → outcome."""
+        timeout = self.profile.safety.home_timeout or 120.0
+        outcome: dict[str, str] = {}
+        for name in names:
+            joint = self.joint(name)
+            if joint.homed and not force:
+                outcome[name] = "already homed"
+                if progress:
+                    progress(name, outcome[name], 1.0)
+                continue
+            self.touched.add(name)
+            try:
+                joint.start_homing()
+                began = time.monotonic()
+                if progress:
+                    progress(name, "homing", 0.0)
+                while joint.ping() & codec.BUSY:
+                    if time.monotonic() - began > timeout:
+                        raise DeviceError(f"{name} did not find its hard stop within "
+                                          f"{timeout:g} s; homing aborted")
+                    time.sleep(POLL_HOMING)
+            except BaseException:
+                joint.stop()  # STOP clears BUSY: the firmware aborts the HOME
+                joint.disable()
+                raise
+            joint.finish_homing()
+            if not joint.homed:
+                raise DeviceError(f"{name}: homing ended but the joint is not homed "
+                                  "(aborted, or it stalled)")
+            outcome[name] = "homed"
+            if progress:
+                progress(name, "homed", 1.0)
+        return outcome
+
+    def stop(self) -> None:
+        """Stop and disable the joints this session commanded (the deadman's safe state)."""
+        for name in sorted(self.touched):
+            joint = self.joints[name]
+            try:
+                joint.disable()
+            except DeltoctlError:
+                self.warnings.append(f"{name} did not answer the stop; its deadman stops it")
+        self.touched.clear()
+
+    def cleanup(self) -> None:
+        if self.bus is not None:
+            self.bus.close()
+            self.bus = None
+        self.connected = False
+
+
+def i2cdetect_grid(found: list[int]) -> str:
+    """The bus as ``i2cdetect`` prints it: addresses that answered, ``--`` for silence."""
+    lines = ["     " + "  ".join(f"{c:x}" for c in range(16))]
+    for row in range(0, 0x80, 0x10):
+        cells = []
+        for a in range(row, row + 0x10):
+            cells.append(f"{a:02x}" if a in found else "--" if a in SCAN else "  ")
+        lines.append(f"{row:02x}: " + " ".join(cells))
+    return "\n".join(lines)
+
+
+class _Identity:
+    def __init__(self, driver: BioscaraDriver) -> None:
+        self.driver = driver
+
+    def as_dict(self) -> dict:
+        d = self.driver
+        joints = {}
+        for name, j in d.joints.items():
+            answers = j in d.present
+            joints[name] = {"address": f"{j.address:#04x}", "answers": answers}
+            if answers:
+                joints[name].update(flags=codec.describe_flags(j.flags), homed=j.homed,
+                                    home_offset=round(j.offset, 6) if j.homed else None)
+        return {"family": "bioscara", "bus": d.url, "joints": joints}

@@ -1,0 +1,109 @@
+"""LSM6DS3 registers, settings and scaling, sans-I/O (reference §2.5).
+
+The MH5 configures 416 Hz, ±2 g and 245 dps, reads gyro, accelerometer and temperature, maps
+the axes into its ROS frame in software and low-pass filters each value.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+
+from deltoctl.errors import InvalidInput, ProtocolError
+
+WHO_AM_I = 0x0F
+CTRL1_XL = 0x10
+CTRL2_G = 0x11
+CTRL4_C = 0x13
+ORIENT_CFG_G = 0x0B
+OUT_TEMP_L = 0x20  # temperature, then gyro X/Y/Z (0x22) and accelerometer X/Y/Z (0x28)
+OUTX_L_G = 0x22
+OUTX_L_XL = 0x28
+BLOCK = 14  # bytes from OUT_TEMP_L to OUTZ_H_XL
+BW_SCAL_ODR = 0x80  # CTRL4_C: the accelerometer bandwidth comes from CTRL1_XL's BW bits
+
+CHIPS = {0x69: "LSM6DS3", 0x6A: "LSM6DS3TR-C"}
+
+ODR = {12.5: 0x10, 26: 0x20, 52: 0x30, 104: 0x40, 208: 0x50, 416: 0x60, 833: 0x70,
+       1660: 0x80, 3330: 0x90, 6660: 0xA0}
+ACCEL_RANGE = {2: 0x00, 4: 0x08, 8: 0x0C, 16: 0x04}  # g → FS_XL bits
+ACCEL_BANDWIDTH = {400: 0x00, 200: 0x01, 100: 0x02, 50: 0x03}  # Hz → BW_XL bits
+GYRO_RANGE = {245: 0x00, 500: 0x04, 1000: 0x08, 2000: 0x0C}  # dps → FS_G bits
+
+G = 9.80665
+MG_PER_LSB_2G = 0.061
+MDPS_PER_LSB_125 = 4.375
+RAW = struct.Struct("<7h")
+
+
+def _lookup(table: dict, value: float, what: str) -> int:
+    if value not in table:
+        raise InvalidInput(f"LSM6DS3 {what} {value:g} is not one of "
+                           f"{', '.join(f'{k:g}' for k in table)}")
+    return table[value]
+
+
+def ctrl1_xl(odr: float = 416, range_g: int = 2, bandwidth: int = 100) -> int:
+    return (_lookup(ODR, odr, "output rate (Hz)") | _lookup(ACCEL_RANGE, range_g, "range (g)")
+            | _lookup(ACCEL_BANDWIDTH, bandwidth, "bandwidth (Hz)"))
+
+
+def ctrl2_g(odr: float = 416, range_dps: int = 245) -> int:
+    return _lookup(ODR, odr, "output rate (Hz)") | _lookup(GYRO_RANGE, range_dps, "range (dps)")
+
+
+def accel_scale(range_g: int) -> float:
+    """m/s² per LSB: 0.061 mg at ±2 g, doubling with each range."""
+    return MG_PER_LSB_2G * (range_g >> 1) / 1000.0 * G
+
+
+def gyro_scale(range_dps: int) -> float:
+    """rad/s per LSB: 4.375 mdps × range/125, 245 dps counted as 2 (8.75 mdps)."""
+    div = 2 if range_dps == 245 else range_dps // 125
+    return MDPS_PER_LSB_125 * div / 1000.0 * math.pi / 180.0
+
+
+def chip_name(who_am_i: int) -> str:
+    if who_am_i not in CHIPS:
+        raise ProtocolError(f"WHO_AM_I reads {who_am_i:#04x}: not an LSM6DS3 (0x69) or an "
+                            "LSM6DS3TR-C (0x6A)")
+    return CHIPS[who_am_i]
+
+
+def decode(block: bytes, accel: float, gyro: float) -> tuple[float, tuple, tuple]:
+    """Temperature (°C), angular velocity and linear acceleration in the MH5's ROS frame:
+    ang_vel = (−gz, gy, −gx), lin_acc = (−az, ay, −ax)."""
+    if len(block) != BLOCK:
+        raise ProtocolError(f"expected {BLOCK} bytes from OUT_TEMP_L, got {len(block)}")
+    t, gx, gy, gz, ax, ay, az = RAW.unpack(block)
+    return (t / 16.0 + 25.0, (-gz * gyro, gy * gyro, -gx * gyro),
+            (-az * accel, ay * accel, -ax * accel))
+
+
+def encode(temperature: float, angular_velocity: tuple, linear_acceleration: tuple,
+           accel: float, gyro: float) -> bytes:
+    """The inverse of ``decode``: what the chip holds for these readings (for the emulator)."""
+    wx, wy, wz = angular_velocity
+    fx, fy, fz = linear_acceleration
+
+    def raw(value: float, scale: float) -> int:
+        return max(-32768, min(32767, round(value / scale)))
+
+    return RAW.pack(raw(temperature - 25.0, 1 / 16.0), raw(-wz, gyro), raw(wy, gyro),
+                    raw(-wx, gyro), raw(-fz, accel), raw(fy, accel), raw(-fx, accel))
+
+
+class LowPass:
+    """y = old·(1 − f) + new·f, per value; the first sample passes through (old is 0.0)."""
+
+    def __init__(self, factor: float) -> None:
+        self.factor = factor
+        self.state: list[float] = []
+
+    def __call__(self, values: tuple) -> tuple:
+        if not self.state:
+            self.state = [0.0] * len(values)
+        f = self.factor
+        self.state = [new if old == 0.0 else old * (1 - f) + new * f
+                      for old, new in zip(self.state, values)]
+        return tuple(self.state)

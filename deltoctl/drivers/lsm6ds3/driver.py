@@ -1,0 +1,113 @@
+"""The LSM6DS3 on an I2C bus: detect by WHO_AM_I, configure rate and range, read gyro,
+accelerometer and temperature into a sensor's interfaces (``imu/angular_velocity.x`` …)."""
+
+from __future__ import annotations
+
+from deltoctl.drivers.lsm6ds3 import codec
+from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, ProtocolError
+from deltoctl.profile.model import Hardware, Profile
+from deltoctl.transport.i2c import I2CBus
+
+AXES = ("x", "y", "z")
+# no orientation estimate: the MH5 reports a fixed quaternion
+ORIENTATION = {"orientation.x": 0.0, "orientation.y": 0.0, "orientation.z": 0.0,
+               "orientation.w": 1.0}
+
+
+class Lsm6ds3Driver:
+    family = "lsm6ds3"
+
+    def __init__(self, profile: Profile, hw: Hardware, url: str, smbus=None) -> None:  # type: ignore[no-untyped-def]
+        if not hw.sensors or hw.sensors[0].address is None:
+            raise InvalidInput(f"{hw.name}: an lsm6ds3 block needs a sensor with an address")
+        self.profile, self.hw, self.url = profile, hw, url
+        self.sensor = hw.sensors[0]
+        self.address = self.sensor.address
+        p = {**hw.params, **self.sensor.params}
+        try:
+            self.odr = float(p.get("odr", 416))
+            self.range_g = int(p.get("accel_range", 2))
+            self.range_dps = int(p.get("gyro_range", 245))
+            self.lpf = codec.LowPass(float(p.get("lpf", 1.0)))
+        except ValueError as exc:
+            raise InvalidInput(f"{hw.name}: {exc}") from None
+        self.settings = (codec.ctrl1_xl(self.odr, self.range_g),
+                         codec.ctrl2_g(self.odr, self.range_dps))
+        self.accel = codec.accel_scale(self.range_g)
+        self.gyro = codec.gyro_scale(self.range_dps)
+        self._smbus = smbus
+        self.bus: I2CBus | None = None
+        self.chip = ""
+        self.values: dict[str, float] = {}
+        self.warnings: list[str] = []
+        self.connected = False
+        self.identity = self
+        self._request = bytes([codec.OUT_TEMP_L])
+
+    @property
+    def stats(self) -> dict[str, int]:
+        bus = self.bus.stats if self.bus else {"packets": 0, "errors": 0}
+        return {"packets": bus["packets"], "errors": bus["errors"], "reconnects": 0}
+
+    def _register(self, register: int) -> int:
+        assert self.bus is not None
+        return self.bus.transfer(self.address, bytes([register]), 1)[0]
+
+    def configure(self) -> Lsm6ds3Driver:
+        from deltoctl.transport.i2c import open_smbus
+
+        self.bus = I2CBus(self._smbus or open_smbus(self.url), self.url)
+        who = self._register(codec.WHO_AM_I)
+        try:
+            self.chip = codec.chip_name(who)
+        except ProtocolError as exc:
+            raise DeviceError(f"{self.sensor.name} at {self.address:#04x} on {self.url}: "
+                              f"{exc.message}", hint="check the address and the part") from None
+        ctrl1, ctrl2 = self.settings
+        self.bus.write(self.address, bytes([codec.CTRL1_XL, ctrl1]))
+        self.bus.write(self.address, bytes([codec.CTRL2_G, ctrl2]))
+        ctrl4 = self._register(codec.CTRL4_C)
+        self.bus.write(self.address, bytes([codec.CTRL4_C, ctrl4 | codec.BW_SCAL_ODR]))
+        self.bus.write(self.address, bytes([codec.ORIENT_CFG_G, 0]))  # remap in software
+        self.connected = True
+        return self
+
+    def read(self) -> dict[str, float]:
+        assert self.bus is not None
+        name = self.sensor.name
+        try:
+            block = self.bus.transfer(self.address, self._request, codec.BLOCK)
+            temperature, gyro, accel = codec.decode(block, self.accel, self.gyro)
+        except DeltoctlError:
+            self.connected = False
+            return self.values
+        self.connected = True
+        filtered = self.lpf((*gyro, *accel))
+        for i, axis in enumerate(AXES):
+            self.values[f"{name}/angular_velocity.{axis}"] = filtered[i]
+            self.values[f"{name}/linear_acceleration.{axis}"] = filtered[3 + i]
+        for key, value in ORIENTATION.items():
+            self.values[f"{name}/{key}"] = value
+        self.values[f"{name}/temperature"] = temperature
+        return self.values
+
+    def detect(self) -> dict:
+        check = {"what": f"{self.sensor.name} at {self.address:#04x}",
+                 "profile": "LSM6DS3 or LSM6DS3TR-C", "device": self.chip or "no answer",
+                 "match": bool(self.chip)}
+        return {"bus": self.url, "chip": self.chip, "checks": [check],
+                "summary": f"{self.sensor.name}: {self.chip} at {self.address:#04x}"}
+
+    def as_dict(self) -> dict:
+        return {"bus": self.url, "address": f"{self.address:#04x}", "chip": self.chip,
+                "output_rate_hz": self.odr, "accel_range_g": self.range_g,
+                "gyro_range_dps": self.range_dps}
+
+    def stop(self) -> None:
+        pass
+
+    def cleanup(self) -> None:
+        if self.bus is not None:
+            self.bus.close()
+            self.bus = None
+        self.connected = False

@@ -1,0 +1,128 @@
+"""I2C transport over smbus2: ``i2c:///dev/i2c-1`` (a kernel bus) or ``i2c+tcp://HOST:PORT``
+(a simulated bus that ``deltoctl sim serve`` shares over loopback).
+
+Both give an object with smbus2's ``SMBus`` methods; ``I2CBus`` adds what the drivers need:
+combined transactions (write, repeated start, read), 3 tries 50 µs apart, counters, and one
+clear message for a missing bus, a device that does not answer, or a permission problem.
+"""
+
+from __future__ import annotations
+
+import errno
+import time
+from urllib.parse import urlsplit
+
+from smbus2 import i2c_msg
+
+from deltoctl.errors import DeviceError, InvalidInput, Unreachable
+
+TRIES = 3
+RETRY_PAUSE = 50e-6  # s between tries
+NO_ANSWER = (errno.ENXIO, errno.EREMOTEIO, errno.EIO, errno.ETIMEDOUT, errno.EAGAIN)
+
+
+class NoAnswer(DeviceError):
+    """A device did not acknowledge its address (after every try)."""
+
+
+def parse_i2c_url(url: str) -> tuple[str, str, int]:
+    """``(kind, path_or_host, port)`` with kind ``dev`` or ``tcp``."""
+    parts = urlsplit(url)
+    if parts.scheme == "i2c" and parts.path:
+        return "dev", parts.path, 0
+    if parts.scheme == "i2c+tcp" and parts.hostname and parts.port:
+        return "tcp", parts.hostname, parts.port
+    raise InvalidInput(f"{url!r} is not an I2C target (expected i2c:///dev/i2c-N or "
+                       "i2c+tcp://HOST:PORT from `deltoctl sim serve`)")
+
+
+def open_smbus(url: str):  # type: ignore[no-untyped-def]
+    """An SMBus-compatible object for the URL; Unreachable with what to do when it fails."""
+    kind, where, port = parse_i2c_url(url)
+    if kind == "tcp":
+        from deltoctl.sim.i2c_bus import SocketSMBus
+
+        try:
+            return SocketSMBus(where, port)
+        except OSError as exc:
+            raise Unreachable(f"cannot reach the simulated I2C bus {url}: {exc.strerror or exc}",
+                              hint="is `deltoctl sim serve` still running?") from None
+    from smbus2 import SMBus
+
+    try:
+        return SMBus(where)
+    except FileNotFoundError:
+        raise Unreachable(f"no I2C bus {where}",
+                          hint="enable I2C (Raspberry Pi: dtparam=i2c_arm=on) and load the "
+                               "i2c-dev module") from None
+    except PermissionError:
+        raise Unreachable(f"no permission to open {where}",
+                          hint="add the user to the i2c group, then log in again") from None
+    except OSError as exc:
+        raise Unreachable(f"cannot open {where}: {exc.strerror}") from None
+
+
+class I2CBus:
+    """Transactions on one bus, with retries and counters (``stats``)."""
+
+    def __init__(self, smbus, url: str) -> None:  # type: ignore[no-untyped-def]
+        self.smbus = smbus
+        self.url = url
+        self.stats = {"packets": 0, "errors": 0, "bytes": 0}
+        self._writes: dict[tuple[int, bytes], object] = {}  # reused messages for fixed requests
+        self._reads: dict[tuple[int, int], object] = {}
+
+    def _message(self, address: int, data: bytes):  # type: ignore[no-untyped-def]
+        key = (address, data)
+        msg = self._writes.get(key)
+        if msg is None:
+            msg = i2c_msg.write(address, data)
+            if len(self._writes) < 256:
+                self._writes[key] = msg
+        return msg
+
+    def _run(self, address: int, *msgs) -> None:  # type: ignore[no-untyped-def]
+        self.stats["packets"] += 1
+        self.stats["bytes"] += sum(len(m) + 1 for m in msgs)  # payload + address byte
+        for attempt in range(TRIES):
+            try:
+                self.smbus.i2c_rdwr(*msgs)
+                return
+            except OSError as exc:
+                self.stats["errors"] += 1
+                if exc.errno not in NO_ANSWER:
+                    raise DeviceError(f"I2C transfer to {address:#04x} on {self.url} failed: "
+                                      f"{exc.strerror or exc}") from None
+                if attempt + 1 < TRIES:
+                    time.sleep(RETRY_PAUSE)
+        raise NoAnswer(f"no answer from {address:#04x} on {self.url} ({TRIES} tries)",
+                       hint="check the device's power, wiring and address")
+
+    def transfer(self, address: int, write: bytes, read: int) -> bytes:
+        """Write ``write``, repeated start, read ``read`` bytes: one combined transaction."""
+        key = (address, read)
+        reply = self._reads.get(key)
+        if reply is None:
+            reply = self._reads[key] = i2c_msg.read(address, read)
+        self._run(address, self._message(address, write), reply)
+        return bytes(reply)
+
+    def write(self, address: int, data: bytes) -> None:
+        self._run(address, self._message(address, data))
+
+    def probe(self, address: int) -> bool:
+        """Whether a device acknowledges its address (a one-byte read, as ``i2cdetect -r``)."""
+        try:
+            self.smbus.i2c_rdwr(i2c_msg.read(address, 1))
+            return True
+        except OSError:
+            return False
+
+    def close(self) -> None:
+        self.smbus.close()
+
+
+def wire_bits(write: int, read: int) -> int:
+    """Bits on the wire for a combined transaction: 9 bits per byte (8 + ACK), the address
+    byte sent twice (write, then after the repeated start, read)."""
+    return 9 * (write + 1 + (read + 1 if read else 0))
