@@ -91,8 +91,28 @@ def identify(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) ->
     if opts.json:
         emit_json(ident)
     else:
-        table(None, ["field", "value"], [[k, v] for k, v in ident.items()])
+        _identity_tables(ident)
     finish(session)
+
+
+def _identity_tables(ident: dict, title: str | None = None) -> None:
+    """Plain fields in one table; each list of parts (joints, servos) in a table of its own,
+    one row per part; nested groups (buses) recursively."""
+    flat = [[k, v] for k, v in ident.items() if not isinstance(v, dict)]
+    if flat:
+        table(title, ["field", "value"], flat)
+    for key, value in ident.items():
+        if not isinstance(value, dict):
+            continue
+        name = f"{title} {key}" if title else key
+        rows = list(value.values())
+        if rows and all(isinstance(r, dict) and not any(isinstance(x, dict) for x in r.values())
+                        for r in rows):
+            columns = list(dict.fromkeys(c for r in rows for c in r))
+            table(name, ["name", *columns],
+                  [[part, *(r.get(c, "") for c in columns)] for part, r in value.items()])
+        else:
+            _identity_tables(value, name)
 
 
 def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:

@@ -100,6 +100,12 @@ class DeltoctlGroup(TyperGroup):
             raise typer.Exit(130) from None
         except (typer.Exit, typer.Abort, click_exceptions.ClickException):
             raise
+        except BrokenPipeError:  # the reader went away (`| head`): stop quietly
+            import os
+            import sys
+
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            raise typer.Exit(0) from None
         except Exception as exc:  # a bug: one line for people, the traceback with -v
             if ctx.obj is not None and getattr(ctx.obj, "verbose", 0):
                 raise

@@ -50,7 +50,7 @@ def record(
             "profile": {"name": session.profile.name, "yaml": to_yaml(session.profile)},
             "identify": {**ident, "target": session.url},
             "deltoctl": {"version": __version__},
-        })
+        }, getattr(driver, "extra_states", ()))
         loop = CycleLoop(rate, duration)
         next_stats = time.monotonic() + STATS_PERIOD
         try:

@@ -68,6 +68,14 @@ class CdrTemplate:
             self.const_string(text)
         return self
 
+    def const_doubles(self, values: list[float]) -> CdrTemplate:
+        """A fixed-size float64[N] that never changes (no length prefix)."""
+        self._pad(8)
+        self._flush_var()
+        self._const += struct.pack(f"<{len(values)}d", *values)
+        self._pos += 8 * len(values)
+        return self
+
     def var(self, code: str, count: int = 1) -> CdrTemplate:
         size = struct.calcsize(code)
         self._pad(size)

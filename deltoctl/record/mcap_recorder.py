@@ -2,8 +2,9 @@
 
 Topics: /joint_states (sensor_msgs/JointState), /dynamic_joint_states (every joint interface,
 temperatures included, as ros2_control's broadcaster publishes them), /<sensor>/wrench
-(geometry_msgs/WrenchStamped per F/T sensor), /gpio (control_msgs/DynamicInterfaceGroupValues,
-with system/connection_status), /diagnostics (link events and loop statistics). The resolved
+(geometry_msgs/WrenchStamped per F/T sensor), /<sensor>/data_raw (sensor_msgs/Imu without
+orientation, per IMU), /gpio (control_msgs/DynamicInterfaceGroupValues, with
+system/connection_status), /diagnostics (link events and loop statistics). The resolved
 profile and the identify result are stored as metadata. ``close()`` always leaves a valid,
 indexed file. Messages are CDR-encoded from precompiled layouts (record/cdr.py): the recorder
 runs inside the cycle loop.
@@ -22,6 +23,17 @@ from deltoctl.record.ros2_msgs import MSGDEFS
 FT_AXES = ("force.x", "force.y", "force.z", "torque.x", "torque.y", "torque.z")
 OK, WARN, ERROR = 0, 1, 2
 NAN = float("nan")
+IMU_FIELDS = ("orientation.x", "orientation.y", "orientation.z", "orientation.w",
+              "angular_velocity.x", "angular_velocity.y", "angular_velocity.z",
+              "linear_acceleration.x", "linear_acceleration.y", "linear_acceleration.z")
+UNKNOWN_COVARIANCE = [0.0] * 9
+NO_ORIENTATION = [-1.0] + [0.0] * 8  # REP 145: the IMU gives no orientation estimate
+
+
+def _imu_template(frame_id: str) -> CdrTemplate:
+    t = CdrTemplate().header(frame_id).var("d", 4).const_doubles(NO_ORIENTATION)
+    t.var("d", 3).const_doubles(UNKNOWN_COVARIANCE)
+    return t.var("d", 3).const_doubles(UNKNOWN_COVARIANCE).done()
 
 
 def _picker(keys: list[str]) -> Callable[[dict], tuple]:
@@ -35,7 +47,10 @@ def _picker(keys: list[str]) -> Callable[[dict], tuple]:
 
 
 class McapRecorder:
-    def __init__(self, stream: BinaryIO, profile: Profile, metadata: dict[str, dict[str, str]]):
+    def __init__(self, stream: BinaryIO, profile: Profile, metadata: dict[str, dict[str, str]],
+                 extra_states: tuple[str, ...] = ()):
+        """``extra_states``: values a driver reads for every joint beyond the profile's state
+        interfaces (a Bioscara joint's flags), recorded in /dynamic_joint_states."""
         from mcap.writer import Writer
 
         from deltoctl import __version__
@@ -47,6 +62,7 @@ class McapRecorder:
         self.channels: dict[str, int] = {}
         self.sequence: dict[str, int] = {}
         self.profile = profile
+        self.extra_states = extra_states
         self.link_losses = 0
         self.connected: float | None = None
         self.closed = False
@@ -67,9 +83,9 @@ class McapRecorder:
         dyn = CdrTemplate().header().const_strings(names).const_u32(n)
         keys = []
         for j in joints:
-            dyn.const_strings([i.name for i in j.state_interfaces])
-            dyn.var_doubles(len(j.state_interfaces))
-            keys += [f"{j.name}/{i.name}" for i in j.state_interfaces]
+            itfs = [i.name for i in j.state_interfaces] + list(self.extra_states)
+            dyn.const_strings(itfs).var_doubles(len(itfs))
+            keys += [f"{j.name}/{i}" for i in itfs]
         self._add("/dynamic_joint_states", "control_msgs/msg/DynamicJointState", dyn.done(), keys)
         for _, sensor in self.profile.components():
             if sensor.kind == "sensor" and sensor.state("force.x"):
@@ -77,6 +93,10 @@ class McapRecorder:
                 wrench.var("d", 6).done()
                 self._add(f"/{sensor.name}/wrench", "geometry_msgs/msg/WrenchStamped", wrench,
                           [f"{sensor.name}/{axis}" for axis in FT_AXES])
+            if sensor.kind == "sensor" and sensor.state("angular_velocity.x"):
+                self._add(f"/{sensor.name}/data_raw", "sensor_msgs/msg/Imu",
+                          _imu_template(sensor.params.get("frame_id", sensor.name)),
+                          [f"{sensor.name}/{k}" for k in IMU_FIELDS])
         groups = [(g.name, [i.name for i in g.state_interfaces])
                   for _, g in self.profile.components() if g.kind == "gpio"]
         groups.append(("system", ["connection_status"]))

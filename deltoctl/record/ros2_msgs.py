@@ -24,6 +24,13 @@ MSGDEFS = {
         "std_msgs/Header header\ngeometry_msgs/Wrench wrench\n",
         "MSG: geometry_msgs/Wrench\ngeometry_msgs/Vector3 force\ngeometry_msgs/Vector3 torque\n",
         VECTOR3, HEADER, TIME),
+    "sensor_msgs/msg/Imu": _join(
+        "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\n"
+        "float64[9] orientation_covariance\ngeometry_msgs/Vector3 angular_velocity\n"
+        "float64[9] angular_velocity_covariance\ngeometry_msgs/Vector3 linear_acceleration\n"
+        "float64[9] linear_acceleration_covariance\n",
+        HEADER, TIME, "MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\n"
+        "float64 w 1\n", VECTOR3),
     "control_msgs/msg/DynamicJointState": _join(
         "std_msgs/Header header\nstring[] joint_names\n"
         "control_msgs/InterfaceValue[] interface_values\n", INTERFACE_VALUE, HEADER, TIME),
