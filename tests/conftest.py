@@ -34,6 +34,31 @@ def eventually(predicate, timeout: float = 2.0) -> bool:
     return True
 
 
+@pytest.fixture
+def mh5_buses():
+    """The MH5's two Dynamixel buses on ptys and its I2C bus (the IMU) on loopback."""
+    from deltoctl.profile.catalog import load_profile
+    from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+    from deltoctl.sim.i2c_bus import I2CSocketServer, bus_for_profile
+
+    profile = load_profile("mh5")
+    servers = {}
+    for hw in profile.hardware:
+        if profile.family_of(hw) == "dynamixel":
+            bus = DynamixelBus([Servo(j.address) for j in hw.joints])
+            servers[hw.bus] = DynamixelPtyServer(bus).start()
+    servers["i2c"] = I2CSocketServer(bus_for_profile(profile)).start()  # the IMU
+    yield servers
+    for server in servers.values():
+        server.close()
+
+
+def mh5_targets(servers):
+    return [a for bus, s in servers.items()
+            for a in ("-t", f"{bus}={s.url}" if bus == "i2c" else
+                      f"{bus}=serial://{s.port}?baud=2000000")]
+
+
 needs_samples = pytest.mark.skipif(not SAMPLES.is_dir(), reason="../shared/data is not present")
 
 

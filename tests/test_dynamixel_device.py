@@ -6,9 +6,7 @@ import json
 
 import pytest
 
-from deltoctl.profile.catalog import load_profile
-from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
-from tests.conftest import eventually
+from tests.conftest import eventually, mh5_targets
 
 
 def test_identify_detect_stream_with_sim(cli):
@@ -25,37 +23,19 @@ def test_identify_detect_stream_with_sim(cli):
     assert sample["l_kne_p/voltage"] == 12.0 and sample["l_kne_p/temperature"] == 30.0
 
 
-@pytest.fixture
-def mh5_buses():
-    profile = load_profile("mh5")
-    servers = {}
-    for hw in profile.hardware:
-        if profile.family_of(hw) == "dynamixel":
-            bus = DynamixelBus([Servo(j.address) for j in hw.joints])
-            servers[hw.bus] = DynamixelPtyServer(bus).start()
-    yield servers
-    for server in servers.values():
-        server.close()
-
-
-def _targets(servers):
-    return [a for bus, s in servers.items()
-            for a in ("-t", f"{bus}=serial://{s.port}?baud=2000000")]
-
-
 def test_detect_names_a_missing_servo(cli, mh5_buses):
     mh5_buses["lower_body"].bus.faults.missing.add(24)
-    result = cli("-p", "mh5", *_targets(mh5_buses), "detect", "--json")
+    result = cli("-p", "mh5", *mh5_targets(mh5_buses), "detect", "--json")
     assert result.exit_code == 3
     report = json.loads(result.stdout)
     assert report["buses"]["lower_body"]["missing"] == [24]
-    identify = cli("-p", "mh5", *_targets(mh5_buses), "identify")
+    identify = cli("-p", "mh5", *mh5_targets(mh5_buses), "identify")
     assert identify.exit_code == 3 and "r_kne_p" in identify.stderr
 
 
 def test_corrupted_replies_count_as_errors_not_exceptions(cli, mh5_buses):
     mh5_buses["upper_body"].bus.faults.corrupt_crc.add(51)
-    result = cli("-p", "mh5", *_targets(mh5_buses), "stream", "-d", "0.1", "--json",
+    result = cli("-p", "mh5", *mh5_targets(mh5_buses), "stream", "-d", "0.1", "--json",
                  "-i", "head_*/position")
     assert "Traceback" not in result.stderr
     assert result.exit_code == 3  # head_p never answered a ping: a warning
@@ -71,20 +51,20 @@ def test_unopenable_port_is_unreachable(cli):
 
 def test_jog_turns_torque_on_and_reaches_the_goal(cli, mh5_buses):
     servo = mh5_buses["upper_body"].bus.servos[52]  # head_y
-    result = cli("-p", "mh5", *_targets(mh5_buses), "jog", "head_y", "10deg", "--velocity",
+    result = cli("-p", "mh5", *mh5_targets(mh5_buses), "jog", "head_y", "10deg", "--velocity",
                  "40deg", "--yes", "--json")
     assert result.exit_code == 0, result.stderr
     assert json.loads(result.stdout)["settled"] is True
     assert eventually(lambda: servo.memory[64] == 1 and servo.memory[10] & 0x04)
     assert servo.get("Goal Position") == round(0.17453292519943295 / 0.001533980787886 + 2047)
-    refused = cli("-p", "mh5", *_targets(mh5_buses), "jog", "head_y", "30deg", "--yes")
+    refused = cli("-p", "mh5", *mh5_targets(mh5_buses), "jog", "head_y", "30deg", "--yes")
     assert refused.exit_code == 5  # larger than max_jog_step (20°)
 
 
 def test_torque_by_group_and_reboot_after_a_shutdown(cli, mh5_buses):
     upper = mh5_buses["upper_body"].bus.servos
     lower = mh5_buses["lower_body"].bus.servos
-    targets = _targets(mh5_buses)
+    targets = mh5_targets(mh5_buses)
     result = cli("-p", "mh5", *targets, "torque", "on", "arms", "--yes", "--json")
     assert result.exit_code == 0, result.stderr
     assert len(json.loads(result.stdout)["joints"]) == 8

@@ -88,7 +88,7 @@ def test_status_return_level_and_reboot(bus):
     assert servo.memory[70] == 0 and servo.memory[65] == 0
 
 
-def test_sim_serve_mh5_serves_both_buses(tmp_path):
+def test_sim_serve_mh5_serves_every_bus(tmp_path):
     import json
     import subprocess
     import sys
@@ -98,7 +98,8 @@ def test_sim_serve_mh5_serves_both_buses(tmp_path):
                             stdout=subprocess.PIPE, text=True)
     try:
         buses = json.loads(proc.stdout.readline())["buses"]
-        assert set(buses) == {"upper_body", "lower_body"}
+        assert set(buses) == {"upper_body", "lower_body", "i2c"}
+        assert buses.pop("i2c").startswith("i2c+tcp://127.0.0.1:")  # the IMU's bus
         ph = sdk.PacketHandler(2.0)
         found = {}
         for name, url in buses.items():

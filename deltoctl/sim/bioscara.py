@@ -47,7 +47,8 @@ class JointFirmware:
         self.max_acceleration = 100 / STEPS_PER_DEG
         self.rpm = 0.0  # velocity mode set point (qd_set)
         self.target: float | None = None  # position mode set point, motor degrees
-        self.speed = 0.0  # deg/s, actual
+        self.speed = 0.0  # deg/s of the commanded profile
+        self.measured = 0.0  # deg/s the encoder sees
         self.filtered = self.previous_error = 0.0
         self.home_offset = 0.0
         self.homing: dict | None = None
@@ -85,7 +86,7 @@ class JointFirmware:
             homed = not self.flags & codec.NOTHOMED
             return codec.FLOAT.pack(self.angle - self.home_angle if homed else 0.0)
         if register == codec.GETENCODERRPM:
-            return codec.FLOAT.pack(self.speed / 6.0)
+            return codec.FLOAT.pack(self.measured / 6.0)
         if register == codec.HOMEOFFSET:
             if len(p) >= 4:
                 self.home_offset = f(p)[0]
@@ -141,7 +142,7 @@ class JointFirmware:
 
     # -- the firmware's loop ---------------------------------------------------------------------
     def _stop(self) -> None:
-        self.rpm, self.target, self.speed = 0.0, None, 0.0
+        self.rpm, self.target, self.speed, self.measured = 0.0, None, 0.0, 0.0
         self.command = self.angle
 
     def _disable(self) -> None:
@@ -188,16 +189,15 @@ class JointFirmware:
         if self.target is not None and abs(self.target - self.command) < abs(wanted) * TICK:
             self.command, self.speed = self.target, 0.0
         low, high = (self.angle, self.angle) if self.blocked else self.stops
-        self.angle = min(max(self.command, low), high)
-        if self.angle != self.command:
-            self.speed = 0.0  # pushing against a stop: the encoder does not move
+        before, self.angle = self.angle, min(max(self.command, low), high)
+        self.measured = (self.angle - before) / TICK
 
     def _stall_step(self, error: float) -> None:
         if error - self.previous_error > SPIKE:
             error = self.previous_error  # spike rejection
         self.previous_error = error
         self.filtered = (1 - LPF_GAIN) * self.filtered + LPF_GAIN * error
-        qd = abs(math.radians(self.speed))
+        qd = abs(math.radians(self.measured))
         threshold = STALL_SLOPE * qd + self.stallguard
         if STALL_B1 <= qd <= STALL_B2:
             threshold += STALL_WINDOW_OFFSET
