@@ -21,6 +21,8 @@ test: $(BIN)/deltoctl
 bench: $(BIN)/deltoctl
 	$(BIN)/python bench/startup.py
 	$(BIN)/deltoctl bench loop
+	$(BIN)/deltoctl bench dynamixel
+	$(BIN)/deltoctl bench i2c
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info

@@ -23,3 +23,13 @@ def test_bench_dynamixel_compares_with_the_sdk(cli):
     report = json.loads(result.stdout)
     assert report["deltoctl_hz"] > 0 and report["deltoctl_errors"] == 0
     assert "ratio" in report  # dynamixel-sdk is a test dependency
+
+
+def test_bench_i2c_sets_the_tool_against_the_wire(cli):
+    result = cli("bench", "i2c", "--cycles", "20", "--json")
+    assert result.exit_code == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["transactions_per_cycle"] == 8 and report["wire_bits_per_transaction"] == 72
+    assert report["wire_us"] == 180.0  # 72 bits at 400 kHz
+    assert report["deltoctl_us"] > 0 and report["smbus2_loop_us"] > 0
+    assert "goal_overhead_le_25pct" in report
