@@ -6,7 +6,8 @@
         assert result.exit_code == 0
 
 ``deltoctl_sim(profile, firmware="3.0", short_version=False, model_id=None)`` returns the
-target URL; the device is stopped when the test ends. Kept import-light: pytest loads this
+target URL (``tcp://`` for a Delto gripper, ``i2c+tcp://`` for the Bioscara arm's I2C bus; the
+firmware options are the gripper's); the device is stopped when the test ends. Kept import-light: pytest loads this
 module in every run, deltoctl's own modules are imported only when the fixture is used.
 """
 
@@ -24,11 +25,19 @@ def deltoctl_sim() -> Iterator[Callable[..., str]]:
     def start(profile: str, firmware: str = "3.0", short_version: bool = False,
               model_id: int | None = None) -> str:
         from deltoctl.profile.catalog import load_profile
+
+        prof = load_profile(profile)
+        if any(prof.family_of(h) == "bioscara" for h in prof.hardware):
+            from deltoctl.sim.i2c_bus import I2CSocketServer, bus_for_profile
+
+            i2c = I2CSocketServer(bus_for_profile(prof)).start()
+            servers.append(i2c)
+            return i2c.url
         from deltoctl.sim.delto import DeltoServer, firmware_for_profile
 
         major, minor = (int(x) for x in firmware.split("."))
-        device = firmware_for_profile(load_profile(profile), model_id=model_id,
-                                      firmware=(major, minor), short_version=short_version)
+        device = firmware_for_profile(prof, model_id=model_id, firmware=(major, minor),
+                                      short_version=short_version)
         server = DeltoServer(device).start()
         servers.append(server)
         return server.endpoint
