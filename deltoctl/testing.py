@@ -7,8 +7,9 @@
 
 ``deltoctl_sim(profile, firmware="3.0", short_version=False, model_id=None)`` returns the
 target URL (``tcp://`` for a Delto gripper, ``i2c+tcp://`` for the Bioscara arm's I2C bus; the
-firmware options are the gripper's); the device is stopped when the test ends. Kept import-light: pytest loads this
-module in every run, deltoctl's own modules are imported only when the fixture is used.
+firmware options are the gripper's); the device is stopped when the test ends. Kept
+import-light: pytest loads this module in every run, deltoctl's own modules are imported only
+when the fixture is used.
 """
 
 from __future__ import annotations

@@ -80,3 +80,46 @@ def test_torque_by_group_and_reboot_after_a_shutdown(cli, mh5_buses):
     assert "r_kne_p" in json.loads(result.stdout)["rebooted"]
     assert lower[24].memory[70] == 0
     assert cli("-p", "mh5", *targets, "torque", "on", "wings", "--yes").exit_code == 2
+
+
+def test_record_reports_each_bus_loop_with_the_mh5_keys(cli, mh5_buses, tmp_path):
+    import threading
+
+    from mcap_ros2.reader import read_ros2_messages
+
+    # once the servos have answered their pings, servo 14's replies go bad
+    threading.Timer(0.5, mh5_buses["lower_body"].bus.faults.corrupt_crc.add, [14]).start()
+    out = tmp_path / "mh5.mcap"
+    result = cli("-p", "mh5", *mh5_targets(mh5_buses), "record", str(out), "-d", "1.3")
+    assert result.exit_code == 0, result.stderr
+    statuses = {st.name: {kv.key: kv.value for kv in st.values}
+                for m in read_ros2_messages(str(out), topics=["/diagnostics"])
+                for st in m.ros_msg.status if "reader" in st.name or "writer" in st.name}
+    assert set(statuses) == {f"deltoctl/{bus}_{loop}" for bus in ("upper_body", "lower_body")
+                             for loop in ("pvl_reader", "tv_reader", "pv_writer", "t_writer")}
+    upper, lower = statuses["deltoctl/upper_body_pvl_reader"], \
+        statuses["deltoctl/lower_body_pvl_reader"]
+    assert set(upper) == {"packets", "errors", "error_rate_perc", "total_packets",
+                          "total_errors", "total_error_rate_perc", "real_rate"}
+    assert int(upper["packets"]) > 50 and upper["errors"] == "0"
+    assert int(lower["errors"]) > 10  # each sync read from then on lacks servo 14's reply
+    assert statuses["deltoctl/upper_body_tv_reader"]["total_packets"] in ("1", "2")
+
+
+def test_comm_loop_runs_at_its_own_rate():
+    import time
+
+    from deltoctl.core.loop import CommLoop
+
+    loop = CommLoop("bus_tv_reader", 20.0)
+    runs = 0
+    end = time.monotonic() + 0.5
+    while time.monotonic() < end:  # a 1 kHz cycle
+        runs += loop.due()
+        time.sleep(0.001)
+    assert 9 <= runs <= 12
+    loop.count(True)
+    loop.count(False)
+    report = loop.report()
+    assert (report["packets"], report["errors"], report["error_rate_perc"]) == (2, 1, 50.0)
+    assert loop.report()["packets"] == 0 and loop.report()["total_packets"] == 2

@@ -58,9 +58,10 @@ def connect(
     session = open_session(opts, allow_model_mismatch)
     with session:
         rtts = []
+        exchange = getattr(session.driver, "round_trip", session.driver.read)
         for _ in range(max(1, count)):
             start = time.perf_counter()
-            session.driver.read()
+            exchange()
             rtts.append((time.perf_counter() - start) * 1e3)
         if not session.driver.connected:
             raise DeviceError(f"{session.url} stopped answering during the round trips")

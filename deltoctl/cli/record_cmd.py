@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from deltoctl.cli.context import options
-from deltoctl.cli.device_cmd import AllowMismatch, DurationOpt, RateOpt, open_session
+from deltoctl.cli.device_cmd import AllowMismatch, DurationOpt, RateOpt, finish, open_session
 from deltoctl.cli.output import emit_json, info
 from deltoctl.errors import WARNINGS, InvalidInput
 
@@ -52,6 +52,7 @@ def record(
             "deltoctl": {"version": __version__},
         }, getattr(driver, "extra_states", ()))
         loop = CycleLoop(rate, duration)
+        comm_loops = getattr(driver, "comm_loops", list)()  # a bus's own loops (Dynamixel)
         next_stats = time.monotonic() + STATS_PERIOD
         try:
             for _ in loop:
@@ -62,8 +63,10 @@ def record(
                 recorder.write(values, time.time_ns())
                 if time.monotonic() >= next_stats:
                     next_stats += STATS_PERIOD
-                    recorder.diagnostic(time.time_ns(), OK, "loop", "record loop",
-                                        loop.stats.summary())
+                    recorder.diagnostics(time.time_ns(), [
+                        (OK, "loop", "record loop", loop.stats.summary()),
+                        *((OK if not c.errors else WARN, c.name, "bus loop", c.report())
+                          for c in comm_loops)])
         except KeyboardInterrupt:
             pass
         finally:
@@ -83,6 +86,8 @@ def record(
     if recorder.link_losses:
         info(f"warning: the link was lost {recorder.link_losses} time(s); the gaps are marked "
              "on /diagnostics")
+    finish(session)  # exit 3 on the driver's warnings (a servo that never answered)
+    if recorder.link_losses:
         raise typer.Exit(WARNINGS)
 
 

@@ -84,3 +84,54 @@ class CycleLoop:
             self.stats.cycles += 1
             yield scheduled
             scheduled = scheduled + period if period else time.monotonic()
+
+
+class CommLoop:
+    """One bus loop inside a faster cycle (the MH5's LoopWithCommunicationStats): ``due()``
+    is true at most once per period, and the loop counts its packets and errors, short-term
+    (cleared by each ``report``) and in total. ``rate=0``: every cycle."""
+
+    EARLY = 0.1  # of a period: a cycle that comes a little early still runs
+
+    def __init__(self, name: str, rate: float) -> None:
+        self.name = name
+        self.period = 1.0 / rate if rate > 0 else 0.0
+        self.next = 0.0  # when the loop is next due; the schedule advances by whole periods
+        self.packets = self.errors = self.total_packets = self.total_errors = 0
+        self.since: float | None = None  # start of the short-term count
+
+    def due(self) -> bool:
+        if not self.period:
+            return True
+        now = time.monotonic()
+        if now < self.next - self.EARLY * self.period:
+            return False
+        self.next += self.period
+        if self.next < now:  # the first run, or after a stall: no burst to catch up
+            self.next = now + self.period
+        return True
+
+    def count(self, ok: bool) -> None:
+        if self.since is None:
+            self.since = time.monotonic()
+        self.packets += 1
+        self.total_packets += 1
+        if not ok:
+            self.errors += 1
+            self.total_errors += 1
+
+    def report(self) -> dict[str, float | int]:
+        """The MH5 communication statistics' keys; clears the short-term counters."""
+        now = time.monotonic()
+
+        def rate(errors: int, packets: int) -> float:
+            return round(100 * errors / packets, 3) if packets else 0.0
+
+        values = {"packets": self.packets, "errors": self.errors,
+                  "error_rate_perc": rate(self.errors, self.packets),
+                  "total_packets": self.total_packets, "total_errors": self.total_errors,
+                  "total_error_rate_perc": rate(self.total_errors, self.total_packets),
+                  "real_rate": round(self.packets / max(now - (self.since or now), 1e-9), 2)}
+        self.packets = self.errors = 0
+        self.since = now
+        return values

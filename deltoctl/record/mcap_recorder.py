@@ -146,12 +146,18 @@ class McapRecorder:
 
     def diagnostic(self, t_ns: int, level: int, name: str, message: str,
                    values: dict[str, Any]) -> None:
+        self.diagnostics(t_ns, [(level, name, message, values)])
+
+    def diagnostics(self, t_ns: int,
+                    statuses: list[tuple[int, str, str, dict[str, Any]]]) -> None:
+        """One DiagnosticArray: a status per (level, name, message, key/values)."""
         self._channel("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
-        w = CdrWriter().header(t_ns).u32(1)
-        w.u8(level).string(f"deltoctl/{name}").string(message).string(self.profile.name)
-        w.u32(len(values))
-        for key, value in values.items():
-            w.string(key).string(str(value))
+        w = CdrWriter().header(t_ns).u32(len(statuses))
+        for level, name, message, values in statuses:
+            w.u8(level).string(f"deltoctl/{name}").string(message).string(self.profile.name)
+            w.u32(len(values))
+            for key, value in values.items():
+                w.string(key).string(str(value))
         self._emit("/diagnostics", w.bytes(), t_ns)
 
     def close(self, summary: dict[str, str] | None = None) -> None:

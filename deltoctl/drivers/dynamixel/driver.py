@@ -1,12 +1,15 @@
-"""A Dynamixel Protocol 2.0 bus: ping and identify the profile's servos, and the MH5's
-present load/velocity/position sync read (126, 10), with conversions and statistics."""
+"""A Dynamixel Protocol 2.0 bus: ping and identify the profile's servos, register access with
+retries, and the MH5's sync loops — present load/velocity/position read (126, 10), voltage and
+temperature read (144, 3), profile/goal write (108, 12), torque write (64) — each at its own
+rate (the block's ``<loop>_rate`` params) with its own communication statistics."""
 
 from __future__ import annotations
 
 import struct
 
+from deltoctl.core.loop import CommLoop
 from deltoctl.drivers.dynamixel import codec
-from deltoctl.errors import DeltoctlError, DeviceError, ProtocolError, Unreachable
+from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, ProtocolError, Unreachable
 from deltoctl.profile.model import Hardware, Profile
 
 RAD_PER_RAW = 0.001533980787886  # 2π/4096
@@ -14,7 +17,8 @@ CENTER = 2047
 RAD_S_PER_RAW = 0.023980823922402  # 0.229 rpm
 LOAD_SCALE = 0.0014
 RETRIES = 3
-TV_EVERY = 50  # one voltage/temperature read per this many position reads
+REGISTER_TRIES = 5  # as the MH5's register helpers
+LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}  # default Hz
 
 
 class DynamixelDriver:
@@ -31,8 +35,18 @@ class DynamixelDriver:
         self.warnings: list[str] = []
         self.identity = None
         self.connected = False
-        self._reads = 0
         self.torque_enabled: set[int] = set()
+        self.loops = {}
+        for name, default in LOOPS.items():
+            try:
+                rate = float(hw.params.get(f"{name}_rate", default))
+            except ValueError:
+                raise InvalidInput(f"{hw.name}: {name}_rate must be a number (Hz)") from None
+            # writers send what a verb commands, when it commands it: never held back
+            self.loops[name] = CommLoop(f"{hw.name}_{name}", rate if "reader" in name else 0.0)
+
+    def comm_loops(self) -> list[CommLoop]:
+        return list(self.loops.values())
 
     # -- wire ------------------------------------------------------------------------------------
     def _exchange(self, packet: bytes, replies: int, timeout: float = 0.1) -> list[codec.Status]:
@@ -82,12 +96,17 @@ class DynamixelDriver:
         self.identity = _Identity(self)
         return self.identity
 
+    def round_trip(self) -> None:
+        """One ping of the first servo: what ``connect`` times."""
+        self.ping(next(iter(self.present)))
+
     def read(self) -> dict[str, float]:
         ids = list(self.present)
-        if self._reads % TV_EVERY == 0:
+        if self.loops["tv_reader"].due():
             self._read_voltage_temperature(ids)
-        self._reads += 1
-        for st in self._sync_read(126, 10, ids):  # the PVL loop
+        if not self.loops["pvl_reader"].due():
+            return self.values
+        for st in self._sync_read(126, 10, ids, self.loops["pvl_reader"]):
             joint = self.joints[st.id]
             load, velocity, position = struct.unpack("<hii", st.params[:10])
             self.values[f"{joint.name}/position"] = (position - CENTER) * RAD_PER_RAW + joint.offset
@@ -95,20 +114,23 @@ class DynamixelDriver:
             self.values[f"{joint.name}/effort"] = load * LOAD_SCALE
         return self.values
 
-    def _sync_read(self, address: int, length: int, ids: list[int]) -> list[codec.Status]:
+    def _sync_read(self, address: int, length: int, ids: list[int],
+                   loop: CommLoop | None = None) -> list[codec.Status]:
         """One sync read; a missing or corrupted reply counts as an error, never raises."""
         self.stats["packets"] += 1
         try:
             replies = self._exchange(codec.sync_read(address, length, ids), len(ids))
         except (ProtocolError, DeltoctlError):
             replies = []
-        if len(replies) < len(ids):
-            self.stats["errors"] += 1
+        ok = len(replies) == len(ids)
+        self.stats["errors"] += not ok
+        if loop is not None:
+            loop.count(ok)
         return [st for st in replies if st.id in self.joints and len(st.params) >= length]
 
     def _read_voltage_temperature(self, ids: list[int]) -> None:
         """The slow loop: Present Input Voltage (144, 0.1 V) and Temperature (146, °C)."""
-        for st in self._sync_read(144, 3, ids):
+        for st in self._sync_read(144, 3, ids, self.loops["tv_reader"]):
             name = self.joints[st.id].name
             voltage, temperature = struct.unpack("<Hb", st.params[:3])
             self.values[f"{name}/voltage"] = voltage / 10.0
@@ -138,8 +160,7 @@ class DynamixelDriver:
         if not ids:
             return
         self.port.write(codec.sync_write(10, 1, {i: b"\x04" for i in ids}))  # time-based
-        self.port.write(codec.sync_write(64, 1, {i: b"\x01" for i in ids}))
-        self.torque_enabled.update(ids)
+        self._torque(list(ids), True)
         ms = max(1, round(seconds * 1000))
         data = {}
         for i, rad in ids.items():
@@ -147,16 +168,26 @@ class DynamixelDriver:
             data[i] = struct.pack("<IIi", 0, ms, raw)
         self.port.write(codec.sync_write(108, 12, data))
         self.port.flush()
-        self.stats["packets"] += 3
+        self.loops["pv_writer"].count(True)
+        self.stats["packets"] += 2
 
     def set_torque(self, joints: list[str], on: bool) -> list[str]:
         """Torque Enable (64) for these joints of this bus; returns the ones it reached."""
         ids = {i: j.name for i, j in self.joints.items() if j.name in joints and i in self.present}
         if ids:
-            self.port.write(codec.sync_write(64, 1, {i: bytes([int(on)]) for i in ids}))
+            self._torque(list(ids), on)
             self.port.flush()  # a sync write has no reply: be sure it left before returning
-            self.stats["packets"] += 1
         return list(ids.values())
+
+    def _torque(self, ids: list[int], on: bool) -> None:
+        """The torque writer (64, 1)."""
+        self.port.write(codec.sync_write(64, 1, {i: bytes([int(on)]) for i in ids}))
+        self.loops["t_writer"].count(True)
+        self.stats["packets"] += 1
+        if on:
+            self.torque_enabled.update(ids)
+        else:
+            self.torque_enabled.difference_update(ids)
 
     def reboot(self, joints: list[str]) -> list[str]:
         """REBOOT each servo (clears a shutdown); returns the ones that acknowledged."""
@@ -234,6 +265,13 @@ class BusesDriver:
                 self.drivers.remove(d)
         self.identity = _Buses(self.drivers)
         return self.identity
+
+    def comm_loops(self) -> list[CommLoop]:
+        return [loop for d in self.servo_buses for loop in d.comm_loops()]
+
+    def round_trip(self) -> None:
+        for d in self.servo_buses:
+            d.round_trip()
 
     def read(self) -> dict[str, float]:
         for d in self.drivers:
