@@ -123,3 +123,69 @@ def test_comm_loop_runs_at_its_own_rate():
     report = loop.report()
     assert (report["packets"], report["errors"], report["error_rate_perc"]) == (2, 1, 50.0)
     assert loop.report()["packets"] == 0 and loop.report()["total_packets"] == 2
+
+
+def test_register_get_and_set_with_the_eeprom_rule(cli, mh5_buses):
+    servo = mh5_buses["upper_body"].bus.servos[52]
+    targets = mh5_targets(mh5_buses)
+    result = cli("-p", "mh5", *targets, "register", "get", "head_y", "present_temperature",
+                 "9", "--json")
+    assert result.exit_code == 0, result.stderr
+    assert json.loads(result.stdout)["values"] == {"Present Temperature": 30,
+                                                   "Return Delay Time": 250}
+    dump = cli("-p", "mh5", *targets, "register", "get", "head_y")
+    assert "Model Number" in dump.stdout and "Present Input Voltage" in dump.stdout
+    assert cli("-p", "mh5", *targets, "register", "set", "head_y", "return_delay_time",
+               "0").exit_code == 5  # a write asks first
+    done = cli("-p", "mh5", *targets, "register", "set", "head_y", "return_delay_time", "0",
+               "--yes")
+    assert done.exit_code == 0, done.stderr
+    assert servo.get("Return Delay Time") == 0
+    servo.set("Torque Enable", 1)
+    refused = cli("-p", "mh5", *targets, "register", "set", "head_y", "drive_mode", "4",
+                  "--yes")
+    assert refused.exit_code == 1
+    assert "access error" in refused.stderr and "EEPROM items need torque off" in refused.stderr
+    bad = cli("-p", "mh5", *targets, "register", "get", "head_y", "warp_drive")
+    assert bad.exit_code == 2 and "no control table item 'warp_drive'" in bad.stderr
+
+
+def test_register_reads_retry_then_say_so(mh5_buses):
+    from deltoctl.drivers.dynamixel.control_table import BY_NAME
+    from deltoctl.drivers.dynamixel.driver import DynamixelDriver
+    from deltoctl.errors import DeviceError
+    from deltoctl.profile.catalog import load_profile
+
+    profile = load_profile("mh5")
+    hw = next(h for h in profile.hardware if h.name == "upper_body")
+    driver = DynamixelDriver(profile, hw, f"serial://{mh5_buses['upper_body'].port}?baud=1000000")
+    driver.configure()
+    bus = mh5_buses["upper_body"].bus
+    bus.faults.corrupt_crc.add(52)
+    with pytest.raises(DeviceError, match=r"no valid reply from servo 52 .* \(5 tries\)"):
+        driver.read_register(52, BY_NAME["Present Temperature"])
+    before = driver.stats["errors"]
+    bus.faults.corrupt_crc.clear()
+    assert driver.read_register(52, BY_NAME["Present Temperature"]) == 30
+    assert driver.stats["errors"] == before
+    driver.cleanup()
+
+
+def test_detect_finds_a_servo_at_another_baud_rate():
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "deltoctl", "sim", "serve", "mh5", "--json",
+                             "--wrong-baud", "head_y"], stdout=subprocess.PIPE, text=True)
+    try:
+        buses = json.loads(proc.stdout.readline())["buses"]
+        targets = [a for bus, url in buses.items() for a in ("-t", f"{bus}={url}")]
+        result = subprocess.run([sys.executable, "-m", "deltoctl", "-p", "mh5", *targets,
+                                 "detect", "--json"], capture_output=True, text=True)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=5)
+    assert result.returncode == 3, result.stderr
+    upper = json.loads(result.stdout)["buses"]["upper_body"]
+    assert upper["missing"] == [52] and upper["wrong_baud"] == {"52": 57600}
+    assert "at another baud rate: head_y (57600)" in result.stderr

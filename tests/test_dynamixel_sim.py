@@ -106,7 +106,7 @@ def test_sim_serve_mh5_serves_every_bus(tmp_path):
             parts = urlsplit(url)
             assert parts.scheme == "serial" and "baud=2000000" in parts.query
             port = sdk.PortHandler(parts.path)
-            assert port.openPort() and port.setBaudRate(1000000)
+            assert port.openPort() and port.setBaudRate(2000000)  # what the URL says
             ids, result = ph.broadcastPing(port)
             port.closePort()
             assert result == sdk.COMM_SUCCESS

@@ -60,6 +60,7 @@ VERBS = {
     "detect": "device_cmd", "home": "motion_cmd", "jog": "motion_cmd",
     "calibrate": "calibrate_cmd", "gpio": "device_cmd", "stream": "device_cmd",
     "record": "record_cmd", "torque": "servo_cmd", "reboot": "servo_cmd",
+    "register": "servo_cmd",
     "sim": "sim_cmd", "bench": "bench_cmd",
     "completion": "completion_cmd",
 }

@@ -1,4 +1,5 @@
-"""Servo bus verbs: ``torque on|off [JOINT|GROUP]`` and ``reboot [JOINT|GROUP]``."""
+"""Servo bus verbs: ``torque on|off [JOINT|GROUP]``, ``reboot [JOINT|GROUP]`` and
+``register get|set JOINT [ITEM [VALUE]]`` (the control table by name)."""
 
 from typing import Annotated, Any
 
@@ -6,7 +7,7 @@ import typer
 
 from deltoctl.cli.context import options
 from deltoctl.cli.device_cmd import open_session
-from deltoctl.cli.output import emit_json, info
+from deltoctl.cli.output import emit_json, info, table
 from deltoctl.errors import DeviceError, InvalidInput
 
 # groups that gather other groups (MH5's torque_control)
@@ -36,6 +37,84 @@ def select_joints(profile: Any, target: str) -> list[str]:
 def register(root: typer.Typer) -> None:
     root.command("torque")(torque)
     root.command("reboot")(reboot)
+    registers = typer.Typer(help="Read and write a servo's control table by item name.",
+                            no_args_is_help=True)
+    registers.command("get")(register_get)
+    registers.command("set")(register_set)
+    root.add_typer(registers, name="register")
+
+
+def _item(name: str):  # type: ignore[no-untyped-def]
+    """A control table item by name (any case; spaces, - or _) or by address."""
+    from deltoctl.drivers.dynamixel.control_table import XL430
+
+    key = name.lower().replace("_", " ").replace("-", " ")
+    for item in XL430:
+        if item.name.lower() == key or (name.isdigit() and item.address == int(name)):
+            return item
+    raise InvalidInput(f"no control table item {name!r} (e.g. return_delay_time, "
+                       "present_temperature, goal_position, or an address)")
+
+
+def _servo(session: Any, joint: str):  # type: ignore[no-untyped-def]
+    if session.driver.family != "dynamixel":
+        raise InvalidInput("register is for servo buses (the dynamixel family)")
+    return session.driver.servo(joint)
+
+
+JointArg = Annotated[str, typer.Argument(help="The servo's joint.")]
+
+
+def register_get(
+    ctx: typer.Context,
+    joint: JointArg,
+    items: Annotated[list[str] | None, typer.Argument(
+        help="Items to read (default: the whole table, in one read).")] = None,
+) -> None:
+    """Read control table items of one servo."""
+    from deltoctl.drivers.dynamixel.control_table import XL430
+
+    opts = options(ctx)
+    chosen = [_item(i) for i in items or []]
+    with open_session(opts) as session:
+        bus, device_id = _servo(session, joint)
+        if chosen:
+            values = {i.name: bus.read_register(device_id, i) for i in chosen}
+        else:
+            table_bytes = bus.read_table(device_id)
+            chosen = list(XL430)
+            values = {i.name: int.from_bytes(table_bytes[i.address:i.address + i.size],
+                                             "little", signed=i.signed) for i in chosen}
+    if opts.json:
+        emit_json({"joint": joint, "id": device_id, "values": values})
+    else:
+        table(f"{joint} (ID {device_id})", ["address", "item", "value", "access"],
+              [[i.address, i.name, values[i.name], ("EEPROM " if i.eeprom else "RAM ") +
+                i.access] for i in chosen])
+
+
+def register_set(
+    ctx: typer.Context,
+    joint: JointArg,
+    item: Annotated[str, typer.Argument(help="The item, e.g. return_delay_time.")],
+    value: Annotated[int, typer.Argument(help="The raw value.")],
+) -> None:
+    """Write one control table item and read it back (asks first: a write can move)."""
+    from deltoctl.cli.motion_cmd import confirm_motion
+
+    opts = options(ctx)
+    chosen = _item(item)
+    if chosen.access != "RW":
+        raise InvalidInput(f"{chosen.name} is read-only")
+    confirm_motion(opts, f"write {chosen.name} = {value} to {joint}")
+    with open_session(opts) as session:
+        bus, device_id = _servo(session, joint)
+        bus.write_register(device_id, chosen, value)
+        after = bus.read_register(device_id, chosen)
+    if after != value:
+        raise DeviceError(f"{chosen.name} reads back {after} after writing {value}")
+    _report(opts, {"joint": joint, "id": device_id, "item": chosen.name, "value": after},
+            f"{joint}: {chosen.name} = {after}")
 
 
 def torque(

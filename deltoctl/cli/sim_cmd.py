@@ -33,6 +33,8 @@ def serve(
         help="Fault: a joint that cannot move (repeatable).")] = None,
     missing: Annotated[list[str] | None, typer.Option(
         help="Fault: a joint (servo, I2C joint) that never answers (repeatable).")] = None,
+    wrong_baud: Annotated[list[str] | None, typer.Option(
+        help="Fault: a servo set to another baud rate than its bus (repeatable).")] = None,
     who_am_i: Annotated[str, typer.Option(
         help="WHO_AM_I of a simulated LSM6DS3: 0x69 (LSM6DS3), 0x6A (LSM6DS3TR-C), or "
              "another value to rehearse a wrong part.")] = "0x6A",
@@ -61,8 +63,10 @@ def serve(
             info = {"profile": prof.name, "buses": {}}
             missing_ids = _joint_addresses(prof, missing or [], "--missing")
             if "dynamixel" in families:
-                info["buses"].update(_serve_dynamixel(stack, prof,
-                                                      missing_ids.get("dynamixel", set())))
+                info["buses"].update(_serve_dynamixel(
+                    stack, prof, missing_ids.get("dynamixel", set()),
+                    _joint_addresses(prof, wrong_baud or [], "--wrong-baud").get("dynamixel",
+                                                                                 set())))
             if families & {"bioscara", "lsm6ds3"}:
                 blocked = _joint_addresses(prof, stall or [], "--stall").get("bioscara", set())
                 info["buses"].update(_serve_i2c(stack, prof, host,
@@ -126,19 +130,25 @@ def _joint_addresses(prof, names: list[str], option: str) -> dict[str, set[int]]
     return found
 
 
-def _serve_dynamixel(stack, prof, missing: set[int]) -> dict:  # type: ignore[no-untyped-def]
-    """One pseudo-terminal per Dynamixel bus of the profile, its servos at the joints' IDs."""
+def _serve_dynamixel(stack, prof, missing: set[int], wrong_baud: set[int]) -> dict:  # type: ignore[no-untyped-def]
+    """One pseudo-terminal per Dynamixel bus of the profile, its servos at the joints' IDs,
+    listening at the bus URL's baud rate."""
     from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+    from deltoctl.transport.serial_port import parse_serial_url
 
     buses = {}
     for hw in prof.hardware:
         if prof.family_of(hw) != "dynamixel":
             continue
-        bus = DynamixelBus([Servo(j.address) for j in hw.joints if j.address is not None])
+        url = prof.buses.get(hw.bus or "", "serial:///dev/ttyUSB0?baud=1000000")
+        _, baud, _ = parse_serial_url(url)
+        bus = DynamixelBus([Servo(j.address) for j in hw.joints if j.address is not None],
+                           baud=baud)
         bus.faults.missing |= missing
+        for device_id in wrong_baud & set(bus.servos):
+            bus.servos[device_id].memory[8] = 1 if baud != 57600 else 2  # 57600 (or 115200)
         server = stack.enter_context(DynamixelPtyServer(bus))
-        url = prof.buses.get(hw.bus or "", "")
-        query = url.split("?", 1)[1] if "?" in url else "baud=1000000"
+        query = url.split("?", 1)[1] if "?" in url else f"baud={baud}"
         buses[hw.bus or hw.name] = f"serial://{server.port}?{query}"
     return buses
 

@@ -102,7 +102,7 @@ class Session:
                 from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
 
                 servos = [Servo(j.address) for j in hw.joints if j.address is not None]
-                server = DynamixelPtyServer(DynamixelBus(servos)).start()
+                server = DynamixelPtyServer(DynamixelBus(servos, baud=1000000)).start()
                 servers.append(server)
                 url = f"serial://{server.port}?baud=1000000"
             else:

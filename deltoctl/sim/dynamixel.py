@@ -13,15 +13,23 @@ from __future__ import annotations
 import contextlib
 import os
 import struct
+import termios
 import threading
 import time
 import tty
 from dataclasses import dataclass, field
 
 from deltoctl.drivers.dynamixel import codec
-from deltoctl.drivers.dynamixel.control_table import BY_NAME, TABLE_SIZE, XL430, item_at
+from deltoctl.drivers.dynamixel.control_table import (
+    BAUD_RATES,
+    BY_NAME,
+    TABLE_SIZE,
+    XL430,
+    item_at,
+)
 from deltoctl.errors import ProtocolError
 
+_SPEEDS = {getattr(termios, f"B{b}"): b for b in BAUD_RATES.values() if hasattr(termios, f"B{b}")}
 ACCESS_ERROR, DATA_LENGTH_ERROR, INSTRUCTION_ERROR, RESULT_FAIL = 7, 5, 2, 1
 MAX_RPM_UNITS = 265  # velocity limit default, 0.229 rpm units
 RAW_PER_REV = 4096
@@ -136,19 +144,32 @@ class BusFaults:
     missing: set[int] = field(default_factory=set)  # IDs that never answer
     corrupt_crc: set[int] = field(default_factory=set)  # IDs whose replies carry a bad CRC
     no_reply: bool = False  # the whole bus is silent
-    baud_mismatch: bool = False  # the servos listen at another baud rate
 
 
 class DynamixelBus:
     """The servos on one bus: instruction packets in, the bytes of their replies out."""
 
-    def __init__(self, servos: list[Servo]) -> None:
+    def __init__(self, servos: list[Servo], baud: int | None = None) -> None:
+        """With ``baud``, every servo's Baud Rate item is set to it and a servo answers only
+        a host speaking its own rate (a wrong rate is one Baud Rate write away)."""
         self.servos = {s.id: s for s in servos}
         self.faults = BusFaults()
+        self.baud = baud
+        self.line_baud: int | None = None  # what the host speaks, told by the transport
+        if baud is not None:
+            code = next((c for c, b in BAUD_RATES.items() if b == baud), None)
+            if code is None:
+                raise ValueError(f"{baud} is not an XL430 baud rate")
+            for servo in servos:
+                servo.memory[8] = code
 
     def _present(self, device_id: int) -> Servo | None:
         servo = self.servos.get(device_id)
-        return None if servo is None or device_id in self.faults.missing else servo
+        if servo is None or device_id in self.faults.missing:
+            return None
+        if self.baud is not None and BAUD_RATES.get(servo.memory[8]) != self.line_baud:
+            return None  # it hears only noise
+        return servo
 
     def _status(self, servo: Servo, error: int = 0, params: bytes = b"") -> bytes:
         data = codec.status(servo.id, error, params)
@@ -162,7 +183,7 @@ class DynamixelBus:
             codec.READ, codec.SYNC_READ, codec.BULK_READ))
 
     def handle(self, device_id: int, instruction: int, params: bytes) -> bytes:
-        if self.faults.no_reply or self.faults.baud_mismatch:
+        if self.faults.no_reply:
             return b""
         broadcast = device_id == codec.BROADCAST_ID
         if instruction == codec.PING:
@@ -272,6 +293,8 @@ class DynamixelPtyServer:
                 data = os.read(self.master, 4096)
             except OSError:
                 return
+            if self.bus.baud is not None:  # the rate the host set on its end of the pty
+                self.bus.line_baud = _SPEEDS.get(termios.tcgetattr(self.master)[5])
             try:
                 packets = reader.feed(data)
             except ProtocolError:

@@ -9,6 +9,7 @@ import struct
 
 from deltoctl.core.loop import CommLoop
 from deltoctl.drivers.dynamixel import codec
+from deltoctl.drivers.dynamixel.control_table import BAUD_RATES, TABLE_SIZE, XL430_W250, Item
 from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, ProtocolError, Unreachable
 from deltoctl.profile.model import Hardware, Profile
 
@@ -18,6 +19,7 @@ RAD_S_PER_RAW = 0.023980823922402  # 0.229 rpm
 LOAD_SCALE = 0.0014
 RETRIES = 3
 REGISTER_TRIES = 5  # as the MH5's register helpers
+SCAN_BAUDS = sorted(BAUD_RATES.values(), key=lambda b: (b < 57600, b))  # 9600 last: slowest
 LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}  # default Hz
 
 
@@ -76,6 +78,48 @@ class DynamixelDriver:
                 return model, firmware
             self.stats["errors"] += 1
         return None
+
+    # -- registers -------------------------------------------------------------------------------
+    def _request(self, device_id: int, packet: bytes, what: str) -> codec.Status:
+        """One instruction and its status, tried up to 5 times while no valid reply comes;
+        a status with an error is the servo's answer, not retried."""
+        for _ in range(REGISTER_TRIES):
+            self.stats["packets"] += 1
+            try:
+                replies = self._exchange(packet, 1)
+            except ProtocolError:
+                replies = []
+            if replies and replies[0].id == device_id:
+                status = replies[0]
+                if status.error & 0x7F:
+                    raise DeviceError(f"servo {device_id} refused to {what}: "
+                                      f"{status.error_text()}")
+                return status
+            self.stats["errors"] += 1
+        raise DeviceError(f"no valid reply from servo {device_id} on {self.url} to {what} "
+                          f"({REGISTER_TRIES} tries)")
+
+    def read_table(self, device_id: int, address: int = 0, length: int = TABLE_SIZE) -> bytes:
+        status = self._request(device_id, codec.read(device_id, address, length),
+                               f"read {length} bytes at {address}")
+        if len(status.params) != length:
+            raise ProtocolError(f"servo {device_id} sent {len(status.params)} bytes, not "
+                                f"{length}")
+        return status.params
+
+    def read_register(self, device_id: int, item: Item) -> int:
+        data = self.read_table(device_id, item.address, item.size)
+        return int.from_bytes(data, "little", signed=item.signed)
+
+    def write_register(self, device_id: int, item: Item, value: int) -> None:
+        try:
+            data = value.to_bytes(item.size, "little", signed=item.signed)
+        except OverflowError:
+            raise InvalidInput(f"{value} does not fit {item.name} ({item.size} byte(s))") \
+                from None
+        hint = " (EEPROM items need torque off)" if item.eeprom else ""
+        self._request(device_id, codec.write(device_id, item.address, data),
+                      f"write {item.name}{hint}")
 
     # -- lifecycle -------------------------------------------------------------------------------
     def configure(self):  # type: ignore[no-untyped-def]
@@ -136,21 +180,51 @@ class DynamixelDriver:
             self.values[f"{name}/voltage"] = voltage / 10.0
             self.values[f"{name}/temperature"] = float(temperature)
 
+    def _broadcast_ping(self, timeout: float) -> dict[int, int]:
+        """ID → model number of every servo that answers a broadcast ping."""
+        try:
+            replies = self._exchange(codec.ping(), 253, timeout=timeout)
+        except ProtocolError:
+            replies = []
+        return {st.id: struct.unpack_from("<HB", st.params)[0] for st in replies
+                if len(st.params) >= 3}
+
     def detect(self) -> dict:
-        replies = self._exchange(codec.ping(), 253, timeout=0.3)
-        found = {st.id: struct.unpack_from("<HB", st.params)[0] for st in replies
-                 if len(st.params) >= 3}
-        expected = {i: 1060 for i in self.joints}
+        """Broadcast ping at the bus's rate; when a servo is missing, broadcast pings at
+        every other XL430 rate too (all IDs at once), to find servos set to another rate."""
+        assert self.port is not None
+        found = self._broadcast_ping(0.3)
+        expected = {i: XL430_W250 for i in self.joints}
         missing = sorted(set(expected) - set(found))
+        elsewhere: dict[int, int] = {}
+        if missing:
+            own = self.port.baudrate
+            try:
+                for baud in SCAN_BAUDS:
+                    if baud != own:
+                        self.port.baudrate = baud
+                        # time for about 30 ping replies (14 bytes) at that rate
+                        for i in self._broadcast_ping(max(0.1, 30 * 140 / baud)):
+                            if i not in found:
+                                elsewhere.setdefault(i, baud)
+            finally:
+                self.port.baudrate = own
         unexpected = sorted(set(found) - set(expected))
         wrong = sorted(i for i in set(found) & set(expected) if found[i] != expected[i])
+        name = {i: j.name for i, j in self.joints.items()}
         checks = [{"what": f"{self.hw.name}: servos", "profile": sorted(expected),
                    "device": sorted(found),
                    "match": not (missing or unexpected or wrong)}]
+        checks += [{"what": f"{name.get(i, i)} (ID {i}) baud rate", "profile": self.port.baudrate,
+                    "device": baud, "match": False} for i, baud in sorted(elsewhere.items())]
+        summary = (f"{self.hw.name}: {len(found)} servos answer ({len(missing)} missing, "
+                   f"{len(unexpected)} unexpected)")
+        if elsewhere:
+            summary += "; at another baud rate: " + ", ".join(
+                f"{name.get(i, i)} ({baud})" for i, baud in sorted(elsewhere.items()))
         return {"bus": self.url, "found": found, "missing": missing, "unexpected": unexpected,
-                "wrong_model": wrong, "checks": checks,
-                "summary": f"{self.hw.name}: {len(found)} servos answer "
-                           f"({len(missing)} missing, {len(unexpected)} unexpected)"}
+                "wrong_model": wrong, "wrong_baud": {str(i): b for i, b in elsewhere.items()},
+                "checks": checks, "summary": summary}
 
     def send_goals(self, goals: dict[str, float], seconds: float) -> None:
         """Torque on, then a time-based profile to each goal: the PV writer (108, 12):
@@ -223,7 +297,7 @@ class _Identity:
         d = self.driver
         return {"bus": d.url, "servos": {
             d.joints[i].name: {"id": i, "model_number": m, "firmware": f,
-                               "model_match": m == 1060}
+                               "model_match": m == XL430_W250}
             for i, (m, f) in sorted(d.present.items())}}
 
 
@@ -315,6 +389,16 @@ class BusesDriver:
             time.sleep(0.02)
         return MoveResult(False, time.monotonic() - start, errors,
                           [j for j, e in errors.items() if e > tolerance])
+
+    def servo(self, joint: str) -> tuple[DynamixelDriver, int]:
+        """The bus and ID of a joint's servo."""
+        for d in self.servo_buses:
+            for device_id, comp in d.joints.items():
+                if comp.name == joint:
+                    if device_id not in d.present:
+                        raise DeviceError(f"{joint} (ID {device_id}) does not answer on {d.url}")
+                    return d, device_id
+        raise InvalidInput(f"{joint!r} is not a servo joint of this profile")
 
     def set_torque(self, joints: list[str], on: bool) -> list[str]:
         return [j for d in self.servo_buses for j in d.set_torque(joints, on)]
