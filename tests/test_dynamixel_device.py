@@ -188,4 +188,4 @@ def test_detect_finds_a_servo_at_another_baud_rate():
     assert result.returncode == 3, result.stderr
     upper = json.loads(result.stdout)["buses"]["upper_body"]
     assert upper["missing"] == [52] and upper["wrong_baud"] == {"52": 57600}
-    assert "at another baud rate: head_y (57600)" in result.stderr
+    assert "head_y (ID 52) baud rate" in result.stderr
