@@ -72,3 +72,31 @@ def test_sync_write_bulk_and_fast_sync():
     blocks = bytes([0, 1, 0x10, 0x00, 0xAA, 0xBB, 0, 2, 0x20, 0x00, 0xCC, 0xDD])
     st = codec.decode_status(*codec.PacketReader().feed(codec.status(0xFE, 0, blocks[1:]))[0])
     assert codec.decode_fast_sync(st, 2, [1, 2]) == {1: (0, b"\x10\x00"), 2: (0, b"\x20\x00")}
+
+
+def test_split_statuses_fast_path_and_fallbacks():
+    from deltoctl.drivers.dynamixel import codec
+
+    ids = [1, 2, 3]
+    replies = [codec.status(i, 0, bytes([i] * 10)) for i in ids]
+    assert codec.split_statuses(b"".join(replies), 10, ids) == [
+        (i, 0, bytes([i] * 10)) for i in ids]
+    bad = bytearray(b"".join(replies))
+    bad[21 + 12] ^= 0x01  # servo 2's data: its CRC no longer checks
+    assert [r[0] for r in codec.split_statuses(bytes(bad), 10, ids)] == [1, 3]
+    # servo 2 silent, servo 3's data needs stuffing: the reader takes over
+    stuffed = codec.status(3, 0, b"\xff\xff\xfd" + bytes(7))
+    got = codec.split_statuses(replies[0] + stuffed, 10, ids)
+    assert got == [(1, 0, bytes([1] * 10)), (3, 0, b"\xff\xff\xfd" + bytes(7))]
+    assert codec.status_at(replies[0], 0, 10, 2) is None  # not the servo expected there
+
+
+def test_crc16_two_bytes_a_step_matches_the_byte_table():
+    from deltoctl.drivers.dynamixel import codec
+
+    data = bytes(range(37))
+    crc = 0
+    for byte in data:  # the e-manual's byte-at-a-time algorithm
+        crc = ((crc << 8) ^ codec._TABLE[((crc >> 8) ^ byte) & 0xFF]) & 0xFFFF
+    assert codec.crc16(data) == crc
+    assert codec.crc16(data[:36]) != crc

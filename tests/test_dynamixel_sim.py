@@ -116,3 +116,29 @@ def test_sim_serve_mh5_serves_every_bus(tmp_path):
     finally:
         proc.terminate()
         assert proc.wait(timeout=5) == 0
+
+
+def test_a_paced_bus_takes_the_wire_time():
+    import time
+
+    from deltoctl.drivers.dynamixel import codec
+    from deltoctl.drivers.dynamixel.driver import DynamixelDriver
+    from deltoctl.profile.model import Component, Hardware, Profile
+    from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+
+    servos = [Servo(i) for i in range(1, 12)]
+    for servo in servos:
+        servo.set("Return Delay Time", 0)
+    hw = Hardware("bus", family="dynamixel", joints=[
+        Component("joint", f"j{i}", address=i) for i in range(1, 12)])
+    with DynamixelPtyServer(DynamixelBus(servos), pace=True) as server:
+        driver = DynamixelDriver(Profile("t", hardware=[hw]), hw,
+                                 f"serial://{server.port}?baud=57600")
+        driver.configure()
+        start = time.perf_counter()
+        replies = driver._sync_read(126, 10, list(range(1, 12)))
+        took = time.perf_counter() - start
+        driver.cleanup()
+    sent = len(codec.sync_read(126, 10, range(1, 12))) + 11 * 21  # bytes both ways
+    assert len(replies) == 11
+    assert took >= sent * 10 / 57600 * 0.95  # 44 ms at 57600 baud: the bus never beats it

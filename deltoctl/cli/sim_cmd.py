@@ -33,6 +33,9 @@ def serve(
         help="Fault: a joint that cannot move (repeatable).")] = None,
     missing: Annotated[list[str] | None, typer.Option(
         help="Fault: a joint (servo, I2C joint) that never answers (repeatable).")] = None,
+    pace: Annotated[bool, typer.Option(
+        help="Serial buses take the wire time of every byte at the baud rate the host "
+             "set, as a real bus does.")] = False,
     wrong_baud: Annotated[list[str] | None, typer.Option(
         help="Fault: a servo set to another baud rate than its bus (repeatable).")] = None,
     who_am_i: Annotated[str, typer.Option(
@@ -64,7 +67,7 @@ def serve(
             missing_ids = _joint_addresses(prof, missing or [], "--missing")
             if "dynamixel" in families:
                 info["buses"].update(_serve_dynamixel(
-                    stack, prof, missing_ids.get("dynamixel", set()),
+                    stack, prof, pace, missing_ids.get("dynamixel", set()),
                     _joint_addresses(prof, wrong_baud or [], "--wrong-baud").get("dynamixel",
                                                                                  set())))
             if families & {"bioscara", "lsm6ds3"}:
@@ -130,7 +133,8 @@ def _joint_addresses(prof, names: list[str], option: str) -> dict[str, set[int]]
     return found
 
 
-def _serve_dynamixel(stack, prof, missing: set[int], wrong_baud: set[int]) -> dict:  # type: ignore[no-untyped-def]
+def _serve_dynamixel(stack, prof, pace: bool, missing: set[int],  # type: ignore[no-untyped-def]
+                     wrong_baud: set[int]) -> dict:
     """One pseudo-terminal per Dynamixel bus of the profile, its servos at the joints' IDs,
     listening at the bus URL's baud rate."""
     from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
@@ -147,7 +151,7 @@ def _serve_dynamixel(stack, prof, missing: set[int], wrong_baud: set[int]) -> di
         bus.faults.missing |= missing
         for device_id in wrong_baud & set(bus.servos):
             bus.servos[device_id].memory[8] = 1 if baud != 57600 else 2  # 57600 (or 115200)
-        server = stack.enter_context(DynamixelPtyServer(bus))
+        server = stack.enter_context(DynamixelPtyServer(bus, pace=pace))
         query = url.split("?", 1)[1] if "?" in url else f"baud={baud}"
         buses[hw.bus or hw.name] = f"serial://{server.port}?{query}"
     return buses

@@ -266,11 +266,35 @@ class DynamixelBus:
         return b"".join(replies)
 
 
-class DynamixelPtyServer:
-    """Serves a bus on a pseudo-terminal; ``port`` is the path a serial client opens."""
+def wait_until(deadline: float) -> None:
+    """Sleep, then spin for the last fraction of a millisecond: byte-time precision."""
+    while True:
+        left = deadline - time.perf_counter()
+        if left <= 0:
+            return
+        if left > 0.0003:
+            time.sleep(left - 0.0002)
 
-    def __init__(self, bus: DynamixelBus) -> None:
+
+def split_packets(data: bytes) -> list[bytes]:
+    out, k = [], 0
+    while k + 7 <= len(data):
+        end = k + 7 + (data[k + 5] | data[k + 6] << 8)
+        out.append(data[k:end])
+        k = end
+    return out
+
+
+class DynamixelPtyServer:
+    """Serves a bus on a pseudo-terminal; ``port`` is the path a serial client opens.
+
+    With ``pace``, the bus takes the time a real one would at the baud rate the host set: the
+    instruction's bytes arrive, each servo waits its Return Delay Time, and its status packet
+    leaves when its last byte would have crossed the wire (10 bits a byte)."""
+
+    def __init__(self, bus: DynamixelBus, pace: bool = False) -> None:
         self.bus = bus
+        self.pace = pace
         self.master, self.slave = os.openpty()
         tty.setraw(self.master)
         tty.setraw(self.slave)
@@ -286,14 +310,21 @@ class DynamixelPtyServer:
         import select
 
         reader = codec.PacketReader()
+        if self.pace:
+            os.set_blocking(self.master, False)
         while not self._stop.is_set():
-            if not select.select([self.master], [], [], 0.1)[0]:
-                continue
-            try:
-                data = os.read(self.master, 4096)
-            except OSError:
-                return
-            if self.bus.baud is not None:  # the rate the host set on its end of the pty
+            data = self._spin_read() if self.pace else b""
+            if not data:
+                if not select.select([self.master], [], [], 0.1)[0]:
+                    continue
+                try:
+                    data = os.read(self.master, 4096)
+                except BlockingIOError:
+                    continue
+                except OSError:
+                    return
+            arrived = time.perf_counter()
+            if self.bus.baud is not None or self.pace:  # the rate the host set on the pty
                 self.bus.line_baud = _SPEEDS.get(termios.tcgetattr(self.master)[5])
             try:
                 packets = reader.feed(data)
@@ -301,8 +332,32 @@ class DynamixelPtyServer:
                 continue  # a corrupted instruction is ignored, as a servo would
             for device_id, instruction, params in packets:
                 reply = self.bus.handle(device_id, instruction, params)
-                if reply:
+                if self.pace and self.bus.line_baud:
+                    self._paced(arrived, 10 + len(params), reply)
+                elif reply:
                     os.write(self.master, reply)
+
+    def _spin_read(self, spin: float = 0.002) -> bytes:
+        """Paced, the bus watches the line like a UART: no wake-up delay for the next
+        instruction within ``spin`` seconds of the last one."""
+        end = time.perf_counter() + spin
+        while time.perf_counter() < end:
+            try:
+                return os.read(self.master, 4096)
+            except BlockingIOError:
+                continue
+            except OSError:
+                break
+        return b""
+
+    def _paced(self, arrived: float, sent: int, reply: bytes) -> None:
+        byte_time = 10.0 / (self.bus.line_baud or 1)
+        t = arrived + sent * byte_time  # the instruction's last byte is in
+        for packet in split_packets(reply):
+            servo = self.bus.servos.get(packet[4])
+            t += (servo.memory[9] * 2e-6 if servo else 0.0) + len(packet) * byte_time
+            wait_until(t)
+            os.write(self.master, packet)
 
     def close(self) -> None:
         self._stop.set()

@@ -41,11 +41,26 @@ def _crc_table() -> list[int]:
 
 
 _TABLE = _crc_table()
+_TABLE16: list[int] = []  # two bytes a step; built on first use (about 10 ms)
+
+
+def _table16() -> list[int]:
+    # the register is 16 bits wide, so after two bytes it is the table entry of
+    # (register ^ the two bytes): T16[w] = T8-step of the high byte, then of the low byte
+    t = _TABLE
+    _TABLE16.extend(((t[hi] << 8) & 0xFFFF) ^ t[(t[hi] >> 8) ^ lo]
+                    for hi in range(256) for lo in range(256))
+    return _TABLE16
 
 
 def crc16(data: bytes, crc: int = 0) -> int:
-    for byte in data:
-        crc = ((crc << 8) ^ _TABLE[((crc >> 8) ^ byte) & 0xFF]) & 0xFFFF
+    """CRC-16 (polynomial 0x8005, not reflected) of the Dynamixel protocol."""
+    table = _TABLE16 or _table16()
+    n = len(data) & ~1
+    for word in struct.unpack_from(f">{n // 2}H", data):
+        crc = table[crc ^ word]
+    if n != len(data):
+        crc = ((crc << 8) ^ _TABLE[(crc >> 8) ^ data[-1]]) & 0xFFFF
     return crc
 
 
@@ -209,6 +224,49 @@ def decode_status(device_id: int, instruction: int, body: bytes) -> Status:
     if not body:
         raise ProtocolError(f"status packet from ID {device_id} has no error byte")
     return Status(device_id, body[0], bytes(body[1:]))
+
+
+def status_at(data: bytes, offset: int, length: int, device_id: int) -> tuple | bool | None:
+    """The common case of a sync read reply — the expected servo, in order, nothing stuffed
+    — read in place: ``(id, error, data)``; False for a bad CRC; None when the bytes do not
+    have that shape (then ``split_statuses`` takes the whole reply apart)."""
+    end = offset + 11 + length
+    pkt = data[offset:end]
+    if (len(pkt) != end - offset or pkt[4] != device_id or pkt[7] != STATUS
+            or pkt[5] != (length + 4) & 0xFF or pkt[6] or not pkt.startswith(HEADER)):
+        return None
+    if crc16(pkt[:-2]) != pkt[-2] | pkt[-1] << 8:
+        return False
+    return device_id, pkt[8], pkt[9:9 + length]
+
+
+def split_statuses(data: bytes, length: int, ids: list[int]) -> list[tuple[int, int, bytes]]:
+    """The replies to a sync read of ``length`` bytes: ``(id, error, data)`` per valid
+    status, in the common case by offsets, else through ``PacketReader``. A bad CRC drops
+    that reply."""
+    size = 11 + length
+    if len(data) == size * len(ids):
+        out = []
+        for k, device_id in enumerate(ids):
+            found = status_at(data, k * size, length, device_id)
+            if found is None:
+                break
+            if found:
+                out.append(found)
+        else:
+            return out
+    reader, out, start = PacketReader(), [], 0
+    while True:  # packet by packet, so one bad CRC costs only its own reply
+        end = data.find(HEADER, start + 1)
+        try:
+            found = reader.feed(data[start:] if end < 0 else data[start:end])
+        except ProtocolError:
+            found = []
+        out += [(i, body[0], bytes(body[1:])) for i, inst, body in found
+                if inst == STATUS and body]
+        if end < 0:
+            return out
+        start = end
 
 
 def decode_fast_sync(status_: Status, length: int, ids: list[int]) -> dict[int, tuple[int, bytes]]:

@@ -10,12 +10,13 @@ import struct
 from deltoctl.core.loop import CommLoop
 from deltoctl.drivers.dynamixel import codec
 from deltoctl.drivers.dynamixel.control_table import BAUD_RATES, TABLE_SIZE, XL430_W250, Item
-from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, ProtocolError, Unreachable
+from deltoctl.errors import DeviceError, InvalidInput, ProtocolError, Unreachable
 from deltoctl.profile.model import Hardware, Profile
 
 RAD_PER_RAW = 0.001533980787886  # 2π/4096
 CENTER = 2047
 RAD_S_PER_RAW = 0.023980823922402  # 0.229 rpm
+PVL = struct.Struct("<hii")  # Present Load, Velocity, Position (126, 10 bytes)
 LOAD_SCALE = 0.0014
 RETRIES = 3
 REGISTER_TRIES = 5  # as the MH5's register helpers
@@ -38,6 +39,9 @@ class DynamixelDriver:
         self.identity = None
         self.connected = False
         self.torque_enabled: set[int] = set()
+        self._requests: dict[tuple, bytes] = {}  # sync read instructions, built once
+        self._poll = None
+        self._stale = False
         self.loops = {}
         for name, default in LOOPS.items():
             try:
@@ -51,6 +55,40 @@ class DynamixelDriver:
         return list(self.loops.values())
 
     # -- wire ------------------------------------------------------------------------------------
+    def _transact(self, packet: bytes, expected: int, timeout: float = 0.1,
+                  on_data=None) -> bytes:  # type: ignore[no-untyped-def]
+        """The hot path of the sync loops: write an instruction, then take reply bytes as
+        they come until ``expected`` are in or the timeout passes; ``on_data(buffer)`` sees
+        the bytes so far after each read, so replies are checked while later ones are still
+        on the wire. Bytes left over from an exchange that went wrong are dropped before the
+        next one."""
+        import os
+        import time
+
+        assert self.port is not None
+        if self._stale:
+            self.port.reset_input_buffer()
+            self._stale = False
+        if self._poll is None:  # no file descriptor (not POSIX): pyserial's own calls
+            self.port.write(packet)
+            data = self.port.read(expected)
+        else:
+            fd = self.port.fd
+            view = memoryview(packet)
+            while view:
+                view = view[os.write(fd, view):]
+            data = b""
+            deadline = time.perf_counter() + timeout
+            while len(data) < expected:
+                left = deadline - time.perf_counter()
+                if left <= 0 or not self._poll.poll(left * 1000):
+                    break
+                data += os.read(fd, 4096)
+                if on_data is not None:
+                    on_data(data)
+        self._stale = len(data) != expected
+        return data
+
     def _exchange(self, packet: bytes, replies: int, timeout: float = 0.1) -> list[codec.Status]:
         import time
 
@@ -126,6 +164,11 @@ class DynamixelDriver:
         from deltoctl.transport.serial_port import open_serial
 
         self.port = open_serial(self.url)
+        if hasattr(self.port, "fd"):
+            import select
+
+            self._poll = select.poll()
+            self._poll.register(self.port.fd, select.POLLIN)
         for device_id in self.joints:
             found = self.ping(device_id)
             if found is not None:
@@ -150,33 +193,55 @@ class DynamixelDriver:
             self._read_voltage_temperature(ids)
         if not self.loops["pvl_reader"].due():
             return self.values
-        for st in self._sync_read(126, 10, ids, self.loops["pvl_reader"]):
-            joint = self.joints[st.id]
-            load, velocity, position = struct.unpack("<hii", st.params[:10])
-            self.values[f"{joint.name}/position"] = (position - CENTER) * RAD_PER_RAW + joint.offset
-            self.values[f"{joint.name}/velocity"] = velocity * RAD_S_PER_RAW
-            self.values[f"{joint.name}/effort"] = load * LOAD_SCALE
-        return self.values
+        values = self.values
+        for device_id, _, data in self._sync_read(126, 10, ids, self.loops["pvl_reader"]):
+            joint = self.joints[device_id]
+            load, velocity, position = PVL.unpack(data)
+            name = joint.name
+            values[name + "/position"] = (position - CENTER) * RAD_PER_RAW + joint.offset
+            values[name + "/velocity"] = velocity * RAD_S_PER_RAW
+            values[name + "/effort"] = load * LOAD_SCALE
+        return values
 
     def _sync_read(self, address: int, length: int, ids: list[int],
-                   loop: CommLoop | None = None) -> list[codec.Status]:
-        """One sync read; a missing or corrupted reply counts as an error, never raises."""
+                   loop: CommLoop | None = None) -> list[tuple[int, int, bytes]]:
+        """One sync read: ``(id, error, data)`` per valid reply; a missing or corrupted reply
+        counts as an error, never raises."""
+        key = (address, length, tuple(ids))
+        packet = self._requests.get(key)
+        if packet is None:
+            packet = self._requests[key] = codec.sync_read(address, length, ids)
+        size = 11 + length
+        replies: list = []
+        shapely = [True]  # every reply so far in the common shape
+
+        def check(data: bytes) -> None:  # the replies that are complete, as they come
+            while shapely[0] and len(replies) < len(ids) and \
+                    len(data) >= (len(replies) + 1) * size:
+                found = codec.status_at(data, len(replies) * size, length, ids[len(replies)])
+                if found is None:
+                    shapely[0] = False
+                else:
+                    replies.append(found)
+
         self.stats["packets"] += 1
-        try:
-            replies = self._exchange(codec.sync_read(address, length, ids), len(ids))
-        except (ProtocolError, DeltoctlError):
-            replies = []
+        data = self._transact(packet, len(ids) * size, on_data=check)
+        check(data)
+        if shapely[0] and len(replies) == len(ids):
+            replies = [r for r in replies if r]  # False: a bad CRC
+        else:
+            replies = codec.split_statuses(data, length, ids)
         ok = len(replies) == len(ids)
         self.stats["errors"] += not ok
         if loop is not None:
             loop.count(ok)
-        return [st for st in replies if st.id in self.joints and len(st.params) >= length]
+        return [r for r in replies if r[0] in self.joints and len(r[2]) == length]
 
     def _read_voltage_temperature(self, ids: list[int]) -> None:
         """The slow loop: Present Input Voltage (144, 0.1 V) and Temperature (146, °C)."""
-        for st in self._sync_read(144, 3, ids, self.loops["tv_reader"]):
-            name = self.joints[st.id].name
-            voltage, temperature = struct.unpack("<Hb", st.params[:3])
+        for device_id, _, data in self._sync_read(144, 3, ids, self.loops["tv_reader"]):
+            name = self.joints[device_id].name
+            voltage, temperature = struct.unpack("<Hb", data)
             self.values[f"{name}/voltage"] = voltage / 10.0
             self.values[f"{name}/temperature"] = float(temperature)
 
