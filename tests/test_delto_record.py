@@ -108,3 +108,30 @@ def test_unreachable_device_leaves_no_file(cli, tmp_path):
     result = cli("-p", "dg-4f", "-t", "tcp://127.0.0.1:9", "record", str(out), "-d", "0.1")
     assert result.exit_code == 4
     assert not out.exists()
+
+
+def test_a_killed_recorder_still_leaves_a_valid_indexed_file(tmp_path):
+    """The MCAP file is written by a child process that finishes it when the loop's process
+    dies, even by SIGKILL."""
+    from tests.conftest import eventually
+
+    out = tmp_path / "killed.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "deltoctl", "-p", "dg-5f-right", "--sim",
+                             "record", str(out), "--duration", "60"], stderr=subprocess.PIPE)
+    try:
+        assert eventually(lambda: out.exists() and out.stat().st_size > 0, timeout=10)
+        time.sleep(0.5)
+    finally:
+        proc.kill()
+        proc.wait(timeout=5)
+
+    def summary():
+        try:
+            with out.open("rb") as f:
+                return make_reader(f).get_summary()
+        except Exception:
+            return None
+
+    assert eventually(lambda: summary() is not None, timeout=5)
+    stats = summary().statistics
+    assert stats.message_count > 0 and stats.channel_count >= 4

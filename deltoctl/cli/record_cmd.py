@@ -14,9 +14,9 @@ from deltoctl.errors import WARNINGS, InvalidInput
 STATS_PERIOD = 1.0  # s between loop-statistics diagnostics
 
 
-def _create(path: Path):  # type: ignore[no-untyped-def]
+def _create(path: Path) -> None:
     try:
-        return path.open("wb")
+        path.open("wb").close()
     except OSError as exc:
         raise InvalidInput(f"cannot write {path}: {exc.strerror}") from None
 
@@ -34,7 +34,8 @@ def record(
     from deltoctl import __version__
     from deltoctl.core.loop import CycleLoop
     from deltoctl.profile.exporter import to_yaml
-    from deltoctl.record.mcap_recorder import OK, WARN, McapRecorder
+    from deltoctl.record.mcap_recorder import OK, WARN
+    from deltoctl.record.recorder_process import RecorderProcess
 
     opts = options(ctx)
     if rate <= 0:
@@ -43,10 +44,11 @@ def record(
         raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     # the file is created once the device answers: an unreachable device leaves no empty file
-    with open_session(opts, allow_model_mismatch) as session, _create(output) as stream:
+    with open_session(opts, allow_model_mismatch) as session:
+        _create(output)
         driver = session.driver
         ident = {k: str(v) for k, v in driver.identity.as_dict().items()}
-        recorder = McapRecorder(stream, session.profile, {
+        recorder = RecorderProcess(output, session.profile, {
             "profile": {"name": session.profile.name, "yaml": to_yaml(session.profile)},
             "identify": {**ident, "target": session.url},
             "deltoctl": {"version": __version__},
@@ -71,10 +73,7 @@ def record(
             pass
         finally:
             summary = loop.stats.summary()
-            recorder.diagnostic(time.time_ns(), WARN if recorder.link_losses else OK, "loop",
-                                "record loop (final)", summary)
-            recorder.close({"link_losses": str(recorder.link_losses),
-                            **{k: str(v) for k, v in summary.items()}})
+            recorder.close(summary)
     result = {"output": str(output), "messages": recorder.counts,
               "link_losses": recorder.link_losses, "loop": summary}
     if opts.json:

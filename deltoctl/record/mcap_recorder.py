@@ -160,10 +160,16 @@ class McapRecorder:
                 w.string(key).string(str(value))
         self._emit("/diagnostics", w.bytes(), t_ns)
 
-    def close(self, summary: dict[str, str] | None = None) -> None:
+    def close(self, loop_summary: dict[str, Any] | None = None, t_ns: int = 0) -> None:
+        """Finish the file; with the loop's final statistics, as a last diagnostic (a warning
+        when the link was lost) and as the ``recording`` metadata."""
         if self.closed:
             return
         self.closed = True
-        if summary:
-            self.writer.add_metadata("recording", summary)
+        if loop_summary is not None:
+            self.diagnostic(t_ns, WARN if self.link_losses else OK, "loop",
+                            "record loop (final)", loop_summary)
+            self.writer.add_metadata("recording", {
+                "link_losses": str(self.link_losses),
+                **{k: str(v) for k, v in loop_summary.items()}})
         self.writer.finish()
