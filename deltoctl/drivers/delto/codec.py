@@ -246,8 +246,8 @@ def _duty_layout(motors: int) -> struct.Struct:
 def encode_duty(duties: list[int]) -> bytes:
     """Duty per motor in 0.1 % (±1000 = ±100 %), motor ids 1..N."""
     values: list[int] = [3 + 3 * len(duties), SET_DUTY]
-    for i, duty in enumerate(duties):
-        values += (i + 1, max(-1000, min(1000, int(duty))))
+    for i, duty in enumerate(duties, 1):
+        values += (i, -1000 if duty < -1000 else 1000 if duty > 1000 else int(duty))
     return _duty_layout(len(duties)).pack(*values)
 
 

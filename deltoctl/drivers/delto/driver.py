@@ -92,6 +92,7 @@ class DeltoDriver:
         self.codes: tuple[int, ...] = ()
         self.values: dict[str, float] = {STATUS: 0.0}
         self.limiters = [CurrentLimiter() for _ in hw.joints]
+        self._duty_plan: tuple = (None, [])
         self.warnings: list[str] = []
         self.stats = {"packets": 0, "errors": 0, "reconnects": 0}
         self._lock = threading.RLock()
@@ -259,19 +260,28 @@ class DeltoDriver:
 
     def write_efforts(self, efforts: dict[str, float]) -> None:
         """Effort commands (N·m) → current limiter → duty → direction → SET_DUTY."""
-        if self.identity is None or self.model is None:
+        identity, model = self.identity, self.model
+        if identity is None or model is None:
             return
+        if self._duty_plan[0] is not identity:  # per joint, worked out once per connection
+            joints = self.hw.joints[: model.motors]
+            self._duty_plan = (identity, [(j.name, f"{j.name}/effort", self.limiters[i],
+                                           identity.direction[i])
+                                          for i, j in enumerate(joints)])
+        get, values = efforts.get, self.values
         duties = []
-        for i, joint in enumerate(self.hw.joints[: self.model.motors]):
-            target = efforts.get(joint.name, 0.0)
-            current = self.values.get(f"{joint.name}/effort", 0.0)
-            limited = self.limiters[i](target, current) if target else 0.0
-            if target and (limited > 0) != (target > 0):
-                limited = 0.0  # the limiter shrinks a command, never reverses it
+        for name, effort_key, limiter, direction in self._duty_plan[1]:
+            target = get(name)
+            if not target:
+                duties.append(0)
+                continue
+            limited = limiter(target, values.get(effort_key, 0.0))
+            if (limited > 0) != (target > 0):
+                duties.append(0)  # the limiter shrinks a command, never reverses it
+                continue
             duty = int(effort_to_duty_percent(limited) * 10)
-            duty = max(-DUTY_WIRE_LIMIT, min(DUTY_WIRE_LIMIT, duty))
-            duties.append(duty * self.identity.direction[i])
-        duties += [0] * (self.model.motors - len(duties))
+            duties.append(max(-DUTY_WIRE_LIMIT, min(DUTY_WIRE_LIMIT, duty)) * direction)
+        duties += [0] * (model.motors - len(duties))
         self._send(codec.encode_duty(duties))
 
     def move(self, targets: dict[str, float], profile: Profile, velocity: float | None = None,
