@@ -189,3 +189,11 @@ def test_detect_finds_a_servo_at_another_baud_rate():
     upper = json.loads(result.stdout)["buses"]["upper_body"]
     assert upper["missing"] == [52] and upper["wrong_baud"] == {"52": 57600}
     assert "head_y (ID 52) baud rate" in result.stderr
+
+
+def test_an_inverse_joint_is_reversed_in_the_servo(cli, mh5_buses):
+    servos = mh5_buses["upper_body"].bus.servos
+    result = cli("-p", "mh5", *mh5_targets(mh5_buses), "jog", "head_p", "5deg", "--yes")
+    assert result.exit_code == 0, result.stderr
+    assert eventually(lambda: servos[51].get("Drive Mode") == 5)  # time-based + reverse
+    assert servos[52].get("Drive Mode") == 0  # head_y was not commanded

@@ -298,7 +298,10 @@ class DynamixelDriver:
         ids = {by_name[name]: rad for name, rad in goals.items() if name in by_name}
         if not ids:
             return
-        self.port.write(codec.sync_write(10, 1, {i: b"\x04" for i in ids}))  # time-based
+        # Drive Mode: time-based profile (4), plus reverse (1) for an inverse joint: the MH5
+        # inverts direction in the servo, not in software
+        self.port.write(codec.sync_write(10, 1, {
+            i: bytes([5 if self.joints[i].inverse else 4]) for i in ids}))
         self._torque(list(ids), True)
         ms = max(1, round(seconds * 1000))
         data = {}
