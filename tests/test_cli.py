@@ -108,3 +108,10 @@ def test_start_up_imports_only_what_the_verb_needs():
         if args == ["profile", "list"]:  # a cold cache parses the YAML catalog
             loaded = [m for m in loaded if not m.startswith("yaml")]
         assert loaded == [], f"{args}: {loaded}"
+
+
+def test_sim_serve_refuses_options_of_another_family(cli):
+    result = cli("sim", "serve", "dg-4f", "--missing", "rj_dg_1_1")
+    assert result.exit_code == 2 and "--missing: not for dg-4f" in result.stderr
+    result = cli("sim", "serve", "bioscara-arm", "--firmware", "2.7", "--short-version")
+    assert result.exit_code == 2 and "--firmware, --short-version" in result.stderr

@@ -58,6 +58,15 @@ def serve(
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     gc.disable()  # a served device answers within microseconds; no collector pauses
+    delto_only = {"--firmware": firmware != "3.0", "--model-id": model_id is not None,
+                  "--short-version": short_version, "--input-1": input_1, "--delay": delay}
+    bus_only = {"--missing": bool(missing), "--pace": pace, "--wrong-baud": bool(wrong_baud),
+                "--who-am-i": who_am_i != "0x6A", "--orientation": orientation != "0,0"}
+    misplaced = [k for k, given in (bus_only if "delto" in families else delto_only).items()
+                 if given]
+    if misplaced:
+        raise InvalidInput(f"{', '.join(misplaced)}: not for {prof.name} "
+                           f"({'a Delto gripper' if 'delto' in families else 'not a gripper'})")
     with contextlib.ExitStack() as stack:
         if "delto" in families:
             info = _serve_delto(stack, prof, host, port, firmware, model_id, short_version,
