@@ -33,6 +33,23 @@ def _serve(profile: str) -> tuple["subprocess.Popen", str]:
     return proc, json.loads(line)["endpoint"]
 
 
+def _cpu_ticks() -> list[int] | None:
+    """The machine's CPU time by kind (Linux /proc/stat), to tell how much of a run the
+    hypervisor took away (steal): on a shared virtual machine, the cause of most misses."""
+    try:
+        with open("/proc/stat") as f:
+            return [int(x) for x in f.readline().split()[1:9]]
+    except (OSError, ValueError):
+        return None
+
+
+def _steal_percent(before: list[int] | None, after: list[int] | None) -> float | None:
+    if not before or not after:
+        return None
+    delta = [b - a for a, b in zip(before, after)]
+    return round(100 * delta[7] / max(sum(delta), 1), 2)
+
+
 def _run(session, rate: float, duration: float, mcap_path: Path) -> dict:  # type: ignore[no-untyped-def]
     from deltoctl.core.loop import CycleLoop
     from deltoctl.record.recorder_process import RecorderProcess
@@ -44,6 +61,7 @@ def _run(session, rate: float, duration: float, mcap_path: Path) -> dict:  # typ
     recorder = RecorderProcess(mcap_path, session.profile, {})
     loop = CycleLoop(rate, duration)
     cpu0 = time.process_time()
+    ticks = _cpu_ticks()
     try:
         for _ in loop:
             values = driver.read()
@@ -55,6 +73,7 @@ def _run(session, rate: float, duration: float, mcap_path: Path) -> dict:  # typ
             timing["write"] += t1 - t0
             timing["recording"] += t2 - t1
         cpu = time.process_time() - cpu0
+        steal = _steal_percent(ticks, _cpu_ticks())
     finally:
         recorder.close(loop.stats.summary())
         driver.timing = None
@@ -68,6 +87,7 @@ def _run(session, rate: float, duration: float, mcap_path: Path) -> dict:  # typ
         "stage_us_per_cycle": {k: round(v / n * 1e6, 1) for k, v in timing.items()},
         "mcap_bytes": mcap_path.stat().st_size,
         "mcap_messages": sum(recorder.counts.values()),
+        "cpu_steal_percent": steal,
         "errors": driver.stats["errors"],
     }
 
@@ -119,7 +139,9 @@ def bench_loop(
         info(f"  {name:8} requested {r['requested_rate']:g} Hz, real {r['real_rate']:.1f} Hz"
              + (f" ({100 * r['achieved_fraction']:.2f} %)" if r["achieved_fraction"] else "")
              + f", lateness p50 {r['lateness_p50_ms']:.3f} ms p99 {r['lateness_p99_ms']:.3f} ms"
-             f", misses {r['deadline_misses']}, errors {r['errors']}")
+             f", misses {r['deadline_misses']}, errors {r['errors']}"
+             + (f", CPU steal {r['cpu_steal_percent']} %" if r["cpu_steal_percent"] is not None
+                else ""))
         stages = ", ".join(f"{k} {v:.1f}" for k, v in r["stage_us_per_cycle"].items())
         info(f"           µs per cycle: {stages}; CPU {r['cpu_us_per_cycle']:.1f} in the loop, "
              f"{r['recorder_process_cpu_us_per_cycle']:.1f} in the recorder process")
