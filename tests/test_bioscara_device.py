@@ -44,7 +44,7 @@ def test_connect_identify_detect_stream_with_sim(cli):
     assert detect["found"] == ["0x11", "0x12", "0x13", "0x14"] and detect["missing"] == []
     lines = cli("-p", "bioscara-arm", "--sim", "stream", "-d", "0.1", "-i", "j1/*")
     sample = json.loads(lines.stdout.splitlines()[0])["values"]
-    assert sample == {"j1/position": 0.0, "j1/velocity": 0.0, "j1/home": 0.0}
+    assert sample == {"j1/position": 0.0, "j1/velocity": 0.0, "j1/home": 0.0, "j1/flags": 12.0}
 
 
 def test_detect_draws_the_bus_and_names_a_missing_joint(cli, arm):

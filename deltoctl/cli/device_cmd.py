@@ -227,8 +227,10 @@ def stream(
     as_lines = opts.json or not stdout_is_terminal()
     with open_session(opts, allow_model_mismatch) as session:
         driver = session.driver
-        names = _select([*session.profile.state_interfaces(), "system/connection_status"],
-                        list(interfaces or []))
+        extras = [f"{j.name}/{e}" for j in session.profile.joints()
+                  for e in getattr(driver, "extra_states", ())]  # e.g. a joint's flags
+        names = _select([*session.profile.state_interfaces(), *extras,
+                         "system/connection_status"], list(interfaces or []))
         live = None
         if not as_lines:
             from rich.live import Live
