@@ -142,3 +142,30 @@ def test_a_paced_bus_takes_the_wire_time():
     sent = len(codec.sync_read(126, 10, range(1, 12))) + 11 * 21  # bytes both ways
     assert len(replies) == 11
     assert took >= sent * 10 / 57600 * 0.95  # 44 ms at 57600 baud: the bus never beats it
+
+
+def test_sdk_fast_sync_read_and_the_driver_agree(bus):
+    from deltoctl.drivers.dynamixel.driver import DynamixelDriver
+    from deltoctl.profile.model import Component, Hardware, Profile
+
+    servos, port, ph = bus
+    servos.servos[12].set("Present Position", 1000)
+    servos.servos[12].position = 1000.0
+    group = sdk.GroupSyncRead(port, ph, 132, 4)
+    for i in (11, 12, 13):
+        assert group.addParam(i)
+    assert group.fastSyncRead() == sdk.COMM_SUCCESS
+    assert [group.getData(i, 132, 4) for i in (11, 12, 13)] == [2047, 1000, 2047]
+    port.closePort()
+    hw = Hardware("bus", family="dynamixel", params={"fast_sync_read": "true"},
+                  joints=[Component("joint", f"j{i}", address=i) for i in (11, 12, 13)])
+    driver = DynamixelDriver(Profile("t", hardware=[hw]), hw,
+                             f"serial://{port.port_name}?baud=1000000")
+    driver.configure()
+    replies = driver._sync_read(132, 4, [11, 12, 13])
+    values = driver.read()
+    driver.cleanup()
+    assert [(i, int.from_bytes(d, "little")) for i, _, d in replies] == [
+        (11, 2047), (12, 1000), (13, 2047)]
+    assert values["j12/position"] == pytest.approx((1000 - 2047) * 0.001533980787886)
+    assert driver.stats["errors"] == 0

@@ -192,7 +192,7 @@ class DynamixelBus:
                                                            s.get("Firmware Version")))
                             for i in targets if (s := self._present(i)))
         if instruction in (codec.SYNC_READ, codec.SYNC_WRITE, codec.BULK_READ,
-                           codec.BULK_WRITE):
+                           codec.BULK_WRITE, codec.FAST_SYNC_READ):
             return self._group(instruction, params)
         targets = list(self.servos) if broadcast else [device_id]
         replies = []
@@ -234,6 +234,15 @@ class DynamixelBus:
 
     def _group(self, instruction: int, params: bytes) -> bytes:
         replies = []
+        if instruction == codec.FAST_SYNC_READ:  # every servo's data in one status packet
+            address, length = struct.unpack_from("<HH", params)
+            blocks = []
+            for i in params[4:]:
+                servo = self._present(i)
+                if servo is not None:
+                    error, data = servo.read(address, length)
+                    blocks.append((error, servo.id, data))
+            return codec.fast_sync_status(blocks) if blocks else b""
         if instruction in (codec.SYNC_READ, codec.SYNC_WRITE):
             address, length = struct.unpack_from("<HH", params)
             body = params[4:]

@@ -269,6 +269,36 @@ def split_statuses(data: bytes, length: int, ids: list[int]) -> list[tuple[int, 
         start = end
 
 
+def fast_sync_status(blocks: list[tuple[int, int, bytes]]) -> bytes:
+    """The emulator's side of a Fast Sync Read: one status packet from ID 0xFE holding
+    [ERR, ID, data, CRC] per servo, unstuffed. Each block's CRC is that of the packet up to
+    the block's end (unverified: dynamixel-sdk checks only the last, the packet's own)."""
+    body = bytearray([STATUS])
+    ends = []
+    for error, device_id, data in blocks:
+        body += bytes([error, device_id]) + data + b"\0\0"
+        ends.append(len(body) - 2)
+    head = HEADER + bytes([BROADCAST_ID]) + struct.pack("<H", len(body))
+    raw = bytearray(head + body)
+    for end in ends:
+        at = len(head) + end
+        raw[at:at + 2] = struct.pack("<H", crc16(bytes(raw[:at])))
+    return bytes(raw)
+
+
+def split_fast_sync(data: bytes, length: int, ids: list[int]) -> list[tuple[int, int, bytes]]:
+    """The reply to a Fast Sync Read as ``(id, error, data)`` per servo; nothing when the
+    packet does not check."""
+    try:
+        found = PacketReader().feed(data)
+        if not found:
+            return []
+        blocks = decode_fast_sync(decode_status(*found[0]), length, ids)
+    except ProtocolError:
+        return []
+    return [(i, error, block) for i, (error, block) in blocks.items()]
+
+
 def decode_fast_sync(status_: Status, length: int, ids: list[int]) -> dict[int, tuple[int, bytes]]:
     """A Fast Sync Read reply: one status (ID 0xFE) with [ERR, ID, data, CRC] per servo."""
     out: dict[int, tuple[int, bytes]] = {}

@@ -40,6 +40,9 @@ class DynamixelDriver:
         self.connected = False
         self.torque_enabled: set[int] = set()
         self._requests: dict[tuple, bytes] = {}  # sync read instructions, built once
+        # Fast Sync Read (XL430 firmware 45 and later) for the reader loops, when the block
+        # says fast_sync_read: true
+        self.fast = str(hw.params.get("fast_sync_read", "false")).lower() in ("1", "true", "yes")
         self._poll = None
         self._stale = False
         self.loops = {}
@@ -210,7 +213,9 @@ class DynamixelDriver:
         key = (address, length, tuple(ids))
         packet = self._requests.get(key)
         if packet is None:
-            packet = self._requests[key] = codec.sync_read(address, length, ids)
+            packet = self._requests[key] = codec.sync_read(address, length, ids, self.fast)
+        if self.fast:
+            return self._fast_sync_read(packet, length, ids, loop)
         size = 11 + length
         replies: list = []
         shapely = [True]  # every reply so far in the common shape
@@ -231,6 +236,18 @@ class DynamixelDriver:
             replies = [r for r in replies if r]  # False: a bad CRC
         else:
             replies = codec.split_statuses(data, length, ids)
+        ok = len(replies) == len(ids)
+        self.stats["errors"] += not ok
+        if loop is not None:
+            loop.count(ok)
+        return [r for r in replies if r[0] in self.joints and len(r[2]) == length]
+
+    def _fast_sync_read(self, packet: bytes, length: int, ids: list[int],
+                        loop: CommLoop | None) -> list[tuple[int, int, bytes]]:
+        """Every servo's data in one status packet: 7 bytes less per servo on the wire."""
+        self.stats["packets"] += 1
+        replies = codec.split_fast_sync(
+            self._transact(packet, 8 + len(ids) * (length + 4)), length, ids)
         ok = len(replies) == len(ids)
         self.stats["errors"] += not ok
         if loop is not None:
