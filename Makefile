@@ -13,6 +13,7 @@ $(BIN)/deltoctl: pyproject.toml
 demo: $(BIN)/deltoctl
 	$(BIN)/deltoctl profile list
 	DELTOCTL=$(BIN)/deltoctl examples/bringup.sh
+	DELTOCTL=$(BIN)/deltoctl examples/bringup-bioscara.sh
 
 test: $(BIN)/deltoctl
 	$(BIN)/ruff check deltoctl tests bench
