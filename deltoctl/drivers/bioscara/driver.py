@@ -36,12 +36,13 @@ class Joint:
             self.stall_threshold = int(p["stall_threshold"])
             self.max_acceleration = float(p["max_acceleration"])
             self.max_velocity = float(p["max_velocity"])
+            home = comp.command("home")  # its params: speed, threshold, current, acceleration
+            self.homing = {k: float(v) for k, v in (home.params if home else {}).items()}
         except (KeyError, ValueError) as exc:
             raise InvalidInput(f"joint {comp.name}: param {exc} is missing or not a number "
                                "(i2c_address, reduction, min, max, drive_current, hold_current, "
-                               "stall_threshold, max_acceleration, max_velocity)") from None
-        home = comp.command("home")
-        self.homing = {k: float(v) for k, v in (home.params if home else {}).items()}
+                               "stall_threshold, max_acceleration, max_velocity, and the home "
+                               "interface's speed, threshold, current, acceleration)") from None
         self.bus, self.name = bus, comp.name
         self.offset = 0.0
         self.flags = codec.INITIAL_FLAGS
@@ -255,7 +256,8 @@ class BioscaraDriver:
                     "match": False} for a in unexpected]
         return {"bus": self.url, "found": [f"{a:#04x}" for a in found], "missing": missing,
                 "unexpected": unexpected, "grid": i2cdetect_grid(found), "checks": checks,
-                "summary": f"{self.hw.name}: {len(found)} of {len(expected)} joints answer on "
+                "summary": f"{self.hw.name}: {len(expected) - len(missing)} of {len(expected)} "
+                           f"joints answer on "
                            f"{self.url}" + (f" (missing: {', '.join(missing)})" if missing
                                             else "")}
 
