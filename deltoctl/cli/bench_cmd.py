@@ -50,6 +50,23 @@ def _steal_percent(before: list[int] | None, after: list[int] | None) -> float |
     return round(100 * delta[7] / max(sum(delta), 1), 2)
 
 
+def _idle_loop(rate: float, duration: float) -> dict:
+    """The baseline: the same cycle loop doing nothing, on this machine, right now. What it
+    misses, no work in the cycle can avoid."""
+    from deltoctl.core.loop import CycleLoop
+
+    ticks = _cpu_ticks()
+    loop = CycleLoop(rate, duration)
+    for _ in loop:
+        pass
+    stats = loop.stats.summary()
+    return {"real_rate": stats["real_rate"],
+            "achieved_fraction": round(stats["real_rate"] / rate, 4),
+            "deadline_misses": stats["deadline_misses"],
+            "lateness_p99_ms": stats["lateness_p99_ms"],
+            "cpu_steal_percent": _steal_percent(ticks, _cpu_ticks())}
+
+
 def _run(session, rate: float, duration: float, mcap_path: Path) -> dict:  # type: ignore[no-untyped-def]
     from deltoctl.core.loop import CycleLoop
     from deltoctl.record.recorder_process import RecorderProcess
@@ -101,7 +118,7 @@ def bench_loop(
         "--unpaced", help="Seconds of the unpaced run (0: skip).")] = 5.0,
 ) -> None:
     """A Delto profile (default dg-5f-right: F/T and IO) over loopback TCP, recording to MCAP:
-    paced, then unpaced."""
+    paced, then unpaced; beside them, the same loop idle (what this machine allows)."""
     import os
     import tempfile
 
@@ -112,7 +129,8 @@ def bench_loop(
         raise InvalidInput("--rate and --duration must be positive, --unpaced not negative")
     prof = opts.load_profile(opts.profile or "dg-5f-right")
     proc, endpoint = _serve(str(prof.source))
-    results = {"profile": prof.name, "endpoint": endpoint, "python": sys.version.split()[0]}
+    results = {"profile": prof.name, "endpoint": endpoint, "python": sys.version.split()[0],
+               "idle_loop": _idle_loop(rate, duration)}
     try:
         with tempfile.TemporaryDirectory() as tmp, Session(prof, [endpoint]) as session:
             results["paced"] = _run(session, rate, duration, Path(tmp) / "paced.mcap")
@@ -132,6 +150,11 @@ def bench_loop(
         emit_json(results)
         return
     info(f"bench loop: {prof.name} against sim serve at {endpoint} ({os.cpu_count()} CPUs)")
+    idle = results["idle_loop"]
+    info(f"  baseline: an idle {rate:g} Hz loop here reaches {100 * idle['achieved_fraction']:.2f}"
+         f" %, lateness p99 {idle['lateness_p99_ms']:.3f} ms, misses {idle['deadline_misses']}"
+         + (f", CPU steal {idle['cpu_steal_percent']} %"
+            if idle["cpu_steal_percent"] is not None else ""))
     for name in ("paced", "unpaced"):
         if name not in results:
             continue
