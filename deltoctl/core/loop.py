@@ -59,7 +59,8 @@ class CycleLoop:
         try:
             yield from self._cycles()
         finally:
-            self.stats.ended = time.monotonic()
+            if self.stats.ended is None:  # stopped early (Ctrl-C): it ends now
+                self.stats.ended = time.monotonic()
             if gc_was_enabled:
                 gc.enable()
 
@@ -84,6 +85,8 @@ class CycleLoop:
             self.stats.cycles += 1
             yield scheduled
             scheduled = scheduled + period if period else time.monotonic()
+        # the last cycle's period ends where the next one would start
+        self.stats.ended = max(time.monotonic(), scheduled)
 
 
 class CommLoop:
