@@ -14,6 +14,7 @@ demo: $(BIN)/deltoctl
 	$(BIN)/deltoctl profile list
 	DELTOCTL=$(BIN)/deltoctl examples/bringup.sh
 	DELTOCTL=$(BIN)/deltoctl examples/bringup-bioscara.sh
+	DELTOCTL=$(BIN)/deltoctl examples/bringup-mh5.sh
 
 test: $(BIN)/deltoctl
 	$(BIN)/ruff check deltoctl tests bench

@@ -197,3 +197,19 @@ def test_an_inverse_joint_is_reversed_in_the_servo(cli, mh5_buses):
     assert result.exit_code == 0, result.stderr
     assert eventually(lambda: servos[51].get("Drive Mode") == 5)  # time-based + reverse
     assert servos[52].get("Drive Mode") == 0  # head_y was not commanded
+
+
+def test_a_move_with_torque_already_on_follows_the_servos_drive_mode(cli, mh5_buses):
+    servos = mh5_buses["upper_body"].bus.servos
+    targets = mh5_targets(mh5_buses)
+    assert cli("-p", "mh5", *targets, "torque", "on", "head", "--yes").exit_code == 0
+    # Drive Mode cannot change now: head_y stays velocity-based, so the profile velocity is a
+    # speed (0.229 rpm units) and the move still takes its time
+    result = cli("-p", "mh5", *targets, "jog", "head_y", "15deg", "--velocity", "30deg",
+                 "--yes", "--json")
+    assert result.exit_code == 0, result.stderr
+    assert 0.3 < json.loads(result.stdout)["seconds"] < 2.0
+    assert servos[52].get("Drive Mode") == 0 and servos[52].get("Profile Velocity") == 22
+    refused = cli("-p", "mh5", *targets, "jog", "head_p", "5deg", "--yes")
+    assert refused.exit_code == 5  # inverse in the profile, not reversed in the servo
+    assert "turns the other way" in refused.stderr

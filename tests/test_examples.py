@@ -15,7 +15,7 @@ DELTOCTL = Path(sys.executable).parent / "deltoctl"
 
 
 @pytest.mark.skipif(not DELTOCTL.exists(), reason="the deltoctl script is not installed")
-@pytest.mark.parametrize("script", ["bringup.sh", "bringup-bioscara.sh"])
+@pytest.mark.parametrize("script", ["bringup.sh", "bringup-bioscara.sh", "bringup-mh5.sh"])
 def test_bringup_script(script, tmp_path):
     env = {**os.environ, "DELTOCTL": str(DELTOCTL), "OUT": str(tmp_path)}
     result = subprocess.run(["bash", str(REPO / "examples" / script)], env=env,

@@ -9,13 +9,20 @@ import struct
 
 from deltoctl.core.loop import CommLoop
 from deltoctl.drivers.dynamixel import codec
-from deltoctl.drivers.dynamixel.control_table import BAUD_RATES, TABLE_SIZE, XL430_W250, Item
-from deltoctl.errors import DeviceError, InvalidInput, ProtocolError, Unreachable
+from deltoctl.drivers.dynamixel.control_table import (
+    BAUD_RATES,
+    BY_NAME,
+    TABLE_SIZE,
+    XL430_W250,
+    Item,
+)
+from deltoctl.errors import DeviceError, InvalidInput, ProtocolError, Refused, Unreachable
 from deltoctl.profile.model import Hardware, Profile
 
 RAD_PER_RAW = 0.001533980787886  # 2π/4096
 CENTER = 2047
 RAD_S_PER_RAW = 0.023980823922402  # 0.229 rpm
+DRIVE_MODE = BY_NAME["Drive Mode"]
 PVL = struct.Struct("<hii")  # Present Load, Velocity, Position (126, 10 bytes)
 LOAD_SCALE = 0.0014
 RETRIES = 3
@@ -309,22 +316,36 @@ class DynamixelDriver:
                 "checks": checks, "summary": summary}
 
     def send_goals(self, goals: dict[str, float], seconds: float) -> None:
-        """Torque on, then a time-based profile to each goal: the PV writer (108, 12):
-        acceleration 0, profile velocity = the move's duration in ms, goal position."""
+        """Torque on, then a profile to each goal through the PV writer (108, 12):
+        acceleration 0, profile velocity, goal position. Drive Mode is set to a time-based
+        profile (4), plus reverse (1) for an inverse joint — the MH5 inverts direction in the
+        servo; a servo whose torque is already on keeps its mode (an EEPROM item), so the
+        profile velocity follows the mode it reports: the move's duration in ms, or a speed in
+        0.229 rpm. A servo turning the other way than the profile says is refused."""
         by_name = {j.name: i for i, j in self.joints.items() if i in self.present}
         ids = {by_name[name]: rad for name, rad in goals.items() if name in by_name}
         if not ids:
             return
-        # Drive Mode: time-based profile (4), plus reverse (1) for an inverse joint: the MH5
-        # inverts direction in the servo, not in software
         self.port.write(codec.sync_write(10, 1, {
             i: bytes([5 if self.joints[i].inverse else 4]) for i in ids}))
+        modes = {i: self.read_register(i, DRIVE_MODE) for i in ids}
+        reversed_wrong = [self.joints[i].name for i, mode in modes.items()
+                          if bool(mode & 1) != self.joints[i].inverse]
+        if reversed_wrong:
+            raise Refused(f"{', '.join(reversed_wrong)}: the servo turns the other way than "
+                          "the profile's inverse says, and its Drive Mode cannot change while "
+                          "torque is on", hint="switch torque off for them, then move again")
         self._torque(list(ids), True)
-        ms = max(1, round(seconds * 1000))
         data = {}
         for i, rad in ids.items():
-            raw = round((rad - self.joints[i].offset) / RAD_PER_RAW + CENTER)
-            data[i] = struct.pack("<IIi", 0, ms, raw)
+            joint = self.joints[i]
+            if modes[i] & 4:  # time-based
+                profile = max(1, round(seconds * 1000))
+            else:
+                now = self.values.get(f"{joint.name}/position", rad)
+                profile = max(1, round(abs(rad - now) / seconds / RAD_S_PER_RAW))
+            raw = round((rad - joint.offset) / RAD_PER_RAW + CENTER)
+            data[i] = struct.pack("<IIi", 0, profile, raw)
         self.port.write(codec.sync_write(108, 12, data))
         self.port.flush()
         self.loops["pv_writer"].count(True)
