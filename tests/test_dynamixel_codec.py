@@ -74,20 +74,23 @@ def test_sync_write_bulk_and_fast_sync():
     assert codec.decode_fast_sync(st, 2, [1, 2]) == {1: (0, b"\x10\x00"), 2: (0, b"\x20\x00")}
 
 
-def test_split_statuses_fast_path_and_fallbacks():
+def test_sync_replies_by_offsets_and_by_the_reader():
     from deltoctl.drivers.dynamixel import codec
 
     ids = [1, 2, 3]
     replies = [codec.status(i, 0, bytes([i] * 10)) for i in ids]
-    assert codec.split_statuses(b"".join(replies), 10, ids) == [
-        (i, 0, bytes([i] * 10)) for i in ids]
+    check = codec.SyncReplies(10, ids)
+    check.feed(replies[0] + replies[1][:5])  # as the bytes arrive
+    assert check.found == [(1, 0, bytes([1] * 10))]
+    assert check.result(b"".join(replies)) == [(i, 0, bytes([i] * 10)) for i in ids]
     bad = bytearray(b"".join(replies))
     bad[21 + 12] ^= 0x01  # servo 2's data: its CRC no longer checks
-    assert [r[0] for r in codec.split_statuses(bytes(bad), 10, ids)] == [1, 3]
+    assert [r[0] for r in codec.SyncReplies(10, ids).result(bytes(bad))] == [1, 3]
     # servo 2 silent, servo 3's data needs stuffing: the reader takes over
     stuffed = codec.status(3, 0, b"\xff\xff\xfd" + bytes(7))
-    got = codec.split_statuses(replies[0] + stuffed, 10, ids)
+    got = codec.SyncReplies(10, ids).result(replies[0] + stuffed)
     assert got == [(1, 0, bytes([1] * 10)), (3, 0, b"\xff\xff\xfd" + bytes(7))]
+    assert codec.split_statuses(bytes(bad)) == [(1, 0, bytes([1] * 10)), (3, 0, bytes([3] * 10))]
     assert codec.status_at(replies[0], 0, 10, 2) is None  # not the servo expected there
 
 

@@ -229,7 +229,7 @@ def decode_status(device_id: int, instruction: int, body: bytes) -> Status:
 def status_at(data: bytes, offset: int, length: int, device_id: int) -> tuple | bool | None:
     """The common case of a sync read reply — the expected servo, in order, nothing stuffed
     — read in place: ``(id, error, data)``; False for a bad CRC; None when the bytes do not
-    have that shape (then ``split_statuses`` takes the whole reply apart)."""
+    have that shape."""
     end = offset + 11 + length
     pkt = data[offset:end]
     if (len(pkt) != end - offset or pkt[4] != device_id or pkt[7] != STATUS
@@ -240,23 +240,38 @@ def status_at(data: bytes, offset: int, length: int, device_id: int) -> tuple | 
     return device_id, pkt[8], pkt[9:9 + length]
 
 
-def split_statuses(data: bytes, length: int, ids: list[int]) -> list[tuple[int, int, bytes]]:
-    """The replies to a sync read of ``length`` bytes: ``(id, error, data)`` per valid
-    status, in the common case by offsets, else through ``PacketReader``. A bad CRC drops
-    that reply."""
-    size = 11 + length
-    if len(data) == size * len(ids):
-        out = []
-        for k, device_id in enumerate(ids):
-            found = status_at(data, k * size, length, device_id)
-            if found is None:
-                break
-            if found:
-                out.append(found)
-        else:
-            return out
+class SyncReplies:
+    """The replies to one sync read, checked as their bytes arrive: ``feed`` the bytes so far
+    while later replies are still on the wire, then ``result`` once all are in (or the time
+    is up). The common case goes by offsets; anything else by ``split_statuses``."""
+
+    def __init__(self, length: int, ids: list[int]) -> None:
+        self.length, self.ids, self.size = length, ids, 11 + length
+        self.found: list = []  # (id, error, data), or False for a bad CRC
+        self.in_shape = True
+
+    def feed(self, data: bytes) -> None:
+        found, ids, size = self.found, self.ids, self.size
+        while self.in_shape and len(found) < len(ids) and len(data) >= (len(found) + 1) * size:
+            reply = status_at(data, len(found) * size, self.length, ids[len(found)])
+            if reply is None:
+                self.in_shape = False
+            else:
+                found.append(reply)
+
+    def result(self, data: bytes) -> list[tuple[int, int, bytes]]:
+        self.feed(data)
+        if self.in_shape and len(self.found) == len(self.ids):
+            return [r for r in self.found if r]
+        return split_statuses(data)
+
+
+def split_statuses(data: bytes) -> list[tuple[int, int, bytes]]:
+    """Status packets in whatever shape they came (some missing, stuffed, out of order):
+    ``(id, error, data)`` per valid one, packet by packet, so one bad CRC costs only its
+    own reply."""
     reader, out, start = PacketReader(), [], 0
-    while True:  # packet by packet, so one bad CRC costs only its own reply
+    while True:
         end = data.find(HEADER, start + 1)
         try:
             found = reader.feed(data[start:] if end < 0 else data[start:end])

@@ -215,46 +215,20 @@ class DynamixelDriver:
 
     def _sync_read(self, address: int, length: int, ids: list[int],
                    loop: CommLoop | None = None) -> list[tuple[int, int, bytes]]:
-        """One sync read: ``(id, error, data)`` per valid reply; a missing or corrupted reply
-        counts as an error, never raises."""
+        """One sync read (or Fast Sync Read): ``(id, error, data)`` per valid reply; a missing
+        or corrupted reply counts as an error, never raises."""
         key = (address, length, tuple(ids))
         packet = self._requests.get(key)
         if packet is None:
             packet = self._requests[key] = codec.sync_read(address, length, ids, self.fast)
-        if self.fast:
-            return self._fast_sync_read(packet, length, ids, loop)
-        size = 11 + length
-        replies: list = []
-        shapely = [True]  # every reply so far in the common shape
-
-        def check(data: bytes) -> None:  # the replies that are complete, as they come
-            while shapely[0] and len(replies) < len(ids) and \
-                    len(data) >= (len(replies) + 1) * size:
-                found = codec.status_at(data, len(replies) * size, length, ids[len(replies)])
-                if found is None:
-                    shapely[0] = False
-                else:
-                    replies.append(found)
-
         self.stats["packets"] += 1
-        data = self._transact(packet, len(ids) * size, on_data=check)
-        check(data)
-        if shapely[0] and len(replies) == len(ids):
-            replies = [r for r in replies if r]  # False: a bad CRC
+        if self.fast:  # one status packet for all: 7 bytes less per servo on the wire
+            data = self._transact(packet, 8 + len(ids) * (length + 4))
+            replies = codec.split_fast_sync(data, length, ids)
         else:
-            replies = codec.split_statuses(data, length, ids)
-        ok = len(replies) == len(ids)
-        self.stats["errors"] += not ok
-        if loop is not None:
-            loop.count(ok)
-        return [r for r in replies if r[0] in self.joints and len(r[2]) == length]
-
-    def _fast_sync_read(self, packet: bytes, length: int, ids: list[int],
-                        loop: CommLoop | None) -> list[tuple[int, int, bytes]]:
-        """Every servo's data in one status packet: 7 bytes less per servo on the wire."""
-        self.stats["packets"] += 1
-        replies = codec.split_fast_sync(
-            self._transact(packet, 8 + len(ids) * (length + 4)), length, ids)
+            check = codec.SyncReplies(length, ids)
+            replies = check.result(self._transact(packet, len(ids) * (11 + length),
+                                                  on_data=check.feed))
         ok = len(replies) == len(ids)
         self.stats["errors"] += not ok
         if loop is not None:
