@@ -58,10 +58,9 @@ def connect(
     session = open_session(opts, allow_model_mismatch)
     with session:
         rtts = []
-        exchange = getattr(session.driver, "round_trip", session.driver.read)
         for _ in range(max(1, count)):
             start = time.perf_counter()
-            exchange()
+            session.driver.round_trip()
             rtts.append((time.perf_counter() - start) * 1e3)
         if not session.driver.connected:
             raise DeviceError(f"{session.url} stopped answering during the round trips")
@@ -228,7 +227,7 @@ def stream(
     with open_session(opts, allow_model_mismatch) as session:
         driver = session.driver
         extras = [f"{j.name}/{e}" for j in session.profile.joints()
-                  for e in getattr(driver, "extra_states", ())]  # e.g. a joint's flags
+                  for e in driver.extra_states]  # e.g. a Bioscara joint's flags
         names = _select([*session.profile.state_interfaces(), *extras,
                          "system/connection_status"], list(interfaces or []))
         live = None

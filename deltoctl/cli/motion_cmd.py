@@ -200,8 +200,7 @@ def jog(
         raise InvalidInput("give either DELTA or --to POS")
     speed = _speed(velocity)
     with open_session(opts, allow_model_mismatch, profile) as session:
-        if hasattr(session.driver, "check_motion"):
-            session.driver.check_motion([joint])  # e.g. not homed: refused before asking
+        session.driver.check_motion([joint])  # e.g. not homed: refused before asking
         start = session.driver.read()[f"{joint}/position"]
         target = _quantity(to, "--to") if to is not None else start + _quantity(delta, "DELTA")
         check_target(profile, comp, target, start)

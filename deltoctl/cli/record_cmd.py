@@ -52,9 +52,9 @@ def record(
             "profile": {"name": session.profile.name, "yaml": to_yaml(session.profile)},
             "identify": {**ident, "target": session.url},
             "deltoctl": {"version": __version__},
-        }, getattr(driver, "extra_states", ()))
+        }, driver.extra_states)
         loop = CycleLoop(rate, duration)
-        comm_loops = getattr(driver, "comm_loops", list)()  # a bus's own loops (Dynamixel)
+        comm_loops = driver.comm_loops()  # a bus's own loops (Dynamixel)
         next_stats = time.monotonic() + STATS_PERIOD
         try:
             for _ in loop:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
+from deltoctl.core.driver import Driver
 from deltoctl.drivers.bioscara import codec
 from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Refused, Unreachable
 from deltoctl.profile.model import Component, Hardware, Profile
@@ -161,7 +162,7 @@ class Joint:
         self.disable()
 
 
-class BioscaraDriver:
+class BioscaraDriver(Driver):
     family = "bioscara"
     extra_states = ("flags",)  # recorded beside each joint's state interfaces
 

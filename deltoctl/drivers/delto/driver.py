@@ -13,6 +13,7 @@ import time
 from dataclasses import dataclass
 from urllib.parse import urlsplit
 
+from deltoctl.core.driver import Driver
 from deltoctl.drivers.delto import codec
 from deltoctl.drivers.delto.models import (
     DUTY_WIRE_LIMIT,
@@ -71,7 +72,7 @@ def parse_tcp_url(url: str) -> tuple[str, int]:
         raise InvalidInput(f"{url!r} has a bad port") from None
 
 
-class DeltoDriver:
+class DeltoDriver(Driver):
     family = "delto"
 
     def __init__(self, profile: Profile, hw: Hardware, url: str,

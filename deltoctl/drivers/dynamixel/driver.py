@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import struct
 
+from deltoctl.core.driver import Driver
 from deltoctl.core.loop import CommLoop
 from deltoctl.drivers.dynamixel import codec
 from deltoctl.drivers.dynamixel.control_table import (
@@ -31,7 +32,7 @@ SCAN_BAUDS = sorted(BAUD_RATES.values(), key=lambda b: (b < 57600, b))  # 9600 l
 LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}  # default Hz
 
 
-class DynamixelDriver:
+class DynamixelDriver(Driver):
     family = "dynamixel"
 
     def __init__(self, profile: Profile, hw: Hardware, url: str) -> None:
@@ -381,7 +382,7 @@ class _Identity:
             for i, (m, f) in sorted(d.present.items())}}
 
 
-class BusesDriver:
+class BusesDriver(Driver):
     """Every bus of one profile (the MH5: two Dynamixel buses and the I2C IMU) behind the one
     driver interface. An I2C sensor whose bus cannot be reached is left out with a warning:
     the servos do not depend on it."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+from deltoctl.core.driver import Driver
 from deltoctl.errors import InvalidInput
 from deltoctl.profile.model import Hardware, Profile
 
@@ -33,7 +34,7 @@ class GenericIdentity:
                 "blocks": self.blocks}
 
 
-class GenericDriver:
+class GenericDriver(Driver):
     family = "generic"
 
     def __init__(self, profile: Profile, blocks: list[Hardware]) -> None:

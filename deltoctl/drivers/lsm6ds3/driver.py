@@ -3,6 +3,7 @@ accelerometer and temperature into a sensor's interfaces (``imu/angular_velocity
 
 from __future__ import annotations
 
+from deltoctl.core.driver import Driver
 from deltoctl.drivers.lsm6ds3 import codec
 from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, ProtocolError
 from deltoctl.profile.model import Hardware, Profile
@@ -14,7 +15,7 @@ ORIENTATION = {"orientation.x": 0.0, "orientation.y": 0.0, "orientation.z": 0.0,
                "orientation.w": 1.0}
 
 
-class Lsm6ds3Driver:
+class Lsm6ds3Driver(Driver):
     family = "lsm6ds3"
 
     def __init__(self, profile: Profile, hw: Hardware, url: str, smbus=None) -> None:  # type: ignore[no-untyped-def]
