@@ -4,8 +4,9 @@ behind a pseudo-terminal that pyserial (and so dynamixel-sdk) opens as a serial 
 Each servo keeps the XL430 control table (EEPROM and RAM, access rights, EEPROM refused while
 torque is on), moves to its goal with a time-based or velocity-based profile, reports
 temperature and voltage, and honours Status Return Level, broadcast semantics, REG_WRITE and
-ACTION, reboot and factory reset. Faults: a missing servo, a corrupted CRC, no reply, a wrong
-baud rate.
+ACTION, reboot and factory reset, and answers only at its Baud Rate (the rate the host set
+on the pty). Faults: a missing servo, a corrupted CRC, no reply, a servo at another baud
+rate. Paced, the bus takes the wire time of every byte.
 """
 
 from __future__ import annotations
