@@ -117,8 +117,10 @@ def bench_loop(
     unpaced: Annotated[float, typer.Option(
         "--unpaced", help="Seconds of the unpaced run (0: skip).")] = 5.0,
 ) -> None:
-    """A Delto profile (default dg-5f-right: F/T and IO) over loopback TCP, recording to MCAP:
-    paced, then unpaced; beside them, the same loop idle (what this machine allows)."""
+    """The Delto read+write cycle while recording, paced and unpaced.
+
+    A Delto profile (default dg-5f-right: F/T and IO) against `sim serve` over loopback TCP,
+    recording to MCAP; beside it, the same loop idle (what this machine allows)."""
     import os
     import tempfile
 
@@ -262,9 +264,11 @@ def bench_dynamixel(
     servos: Annotated[int, typer.Option(help="Servos on the bus.")] = 11,
     duration: Annotated[float, typer.Option(help="Seconds per measurement.")] = 3.0,
 ) -> None:
-    """Sync read of present load/velocity/position (126, 10) from N servos of an emulated
-    bus in another process: deltoctl's driver against dynamixel-sdk's GroupSyncRead; then,
-    with the bus paced at 1 and 2 Mbps, deltoctl's rate against the wire's limit."""
+    """Dynamixel sync reads against dynamixel-sdk, and against the wire's limit.
+
+    Present load/velocity/position (126, 10) from N servos of an emulated bus in another
+    process: deltoctl's driver against dynamixel-sdk's GroupSyncRead; then, with the bus paced
+    at 1 and 2 Mbps, deltoctl's rate against the wire's limit."""
     opts = options(ctx)
     if not 1 <= servos <= 252 or duration <= 0:
         raise InvalidInput("--servos must be 1-252 and --duration positive")
@@ -329,10 +333,11 @@ def bench_i2c(
     cycles: Annotated[int, typer.Option(help="Read cycles per client.")] = 3000,
     clock: Annotated[int, typer.Option(help="I2C clock in Hz for the wire time.")] = 400_000,
 ) -> None:
-    """A full read cycle of bioscara-arm's four joints (position and velocity, each reply with
-    its flags) on the in-process emulator: deltoctl's own time per transaction, without the
-    emulator's, against the I2C wire time; beside it, the same transactions written straight
-    against smbus2."""
+    """The Bioscara read cycle against the I2C wire time.
+
+    Position and velocity of bioscara-arm's four joints, each reply with its flags, on the
+    in-process emulator: deltoctl's own time per transaction, without the emulator's, against
+    the I2C wire time; beside it, the same transactions written straight against smbus2."""
     import struct
 
     from smbus2 import i2c_msg

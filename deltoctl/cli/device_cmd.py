@@ -82,7 +82,7 @@ def connect(
 
 
 def identify(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
-    """Model, firmware and the motor direction map in use, compared with the profile."""
+    """What the device says it is (model, firmware, direction map, flags), against the profile."""
     opts = options(ctx)
     with open_session(opts, allow_model_mismatch) as session:
         ident = session.driver.identity.as_dict()
@@ -116,7 +116,7 @@ def _identity_tables(ident: dict, title: str | None = None) -> None:
 
 
 def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
-    """Sensors and GPIO as the device reports them, compared with the profile."""
+    """What is on the device or bus (sensors, GPIO, servos, I2C devices), against the profile."""
     opts = options(ctx)
     with open_session(opts, allow_model_mismatch) as session:
         result = session.driver.detect()

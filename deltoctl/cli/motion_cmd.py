@@ -102,9 +102,11 @@ def home(
         help="Home again joints that are homed already (homing joints only).")] = False,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
-    """Drive every joint to the profile's home pose (zero unless the profile says otherwise);
-    joints with a `home` command interface run their homing routine instead, in the profile's
-    homing order."""
+    """Drive every joint home: to the profile's home pose, or by its homing routine.
+
+    Joints with a `home` command interface (the Bioscara arm) run into their hard stops one at
+    a time, in the profile's homing order; the others go to safety.home_pose (zero unless the
+    profile says otherwise)."""
     from deltoctl.core.motion import check_target
 
     opts = options(ctx)

@@ -44,8 +44,10 @@ def serve(
     orientation: Annotated[str, typer.Option(
         help="The IMU's roll,pitch in degrees (gravity follows).")] = "0,0",
 ) -> None:
-    """Serve a simulated device until Ctrl-C or SIGTERM; prints each bus's endpoint (TCP, a
-    pseudo-terminal for a Dynamixel bus, i2c+tcp:// for an I2C bus), as JSON with --json."""
+    """Serve a simulated device until Ctrl-C or SIGTERM, printing each bus's target.
+
+    A Delto gripper on loopback TCP, a Dynamixel bus on a pseudo-terminal, an I2C bus as
+    i2c+tcp://; with --json, one JSON line."""
     import gc
     import json
     import signal
