@@ -163,3 +163,13 @@ def test_sim_serve_in_its_own_process():
     finally:
         proc.terminate()
         assert proc.wait(timeout=5) == 0
+
+
+def test_detect_still_draws_a_bus_where_no_joint_answers(cli, arm):
+    target, devices = arm
+    devices.clear()
+    assert cli("-p", "bioscara-arm", "-t", target, "identify").exit_code == 4
+    result = cli("-p", "bioscara-arm", "-t", target, "detect", "--json")
+    assert result.exit_code == 3, result.stderr
+    report = json.loads(result.stdout)
+    assert report["found"] == [] and report["missing"] == ["j1", "j2", "j3", "j4"]

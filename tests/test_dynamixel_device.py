@@ -213,3 +213,28 @@ def test_a_move_with_torque_already_on_follows_the_servos_drive_mode(cli, mh5_bu
     refused = cli("-p", "mh5", *targets, "jog", "head_p", "5deg", "--yes")
     assert refused.exit_code == 5  # inverse in the profile, not reversed in the servo
     assert "turns the other way" in refused.stderr
+
+
+def test_a_silent_bus_is_unreachable(cli, mh5_buses):
+    mh5_buses["lower_body"].bus.faults.no_reply = True
+    result = cli("-p", "mh5", *mh5_targets(mh5_buses), "identify")
+    assert result.exit_code == 4
+    assert "no servo of 'lower_body' answers" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_detect_finds_a_whole_bus_at_another_baud_rate(cli):
+    from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+
+    bus = DynamixelBus([Servo(i) for i in (11, 12)], baud=2_000_000)
+    for servo in bus.servos.values():
+        servo.set("Baud Rate", 3)  # 1 Mbps
+    upper = DynamixelBus([Servo(52)], baud=2_000_000)
+    with DynamixelPtyServer(bus) as lower_pty, DynamixelPtyServer(upper) as upper_pty:
+        targets = ["-t", f"lower_body=serial://{lower_pty.port}?baud=2000000",
+                   "-t", f"upper_body=serial://{upper_pty.port}?baud=2000000",
+                   "-t", "i2c=i2c:///dev/i2c-99"]
+        assert cli("-p", "mh5", *targets, "identify").exit_code == 4  # nothing at 2 Mbps
+        result = cli("-p", "mh5", *targets, "detect", "--json")
+    assert result.exit_code == 3, result.stderr
+    lower = json.loads(result.stdout)["buses"]["lower_body"]
+    assert lower["wrong_baud"] == {"11": 1_000_000, "12": 1_000_000}

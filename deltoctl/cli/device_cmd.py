@@ -15,12 +15,13 @@ AllowMismatch = Annotated[bool, typer.Option(
 
 
 def open_session(opts: Options, allow_model_mismatch: bool = False,  # type: ignore[no-untyped-def]
-                 profile: Any = None):
-    """A session on the selected profile (pass ``profile`` when the verb loaded it already)."""
+                 profile: Any = None, probe: bool = False):
+    """A session on the selected profile (pass ``profile`` when the verb loaded it already;
+    ``probe`` for a verb that looks at a bus where nothing may answer)."""
     from deltoctl.core.session import Session
 
     return Session(profile or opts.load_profile(), opts.target, sim=opts.sim,
-                   allow_model_mismatch=allow_model_mismatch)
+                   allow_model_mismatch=allow_model_mismatch, probe=probe)
 
 
 def finish(session: Any) -> None:
@@ -118,7 +119,7 @@ def _identity_tables(ident: dict, title: str | None = None) -> None:
 def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
     """What is on the device or bus (sensors, GPIO, servos, I2C devices), against the profile."""
     opts = options(ctx)
-    with open_session(opts, allow_model_mismatch) as session:
+    with open_session(opts, allow_model_mismatch, probe=True) as session:
         result = session.driver.detect()
     checks = result["checks"]
     if opts.json:

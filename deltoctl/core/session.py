@@ -32,8 +32,11 @@ class Session:
     """``with Session(profile, opts) as s: s.driver.read()``."""
 
     def __init__(self, profile: Profile, targets: list[str], sim: bool = False,
-                 allow_model_mismatch: bool = False):
+                 allow_model_mismatch: bool = False, probe: bool = False):
+        """``probe``: a bus where nothing answers is still opened (for ``detect``, which is
+        what a technician runs then); otherwise it is unreachable."""
         self.profile = profile
+        self.probe = probe
         self.hw = self._driven_block(profile)
         self.sim = None
         self.lifecycle = Lifecycle()
@@ -46,7 +49,7 @@ class Session:
             from deltoctl.drivers.bioscara.driver import BioscaraDriver
 
             smbus, self.url = self._i2c(self.hw, targets, sim)
-            self.driver = BioscaraDriver(profile, self.hw, self.url, smbus)
+            self.driver = BioscaraDriver(profile, self.hw, self.url, smbus, probe)
             return
         if family == "generic":  # simulated only: no transport
             from deltoctl.drivers.generic.driver import GenericDriver
@@ -107,7 +110,7 @@ class Session:
                 url = f"serial://{server.port}?baud=1000000"
             else:
                 url = resolve_target(self.profile, hw, targets)
-            drivers.append(DynamixelDriver(self.profile, hw, url))
+            drivers.append(DynamixelDriver(self.profile, hw, url, self.probe))
         self.sim = _Servers(servers) if servers else None
         self.url = ", ".join(d.url for d in drivers)
         self.driver = BusesDriver(drivers)

@@ -166,8 +166,9 @@ class BioscaraDriver(Driver):
     family = "bioscara"
     extra_states = ("flags",)  # recorded beside each joint's state interfaces
 
-    def __init__(self, profile: Profile, hw: Hardware, url: str, smbus=None) -> None:  # type: ignore[no-untyped-def]
-        self.profile, self.hw, self.url = profile, hw, url
+    def __init__(self, profile: Profile, hw: Hardware, url: str, smbus=None,  # type: ignore[no-untyped-def]
+                 probe: bool = False) -> None:
+        self.profile, self.hw, self.url, self.probe = profile, hw, url, probe
         self._smbus = smbus  # an SMBus-compatible object (a simulator); else opened from url
         self.bus: I2CBus | None = None
         self.joints: dict[str, Joint] = {}
@@ -197,9 +198,10 @@ class BioscaraDriver(Driver):
                 joint.offset = joint.read_home_offset()
             self.present.append(joint)
         missing = [j.name for j in self.joints.values() if j not in self.present]
-        if not self.present:
+        if not self.present and not self.probe:
             raise Unreachable(f"no joint of {self.hw.name!r} answers on {self.url}",
-                              hint="check the joints' power and the I2C wiring")
+                              hint="check the joints' power and the I2C wiring, then run "
+                                   "deltoctl detect to see what the bus holds")
         if missing:
             self.warnings.append(f"no answer from {', '.join(missing)}")
         self.connected = True

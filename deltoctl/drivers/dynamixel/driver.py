@@ -35,8 +35,8 @@ LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}
 class DynamixelDriver(Driver):
     family = "dynamixel"
 
-    def __init__(self, profile: Profile, hw: Hardware, url: str) -> None:
-        self.profile, self.hw, self.url = profile, hw, url
+    def __init__(self, profile: Profile, hw: Hardware, url: str, probe: bool = False) -> None:
+        self.profile, self.hw, self.url, self.probe = profile, hw, url, probe
         self.joints = {j.address: j for j in hw.joints if j.address is not None}
         self.port = None
         self.reader = codec.PacketReader()
@@ -185,9 +185,10 @@ class DynamixelDriver(Driver):
             if found is not None:
                 self.present[device_id] = found
         missing = [self.joints[i].name for i in self.joints if i not in self.present]
-        if not self.present:
-            raise DeviceError(f"no servo of {self.hw.name!r} answers on {self.url}",
-                              hint="check power, the baud rate and the IDs")
+        if not self.present and not self.probe:
+            raise Unreachable(f"no servo of {self.hw.name!r} answers on {self.url}",
+                              hint="check power, the baud rate and the IDs (deltoctl detect "
+                                   "scans the other baud rates)")
         if missing:
             self.warnings.append(f"{self.hw.name}: no answer from {', '.join(missing)}")
         self.connected = True
