@@ -6,14 +6,17 @@
         assert result.exit_code == 0
 
 ``deltoctl_sim(profile, firmware="3.0", short_version=False, model_id=None)`` returns the
-target URL (``tcp://`` for a Delto gripper, ``i2c+tcp://`` for the Bioscara arm's I2C bus; the
-firmware options are the gripper's); the device is stopped when the test ends. Kept
-import-light: pytest loads this module in every run, deltoctl's own modules are imported only
-when the fixture is used.
+target URL of a one-bus device (``tcp://`` for a Delto gripper, ``i2c+tcp://`` for the
+Bioscara arm); ``deltoctl_sim.buses(profile, **faults)`` returns ``{bus: URL}`` for any
+profile (the MH5: two serial buses and the I2C bus), with the faults of ``deltoctl sim serve``
+(``missing=("head_y",)``, ``wrong_baud=…``, ``pace=True``, ``who_am_i=0x12`` …). The devices
+stop when the test ends. Kept import-light: pytest loads this module in every run, deltoctl's
+own modules are imported only when the fixture is used.
 """
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable, Iterator
 
 import pytest
@@ -21,28 +24,23 @@ import pytest
 
 @pytest.fixture
 def deltoctl_sim() -> Iterator[Callable[..., str]]:
-    servers = []
+    with contextlib.ExitStack() as stack:
 
-    def start(profile: str, firmware: str = "3.0", short_version: bool = False,
-              model_id: int | None = None) -> str:
-        from deltoctl.profile.catalog import load_profile
+        def buses(profile: str, **faults: object) -> dict[str, str]:
+            from deltoctl.profile.catalog import load_profile
+            from deltoctl.sim.serve import ServeOptions, serve_profile
 
-        prof = load_profile(profile)
-        if any(prof.family_of(h) == "bioscara" for h in prof.hardware):
-            from deltoctl.sim.i2c_bus import I2CSocketServer, bus_for_profile
+            options = ServeOptions(**faults)  # type: ignore[arg-type]
+            return serve_profile(stack, load_profile(profile), options)["buses"]
 
-            i2c = I2CSocketServer(bus_for_profile(prof)).start()
-            servers.append(i2c)
-            return i2c.url
-        from deltoctl.sim.delto import DeltoServer, firmware_for_profile
+        def start(profile: str, firmware: str = "3.0", short_version: bool = False,
+                  model_id: int | None = None) -> str:
+            served = buses(profile, firmware=firmware, short_version=short_version,
+                           model_id=model_id)
+            if len(served) != 1:
+                raise ValueError(f"{profile} has {len(served)} buses "
+                                 f"({', '.join(served)}): use deltoctl_sim.buses({profile!r})")
+            return next(iter(served.values()))
 
-        major, minor = (int(x) for x in firmware.split("."))
-        device = firmware_for_profile(prof, model_id=model_id, firmware=(major, minor),
-                                      short_version=short_version)
-        server = DeltoServer(device).start()
-        servers.append(server)
-        return server.endpoint
-
-    yield start
-    for server in servers:
-        server.close()
+        start.buses = buses  # type: ignore[attr-defined]
+        yield start

@@ -23,3 +23,18 @@ def test_deltoctl_sim_fixture_serves_an_i2c_arm(deltoctl_sim):
                                     "-j", "j3", "--json"])
     assert home.exit_code == 0, home.stderr
     assert json.loads(home.stdout)["homed"] == {"j3": "homed"}
+
+
+def test_deltoctl_sim_buses_serves_every_bus_with_faults(deltoctl_sim):
+    buses = deltoctl_sim.buses("mh5", missing=("head_y",))
+    assert set(buses) == {"upper_body", "lower_body", "i2c"}
+    targets = [a for bus, url in buses.items() for a in ("-t", f"{bus}={url}")]
+    result = CliRunner().invoke(app, ["-p", "mh5", *targets, "detect", "--json"])
+    assert result.exit_code == 3  # head_y is missing
+    assert json.loads(result.stdout)["buses"]["upper_body"]["missing"] == [52]
+    try:
+        deltoctl_sim("mh5")
+    except ValueError as exc:
+        assert "deltoctl_sim.buses('mh5')" in str(exc)
+    else:
+        raise AssertionError("a three-bus profile has no single target")
