@@ -1,0 +1,1 @@
+"""The benchmarks behind ``deltoctl bench``: each measures and returns its figures."""

@@ -1,0 +1,115 @@
+"""``bench dynamixel``: sync reads of an emulated bus in another process — deltoctl's driver
+against dynamixel-sdk's GroupSyncRead, then deltoctl against the wire's limit, paced."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+_SERVE_BUS = """
+import sys
+from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+servos = [Servo(i) for i in range(1, {n} + 1)]
+for servo in servos:
+    servo.set("Return Delay Time", 0)  # as the MH5 sets it
+server = DynamixelPtyServer(DynamixelBus(servos), pace={pace}).start()
+print(server.port, flush=True)
+sys.stdin.read()
+"""
+
+
+def _bus_process(servos: int, pace: bool):  # type: ignore[no-untyped-def]
+    """An emulated bus of N servos in another process; returns (process, pty path)."""
+    proc = subprocess.Popen([sys.executable, "-c", _SERVE_BUS.format(n=servos, pace=pace)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    return proc, proc.stdout.readline().strip() if proc.stdout else ""
+
+
+def _stop(proc) -> None:  # type: ignore[no-untyped-def]
+    if proc.stdin:
+        proc.stdin.close()
+    proc.wait(timeout=5)
+
+
+def _deltoctl_rate(pty: str, servos: int, baud: int, duration: float) -> tuple[float, int]:
+    """Sync reads (126, 10) per second through deltoctl's driver, and its errors."""
+    from deltoctl.drivers.dynamixel.driver import DynamixelDriver
+    from deltoctl.profile.model import Component, Hardware, Profile
+
+    hw = Hardware("bus", family="dynamixel", joints=[
+        Component("joint", f"j{i}", address=i) for i in range(1, servos + 1)])
+    driver = DynamixelDriver(Profile("bench", hardware=[hw]), hw, f"serial://{pty}?baud={baud}")
+    driver.configure()
+    ids = list(range(1, servos + 1))
+    errors = driver.stats["errors"]
+    cycles, start = 0, time.perf_counter()
+    while time.perf_counter() - start < duration:
+        driver._sync_read(126, 10, ids)
+        cycles += 1
+    rate = cycles / (time.perf_counter() - start)
+    errors = driver.stats["errors"] - errors
+    driver.cleanup()
+    return rate, errors
+
+
+def _sdk_rate(pty: str, servos: int, duration: float) -> tuple[float, int] | None:
+    """The same with dynamixel-sdk's GroupSyncRead (None when it is not installed)."""
+    try:
+        import dynamixel_sdk as sdk
+    except ImportError:
+        return None
+    port = sdk.PortHandler(pty)
+    port.openPort()
+    port.setBaudRate(1000000)
+    group = sdk.GroupSyncRead(port, sdk.PacketHandler(2.0), 126, 10)
+    for i in range(1, servos + 1):
+        group.addParam(i)
+    cycles, failed, start = 0, 0, time.perf_counter()
+    while time.perf_counter() - start < duration:
+        failed += group.txRxPacket() != sdk.COMM_SUCCESS
+        cycles += 1
+    rate = cycles / (time.perf_counter() - start)
+    port.closePort()
+    return rate, failed
+
+
+def _wire_limit(servos: int, baud: int) -> float:
+    """Sync reads per second the wire allows: the instruction and every status, 10 bits a
+    byte, no return delay."""
+    from deltoctl.drivers.dynamixel import codec
+
+    ids = list(range(1, servos + 1))
+    sent = len(codec.sync_read(126, 10, ids)) + sum(len(codec.status(i, 0, bytes(10)))
+                                                    for i in ids)
+    return baud / (10 * sent)
+
+
+def measure(servos: int, duration: float) -> dict:
+    """deltoctl against dynamixel-sdk on one unpaced bus; then deltoctl on a bus paced at
+    1 and 2 Mbps against the wire's limit."""
+    proc, pty = _bus_process(servos, pace=False)
+    try:
+        ours, errors = _deltoctl_rate(pty, servos, 1_000_000, duration)
+        theirs = _sdk_rate(pty, servos, duration)
+    finally:
+        _stop(proc)
+    results: dict = {"servos": servos, "deltoctl_hz": round(ours, 1), "deltoctl_errors": errors}
+    if theirs is not None:
+        results.update({"dynamixel_sdk_hz": round(theirs[0], 1),
+                        "dynamixel_sdk_errors": theirs[1], "ratio": round(ours / theirs[0], 2),
+                        "goal_ratio_ge_2": ours >= 2 * theirs[0]})
+    paced = {}
+    for baud in (1_000_000, 2_000_000):
+        proc, pty = _bus_process(servos, pace=True)
+        try:
+            rate, errors = _deltoctl_rate(pty, servos, baud, duration)
+        finally:
+            _stop(proc)
+        limit = _wire_limit(servos, baud)
+        paced[str(baud)] = {"deltoctl_hz": round(rate, 1), "errors": errors,
+                            "wire_limit_hz": round(limit, 1),
+                            "fraction": round(rate / limit, 3),
+                            "goal_ge_0_9": rate >= 0.9 * limit}
+    results["paced"] = paced
+    return results
