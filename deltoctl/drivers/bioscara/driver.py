@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 from deltoctl.core.driver import Driver
 from deltoctl.drivers.bioscara import codec
-from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Refused, Unreachable
+from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Refused
 from deltoctl.profile.model import Component, Hardware, Profile
 from deltoctl.transport.i2c import I2CBus, NoAnswer
 
@@ -197,13 +197,10 @@ class BioscaraDriver(Driver):
             if joint.homed:  # the offset survived in the joint while it stayed powered
                 joint.offset = joint.read_home_offset()
             self.present.append(joint)
-        missing = [j.name for j in self.joints.values() if j not in self.present]
-        if not self.present and not self.probe:
-            raise Unreachable(f"no joint of {self.hw.name!r} answers on {self.url}",
-                              hint="check the joints' power and the I2C wiring, then run "
-                                   "deltoctl detect to see what the bus holds")
-        if missing:
-            self.warnings.append(f"no answer from {', '.join(missing)}")
+        self.roll_call([j.name for j in self.joints.values() if j not in self.present],
+                       bool(self.present), "joint",
+                       "check the joints' power and the I2C wiring, then run deltoctl detect "
+                       "to see what the bus holds")
         self.connected = True
         self.identity = _Identity(self)
         return self.identity

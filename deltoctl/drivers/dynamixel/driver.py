@@ -184,13 +184,10 @@ class DynamixelDriver(Driver):
             found = self.ping(device_id)
             if found is not None:
                 self.present[device_id] = found
-        missing = [self.joints[i].name for i in self.joints if i not in self.present]
-        if not self.present and not self.probe:
-            raise Unreachable(f"no servo of {self.hw.name!r} answers on {self.url}",
-                              hint="check power, the baud rate and the IDs (deltoctl detect "
-                                   "scans the other baud rates)")
-        if missing:
-            self.warnings.append(f"{self.hw.name}: no answer from {', '.join(missing)}")
+        self.roll_call([j.name for i, j in self.joints.items() if i not in self.present],
+                       bool(self.present), "servo",
+                       "check power, the baud rate and the IDs (deltoctl detect scans the "
+                       "other baud rates)")
         self.connected = True
         self.identity = _Identity(self)
         return self.identity
