@@ -1,8 +1,10 @@
 """ROS 2 CDR (little-endian, XCDR1) encoding for the recorder's fixed-shape messages.
 
 A recorder's messages keep their shape for a whole recording: the same names, the same array
-lengths; only stamps and values change. ``CdrTemplate`` works out the layout and alignment once,
-folds every constant field into bytes, and packs each message with a few precompiled structs.
+lengths; only stamps and values change. ``CdrTemplate`` works out the layout and alignment once
+and compiles the whole message into one struct: every constant part is a byte string field,
+every changing one a named value (an interface name, or ``SEC``/``NANOSEC`` for the stamp).
+The recorder fills it with one ``itemgetter`` over a row of values and one ``pack``.
 ``CdrWriter`` encodes free-form messages (diagnostics, once a second) field by field.
 """
 
@@ -11,6 +13,7 @@ from __future__ import annotations
 import struct
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR, little-endian
+SEC, NANOSEC = "@sec", "@nanosec"  # the stamp's fields in a template
 
 
 def _string(text: str) -> bytes:
@@ -19,48 +22,33 @@ def _string(text: str) -> bytes:
 
 
 class CdrTemplate:
-    """Build once: ``.const_*`` for fixed fields, ``.var(code, count)`` for changing ones."""
+    """Build with ``.const_*``, ``.var*`` and ``.header``; ``.fields`` lists what ``.layout``
+    packs, in order: bytes for a constant, a name for a value."""
 
     def __init__(self) -> None:
-        self.parts: list[bytes | tuple[struct.Struct, int]] = []
-        self._const = bytearray(ENCAPSULATION)
-        self._fmt = ""
-        self._items = 0
+        self.fields: list[bytes | str] = [ENCAPSULATION]
+        self._tokens = ["4s"]
         self._pos = 0  # offset from the start of the payload, after the encapsulation
+        self.layout: struct.Struct | None = None
 
-    def _pad(self, align: int) -> None:
+    def _const(self, data: bytes, align: int) -> CdrTemplate:
         pad = (-self._pos) % align
-        if pad:
-            if self._fmt:
-                self._fmt += f"{pad}x"
-            else:
-                self._const += bytes(pad)
-            self._pos += pad
-
-    def _flush_var(self) -> None:
-        if self._fmt:
-            self.parts.append((struct.Struct("<" + self._fmt), self._items))
-            self._fmt, self._items = "", 0
-
-    def _flush_const(self) -> None:
-        if self._const:
-            self.parts.append(bytes(self._const))
-            self._const = bytearray()
+        if isinstance(self.fields[-1], bytes):  # zero padding joins the constant before it
+            self.fields[-1] += bytes(pad) + data
+            self._tokens[-1] = f"{len(self.fields[-1])}s"
+        else:
+            if pad:
+                self._tokens.append(f"{pad}x")
+            self.fields.append(data)
+            self._tokens.append(f"{len(data)}s")
+        self._pos += pad + len(data)
+        return self
 
     def const_u32(self, value: int) -> CdrTemplate:
-        self._pad(4)
-        self._flush_var()
-        self._const += struct.pack("<I", value)
-        self._pos += 4
-        return self
+        return self._const(struct.pack("<I", value), 4)
 
     def const_string(self, text: str) -> CdrTemplate:
-        self._pad(4)
-        self._flush_var()
-        data = _string(text)
-        self._const += data
-        self._pos += len(data)
-        return self
+        return self._const(_string(text), 4)
 
     def const_strings(self, texts: list[str]) -> CdrTemplate:
         self.const_u32(len(texts))
@@ -70,46 +58,31 @@ class CdrTemplate:
 
     def const_doubles(self, values: list[float]) -> CdrTemplate:
         """A fixed-size float64[N] that never changes (no length prefix)."""
-        self._pad(8)
-        self._flush_var()
-        self._const += struct.pack(f"<{len(values)}d", *values)
-        self._pos += 8 * len(values)
-        return self
+        return self._const(struct.pack(f"<{len(values)}d", *values), 8)
 
-    def var(self, code: str, count: int = 1) -> CdrTemplate:
+    def var(self, code: str, names: list[str]) -> CdrTemplate:
+        """Values of one struct ``code`` each, filled from ``names``."""
         size = struct.calcsize(code)
-        self._pad(size)
-        self._flush_const()
-        self._fmt += f"{count}{code}" if count != 1 else code
-        self._items += count
-        self._pos += size * count
+        pad = (-self._pos) % size
+        if pad:
+            self._tokens.append(f"{pad}x")
+        self._tokens.append(f"{len(names)}{code}")
+        self.fields += names
+        self._pos += pad + size * len(names)
         return self
 
-    def var_doubles(self, count: int) -> CdrTemplate:
+    def var_doubles(self, names: list[str]) -> CdrTemplate:
         """A float64[] of a fixed length: the count is constant, the values are not."""
-        self.const_u32(count)
-        return self.var("d", count) if count else self
+        self.const_u32(len(names))
+        return self.var("d", names) if names else self
 
     def header(self, frame_id: str = "") -> CdrTemplate:
         """std_msgs/Header: a changing stamp (sec, nanosec) and a fixed frame_id."""
-        return self.var("i").var("I").const_string(frame_id)
+        return self.var("i", [SEC]).var("I", [NANOSEC]).const_string(frame_id)
 
     def done(self) -> CdrTemplate:
-        self._flush_var()
-        self._flush_const()
+        self.layout = struct.Struct("<" + "".join(self._tokens))
         return self
-
-    def pack(self, values: tuple | list) -> bytes:
-        out = []
-        i = 0
-        for part in self.parts:
-            if isinstance(part, bytes):
-                out.append(part)
-            else:
-                layout, count = part
-                out.append(layout.pack(*values[i:i + count]))
-                i += count
-        return b"".join(out)
 
 
 class CdrWriter:

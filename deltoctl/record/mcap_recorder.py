@@ -6,18 +6,16 @@ temperatures included, as ros2_control's broadcaster publishes them), /<sensor>/
 orientation, per IMU), /gpio (control_msgs/DynamicInterfaceGroupValues, with
 system/connection_status), /diagnostics (link events and loop statistics). The resolved
 profile and the identify result are stored as metadata. ``close()`` always leaves a valid,
-indexed file. Messages are CDR-encoded from precompiled layouts (record/cdr.py): the recorder
-runs inside the cycle loop.
+indexed file. Messages are CDR-encoded from precompiled layouts (record/cdr.py).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from operator import itemgetter
 from typing import Any, BinaryIO
 
 from deltoctl.profile.model import Profile
-from deltoctl.record.cdr import CdrTemplate, CdrWriter
+from deltoctl.record.cdr import NANOSEC, SEC, CdrTemplate, CdrWriter
 from deltoctl.record.ros2_msgs import MSGDEFS
 
 FT_AXES = ("force.x", "force.y", "force.z", "torque.x", "torque.y", "torque.z")
@@ -30,20 +28,11 @@ UNKNOWN_COVARIANCE = [0.0] * 9
 NO_ORIENTATION = [-1.0] + [0.0] * 8  # REP 145: the IMU gives no orientation estimate
 
 
-def _imu_template(frame_id: str) -> CdrTemplate:
-    t = CdrTemplate().header(frame_id).var("d", 4).const_doubles(NO_ORIENTATION)
-    t.var("d", 3).const_doubles(UNKNOWN_COVARIANCE)
-    return t.var("d", 3).const_doubles(UNKNOWN_COVARIANCE).done()
-
-
-def _picker(keys: list[str]) -> Callable[[dict], tuple]:
-    """Values of ``keys`` from a dict as a tuple, at C speed (KeyError when one is missing)."""
-    if len(keys) > 1:
-        return itemgetter(*keys)
-    if keys:
-        key = keys[0]
-        return lambda values: (values[key],)
-    return lambda values: ()
+def _imu_template(sensor: str, frame_id: str) -> CdrTemplate:
+    fields = [f"{sensor}/{k}" for k in IMU_FIELDS]
+    t = CdrTemplate().header(frame_id).var("d", fields[:4]).const_doubles(NO_ORIENTATION)
+    t.var("d", fields[4:7]).const_doubles(UNKNOWN_COVARIANCE)
+    return t.var("d", fields[7:]).const_doubles(UNKNOWN_COVARIANCE).done()
 
 
 class McapRecorder:
@@ -69,46 +58,44 @@ class McapRecorder:
         for name, data in metadata.items():
             self.writer.add_metadata(name, data)
         self._plan()
+        self.keys: list[str] = []
+        self.set_keys([])
 
     def _plan(self) -> None:
-        """Per topic: its message layout and the interface names that fill it, in order."""
+        """Per topic: its message layout, with the interface names that fill it."""
         joints = [j for j in self.profile.joints() if j.state("position")]
         names = [j.name for j in joints]
-        self.topics: list[tuple[str, CdrTemplate, list[str], Callable]] = []
-        n = len(names)
+        self.topics: list[tuple[str, CdrTemplate]] = []
         js = CdrTemplate().header().const_strings(names)
-        js.var_doubles(n).var_doubles(n).var_doubles(n).done()
-        self._add("/joint_states", "sensor_msgs/msg/JointState", js,
-                  [f"{j}/{k}" for k in ("position", "velocity", "effort") for j in names])
-        dyn = CdrTemplate().header().const_strings(names).const_u32(n)
-        keys = []
+        for kind in ("position", "velocity", "effort"):
+            js.var_doubles([f"{j}/{kind}" for j in names])
+        self._add("/joint_states", "sensor_msgs/msg/JointState", js.done())
+        dyn = CdrTemplate().header().const_strings(names).const_u32(len(names))
         for j in joints:
             itfs = [i.name for i in j.state_interfaces] + list(self.extra_states)
-            dyn.const_strings(itfs).var_doubles(len(itfs))
-            keys += [f"{j.name}/{i}" for i in itfs]
-        self._add("/dynamic_joint_states", "control_msgs/msg/DynamicJointState", dyn.done(), keys)
+            dyn.const_strings(itfs).var_doubles([f"{j.name}/{i}" for i in itfs])
+        self._add("/dynamic_joint_states", "control_msgs/msg/DynamicJointState", dyn.done())
         for _, sensor in self.profile.components():
+            frame_id = sensor.params.get("frame_id", sensor.name)
             if sensor.kind == "sensor" and sensor.state("force.x"):
-                wrench = CdrTemplate().header(sensor.params.get("frame_id", sensor.name))
-                wrench.var("d", 6).done()
-                self._add(f"/{sensor.name}/wrench", "geometry_msgs/msg/WrenchStamped", wrench,
-                          [f"{sensor.name}/{axis}" for axis in FT_AXES])
+                wrench = CdrTemplate().header(frame_id)
+                wrench.var("d", [f"{sensor.name}/{axis}" for axis in FT_AXES])
+                self._add(f"/{sensor.name}/wrench", "geometry_msgs/msg/WrenchStamped",
+                          wrench.done())
             if sensor.kind == "sensor" and sensor.state("angular_velocity.x"):
                 self._add(f"/{sensor.name}/data_raw", "sensor_msgs/msg/Imu",
-                          _imu_template(sensor.params.get("frame_id", sensor.name)),
-                          [f"{sensor.name}/{k}" for k in IMU_FIELDS])
+                          _imu_template(sensor.name, frame_id))
         groups = [(g.name, [i.name for i in g.state_interfaces])
                   for _, g in self.profile.components() if g.kind == "gpio"]
         groups.append(("system", ["connection_status"]))
         gpio = CdrTemplate().header().const_strings([g for g, _ in groups]).const_u32(len(groups))
-        for _, itfs in groups:
-            gpio.const_strings(itfs).var_doubles(len(itfs))
-        self._add("/gpio", "control_msgs/msg/DynamicInterfaceGroupValues", gpio.done(),
-                  [f"{g}/{i}" for g, itfs in groups for i in itfs])
+        for group, itfs in groups:
+            gpio.const_strings(itfs).var_doubles([f"{group}/{i}" for i in itfs])
+        self._add("/gpio", "control_msgs/msg/DynamicInterfaceGroupValues", gpio.done())
 
-    def _add(self, topic: str, schema: str, template: CdrTemplate, keys: list[str]) -> None:
+    def _add(self, topic: str, schema: str, template: CdrTemplate) -> None:
         self._channel(topic, schema)
-        self.topics.append((topic, template, keys, _picker(keys)))
+        self.topics.append((topic, template))
 
     def _channel(self, topic: str, schema: str) -> int:
         if topic not in self.channels:
@@ -127,16 +114,42 @@ class McapRecorder:
     def counts(self) -> dict[str, int]:
         return {t: n for t, n in self.sequence.items() if n}
 
+    def set_keys(self, keys: list[str]) -> None:
+        """The interfaces, in the order ``write_row`` gets their values. Each topic's fields
+        become positions in a row: the values, then NaN (for a name not among the keys), the
+        stamp, and the templates' constant bytes."""
+        at = {key: i for i, key in enumerate(keys)}
+        missing = len(keys)
+        at[SEC], at[NANOSEC] = missing + 1, missing + 2
+        constants: list[bytes] = []
+        self._rows = []
+        for topic, template in self.topics:
+            picks = []
+            for f in template.fields:
+                if isinstance(f, bytes):
+                    picks.append(missing + 3 + len(constants))
+                    constants.append(f)
+                else:
+                    picks.append(at.get(f, missing))
+            self._rows.append((topic, template.layout.pack, itemgetter(*picks)))
+        self._constants = constants
+        self._status_at = at.get("system/connection_status")
+        self.keys = list(keys)
+
     def write(self, values: dict[str, float], t_ns: int) -> None:
-        get = values.get
-        stamp = (t_ns // 1_000_000_000, t_ns % 1_000_000_000)
-        for topic, template, keys, getter in self.topics:
-            try:
-                picked = getter(values)  # C speed; a missing value falls back to NaN below
-            except KeyError:
-                picked = [get(k, NAN) for k in keys]
-            self._emit(topic, template.pack((*stamp, *picked)), t_ns)
-        status = get("system/connection_status", NAN)
+        if len(values) != len(self.keys) or list(values) != self.keys:
+            self.set_keys(list(values))
+        self.write_row(list(values.values()), t_ns)
+
+    def write_row(self, row: list[float], t_ns: int) -> None:
+        """One cycle's values in ``set_keys`` order (the list is extended in place)."""
+        row += (NAN, t_ns // 1_000_000_000, t_ns % 1_000_000_000)
+        row += self._constants
+        for topic, pack, pick in self._rows:
+            self._emit(topic, pack(*pick(row)), t_ns)
+        if self._status_at is None:
+            return
+        status = row[self._status_at]
         if self.connected is not None and status != self.connected:
             lost = status == 0.0
             self.link_losses += lost

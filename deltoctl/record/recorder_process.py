@@ -1,6 +1,6 @@
 """Recording in a process of its own.
 
-The cycle loop hands each cycle's values over a pipe (a few microseconds); a child process
+The cycle loop hands its values over a pipe, a few cycles at a time; a child process
 encodes them (record/mcap_recorder.py) and writes the MCAP file. Chunk compression and
 indexing then never delay a cycle, and the file is closed validly even when the loop's
 process dies: the child ignores Ctrl-C and SIGTERM and finishes the file when the pipe closes.
@@ -13,6 +13,8 @@ import multiprocessing
 import os
 import pickle
 import signal
+import struct
+import time
 from array import array
 from operator import itemgetter
 from pathlib import Path
@@ -21,6 +23,10 @@ from typing import Any
 from deltoctl.profile.model import Profile
 
 NAN = float("nan")
+# Cycles go to the child in batches: at least every 5 ms (a slow loop: every cycle), at most
+# 64 KiB at a time. A killed loop loses at most the last 5 ms.
+BATCH_SECONDS = 0.005
+BATCH_BYTES = 1 << 16
 
 
 def _nothing(values: dict) -> tuple:
@@ -62,6 +68,8 @@ class RecorderProcess:
         results_out.close()
         self.keys: list[str] = []
         self._pick = _nothing
+        self._batch = bytearray(b"v")  # cycles not yet handed over: t_ns and values each
+        self._flushed = time.monotonic()
         self.counts: dict[str, int] = {}
         self.link_losses = 0
         self.cpu_seconds = 0.0  # the child's, once closed
@@ -73,18 +81,32 @@ class RecorderProcess:
         except KeyError:  # an interface went missing: NaN for it this cycle
             picked = [values.get(k, NAN) for k in self.keys]
         if len(values) != len(self.keys):  # the set of interfaces changed (the first cycle)
+            self._flush()
             self.keys = list(values)
             self._pick = itemgetter(*self.keys) if len(self.keys) > 1 else \
                 (lambda v, k=self.keys[0]: (v[k],))
             self._pipe.send_bytes(b"k" + pickle.dumps(self.keys))
             picked = self._pick(values)
-        self._pipe.send_bytes(b"v" + t_ns.to_bytes(8, "little") + array("d", picked).tobytes())
+        batch = self._batch
+        batch += t_ns.to_bytes(8, "little")
+        batch += array("d", picked).tobytes()
+        now = time.monotonic()
+        if now - self._flushed >= BATCH_SECONDS or len(batch) >= BATCH_BYTES:
+            self._flush(now)
+
+    def _flush(self, now: float | None = None) -> None:
+        """Hand the cycles gathered so far to the child (one write for several cycles)."""
+        if len(self._batch) > 1:
+            self._pipe.send_bytes(self._batch)
+            del self._batch[1:]
+        self._flushed = time.monotonic() if now is None else now
 
     def diagnostic(self, t_ns: int, level: int, name: str, message: str,
                    values: dict[str, Any]) -> None:
         self.diagnostics(t_ns, [(level, name, message, values)])
 
     def diagnostics(self, t_ns: int, statuses: list[tuple[int, str, str, dict[str, Any]]]) -> None:
+        self._flush()
         self._pipe.send_bytes(b"d" + pickle.dumps((t_ns, statuses)))
 
     def close(self, loop_summary: dict[str, Any] | None = None) -> None:
@@ -93,6 +115,7 @@ class RecorderProcess:
             return
         self.closed = True
         with contextlib.suppress(OSError):  # the child may be gone already
+            self._flush()
             self._pipe.send_bytes(b"c" + pickle.dumps(loop_summary))
         self._pipe.close()
         try:
@@ -107,8 +130,6 @@ class RecorderProcess:
 def _record(pipe, parent_end, results, path: str, profile: Profile,  # type: ignore[no-untyped-def]
             metadata: dict, extra_states: tuple[str, ...]) -> None:
     """The child: values in, MCAP out, until told to close or the pipe closes."""
-    import time
-
     parent_end.close()  # else the pipe would never close while this process holds its end
     from deltoctl.record.mcap_recorder import McapRecorder
 
@@ -116,7 +137,7 @@ def _record(pipe, parent_end, results, path: str, profile: Profile,  # type: ign
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     with contextlib.suppress(OSError, AttributeError):
         os.nice(10)  # the loop and the device come first; the pipe holds the backlog
-    keys: list[str] = []
+    row = struct.Struct("<q")
     summary = None
     with open(path, "wb") as stream:
         recorder = McapRecorder(stream, profile, metadata, extra_states)
@@ -125,11 +146,13 @@ def _record(pipe, parent_end, results, path: str, profile: Profile,  # type: ign
                 msg = pipe.recv_bytes()
                 kind = msg[:1]
                 if kind == b"v":
-                    values = array("d")
-                    values.frombytes(msg[9:])
-                    recorder.write(dict(zip(keys, values)), int.from_bytes(msg[1:9], "little"))
+                    for at in range(1, len(msg), row.size):
+                        t_ns, *values = row.unpack_from(msg, at)
+                        recorder.write_row(values, t_ns)
                 elif kind == b"k":
                     keys = pickle.loads(msg[1:])
+                    recorder.set_keys(keys)
+                    row = struct.Struct(f"<q{len(keys)}d")
                 elif kind == b"d":
                     recorder.diagnostics(*pickle.loads(msg[1:]))
                 elif kind == b"c":

@@ -16,6 +16,7 @@ import socketserver
 import threading
 import time
 from dataclasses import dataclass, field
+from operator import add, sub
 
 from deltoctl.drivers.delto import codec
 from deltoctl.drivers.delto.models import (
@@ -39,6 +40,8 @@ FT_NOISE = 0.02  # N (torques: 1/10 of it in N·m)
 FT_DRIFT = 0.005  # N/s, random walk of the sensor offset
 GRAVITY = (0.0, 0.0, -0.49)  # N on each fingertip (50 g)
 FT_OFFSET_FROM = (2, 3)  # firmware that added SET_FT_SENSOR_OFFSET
+TICK = 0.001  # s: the model moves in 1 ms steps, however often it is asked
+MAX_STEPS = 1000
 
 
 @dataclass
@@ -78,18 +81,31 @@ class DeltoFirmware:
         self.lock = threading.Lock()
         self.last_step = time.monotonic()
         self._drift_dt = 0.0
-        self._noise = [self.rng.gauss(0.0, 1.0) for _ in range(4099)]  # a prime-length cycle
+        gauss = [self.rng.gauss(0.0, 1.0) for _ in range(4099)]  # a prime-length cycle
+        scale = (FT_NOISE,) * 3 + (FT_NOISE / 10,) * 3
+        self._noise = [tuple(gauss[(at + k) % len(gauss)] * scale[k] for k in range(6))
+                       for at in range(len(gauss))]  # the six axes' noise from each start
         self._noise_at = 0
+        self._replies: dict[bytes, bytes] = {}  # this tick's GET_DATA replies, by request
 
     # -- simulated time ----------------------------------------------------------------------
     def advance(self, now: float | None = None) -> None:
+        """Bring the model up to ``now`` in whole ticks; a long gap is covered in at most
+        MAX_STEPS steps (at most 5 s of it)."""
         now = time.monotonic() if now is None else now
-        elapsed = min(now - self.last_step, 5.0)
-        self.last_step = now
-        steps = max(1, min(1000, int(elapsed / 0.001)))
-        dt = elapsed / steps
+        elapsed = now - self.last_step
+        if elapsed < TICK:
+            return
+        steps = int(elapsed / TICK)
+        if steps > MAX_STEPS:
+            steps, dt = MAX_STEPS, min(elapsed, 5.0) / MAX_STEPS
+            self.last_step = now
+        else:
+            dt = TICK
+            self.last_step += steps * TICK
         for _ in range(steps):
             self.step(dt)
+        self._replies.clear()  # a new sample
 
     def step(self, dt: float) -> None:
         for i in range(self.model.motors):
@@ -134,15 +150,19 @@ class DeltoFirmware:
                 mask = (1 << self.model.fingers) - 1
                 return codec.encode_version_reply(codec.VersionInfo(
                     self.model.id, self.firmware, sensor, mask))
-            if cmd == codec.GET_DATA:
-                codes = codec.decode_data_request(data)
-                return codec.encode_data_reply(self.record(), self.model, codes,
-                                               self.sensor_type)
+            if cmd == codec.GET_DATA:  # sampled once a tick: polled faster, the same sample
+                reply = self._replies.get(data)
+                if reply is None:
+                    codes = codec.decode_data_request(data)
+                    reply = self._replies[data] = codec.encode_data_reply(
+                        self.record(), self.model, codes, self.sensor_type)
+                return reply
             if cmd == codec.SET_DUTY:
                 for motor, duty in codec.decode_duty(data).items():
                     if 1 <= motor <= self.model.motors:
                         self.duty[motor - 1] = duty
                 return None
+            self._replies.clear()  # a command may change what the next reply says
             if cmd == codec.SET_GPIO:
                 if self.model.gpio:
                     self.gpio_out = list(codec.decode_gpio(data))
@@ -156,24 +176,19 @@ class DeltoFirmware:
             raise ProtocolError(f"unknown command {cmd:#04x}")
 
     def _ft_raw(self, finger: int, noise: bool = True) -> tuple[float, ...]:
-        offset = self.ft_offset[finger]
-        base = [GRAVITY[0] + offset[0], GRAVITY[1] + offset[1], GRAVITY[2] + offset[2],
-                offset[3], offset[4], offset[5]]
-        if noise:
-            at = self._noise_at
-            table = self._noise
-            n = len(table)
-            for k in range(6):
-                base[k] += table[(at + k) % n] * (FT_NOISE if k < 3 else FT_NOISE / 10)
-            self._noise_at = (at + 7) % n
-        return tuple(base)
+        o = self.ft_offset[finger]
+        base = (GRAVITY[0] + o[0], GRAVITY[1] + o[1], GRAVITY[2] + o[2], o[3], o[4], o[5])
+        if not noise:
+            return base
+        at = self._noise_at
+        self._noise_at = (at + 7) % len(self._noise)
+        return tuple(map(add, base, self._noise[at]))
 
     def record(self) -> codec.DataRecord:
         fingers = range(self.model.fingers)
         ft, tactile = [], []
         if self.sensor_type in FT_TYPES:
-            ft = [tuple(r - t for r, t in zip(self._ft_raw(f), self.ft_tare[f]))
-                  for f in fingers]
+            ft = [tuple(map(sub, self._ft_raw(f), self.ft_tare[f])) for f in fingers]
         elif self.sensor_type == TACTILE_M:
             tactile = [tuple(self.rng.randrange(0, 8) for _ in range(15)) for _ in fingers]
         elif self.sensor_type == TACTILE_S:

@@ -12,6 +12,7 @@ import re
 import struct
 from dataclasses import dataclass, field
 from functools import lru_cache
+from itertools import chain
 
 from deltoctl.drivers.delto.models import (
     FT_TYPES,
@@ -47,6 +48,8 @@ class FrameReader:
         self._buffer = bytearray()
 
     def feed(self, data: bytes) -> list[bytes]:
+        if not self._buffer and len(data) >= 3 and (data[0] << 8) | data[1] == len(data):
+            return [data]  # the usual case: exactly one frame
         self._buffer += data
         frames = []
         while len(self._buffer) >= 2:
@@ -162,53 +165,80 @@ def _reply_layout(model: DeltoModel, codes: tuple[int, ...], sensor_type: int) -
     return struct.Struct(fmt)
 
 
-def decode_data_reply(data: bytes, model: DeltoModel, codes: tuple[int, ...],
-                      sensor_type: int) -> DataRecord:
+@lru_cache(maxsize=64)
+def reply_fields(model: DeltoModel, codes: tuple[int, ...],
+                 sensor_type: int) -> dict[str, tuple[tuple[int, float], ...]]:
+    """Where each value of a GET_DATA reply sits in the unpacked body, and its scale to SI:
+    ``{"position": ((index, scale), ...), "current": ..., "ft": six per finger, ...}``."""
+    stride = 3 if model.legacy else 5
+    motors = range(model.motors)
+    fields: dict[str, tuple[tuple[int, float], ...]] = {
+        "position": tuple((m * stride + 1, model.position_scale()) for m in motors),
+        "current": tuple((m * stride + 2, 1.0) for m in motors),  # mA
+    }
+    if model.legacy:
+        return fields
+    fields["temperature"] = tuple((m * 5 + 3, 0.1) for m in motors)
+    fields["velocity"] = tuple((m * 5 + 4, RPM_TO_RAD_S) for m in motors)
+    at = model.motors * 5
+    if FINGERTIP_SENSOR in codes and sensor_type != SENSOR_NONE:
+        if sensor_type in FT_TYPES:  # F in 0.1 N, T in 0.001 N·m
+            scales = (0.1, 0.1, 0.1, 0.001, 0.001, 0.001)
+            fields["ft"] = tuple((at + f * 6 + k, scales[k])
+                                 for f in range(model.fingers) for k in range(6))
+        else:  # tactile cells, as read
+            width = 15 if sensor_type == TACTILE_M else 18
+            fields["tactile"] = tuple((at + k, 1) for k in range(model.fingers * width))
+        at += len(fields.get("ft", fields.get("tactile", ())))
+    if GPIO in codes:
+        fields["gpio"] = tuple((at + k, 1) for k in range(4))
+    return fields
+
+
+def unpack_data_reply(data: bytes, model: DeltoModel, codes: tuple[int, ...],
+                      sensor_type: int) -> tuple[int, ...]:
+    """The reply's body as raw integers, in wire order (``reply_fields`` says which is which)."""
     _check(data, GET_DATA, "GET_DATA reply")
     layout = _reply_layout(model, codes, sensor_type)
     if len(data) != 3 + layout.size:
         raise ProtocolError(f"GET_DATA reply: {len(data)} bytes, expected {3 + layout.size} for "
                             f"{model.name} with codes {list(codes)}")
-    raw = layout.unpack_from(data, 3)
-    scale = model.position_scale()
-    n = model.motors
-    stride = 3 if model.legacy else 5
-    motors = raw[: n * stride]
-    record = DataRecord(position=[p * scale for p in motors[1::stride]],
-                        current=[float(c) for c in motors[2::stride]])
-    if model.legacy:
-        return record
-    record.temperature = [t * 0.1 for t in motors[3::5]]
-    record.velocity = [v * RPM_TO_RAD_S for v in motors[4::5]]
-    rest = raw[n * 5:]
-    if FINGERTIP_SENSOR in codes and sensor_type != SENSOR_NONE:
-        width = {TACTILE_M: 15, TACTILE_S: 18}.get(sensor_type, 6)
-        for f in range(model.fingers):
-            block = rest[f * width:(f + 1) * width]
-            if sensor_type in FT_TYPES:
-                record.ft.append((block[0] * 0.1, block[1] * 0.1, block[2] * 0.1,
-                                  block[3] * 0.001, block[4] * 0.001, block[5] * 0.001))
-            else:
-                record.tactile.append(tuple(block))
-        rest = rest[model.fingers * width:]
-    if GPIO in codes:
-        record.gpio = (rest[0] != 0, rest[1] != 0, rest[2] != 0, rest[3] != 0)
-    return record
+    return layout.unpack_from(data, 3)
+
+
+def decode_data_reply(data: bytes, model: DeltoModel, codes: tuple[int, ...],
+                      sensor_type: int) -> DataRecord:
+    raw = unpack_data_reply(data, model, codes, sensor_type)
+    fields = reply_fields(model, codes, sensor_type)
+
+    def values(kind: str) -> list:
+        return [raw[i] * scale for i, scale in fields.get(kind, ())]
+
+    ft, tactile = values("ft"), values("tactile")
+    width = len(tactile) // model.fingers
+    gpio = values("gpio")
+    return DataRecord(
+        position=values("position"), current=values("current"),
+        temperature=values("temperature"), velocity=values("velocity"),
+        ft=[tuple(ft[k:k + 6]) for k in range(0, len(ft), 6)],
+        tactile=[tuple(tactile[k:k + width]) for k in range(0, len(tactile), width or 1)],
+        gpio=(gpio[0] != 0, gpio[1] != 0, gpio[2] != 0, gpio[3] != 0) if gpio else None)
 
 
 def encode_data_reply(record: DataRecord, model: DeltoModel, codes: tuple[int, ...],
                       sensor_type: int) -> bytes:
     """The emulator's side: a DataRecord in SI units → the reply frame."""
     scale = 1.0 / model.position_scale()
-    values: list[int] = []
+    n = model.motors
+    ids = range(1, n + 1)
+    position = [round(p * scale) for p in record.position[:n]]
+    current = map(round, record.current[:n])
     if model.legacy:
-        for i in range(model.motors):
-            values += (i + 1, round(record.position[i] * scale), round(record.current[i]))
+        values = list(chain.from_iterable(zip(ids, position, current)))
     else:
-        to_rpm = 1.0 / RPM_TO_RAD_S
-        for i, (p, c, t, v) in enumerate(zip(record.position, record.current,
-                                              record.temperature, record.velocity)):
-            values += (i + 1, round(p * scale), round(c), round(t * 10), round(v * to_rpm))
+        temperature = [round(t * 10) for t in record.temperature[:n]]
+        velocity = [round(v * (1.0 / RPM_TO_RAD_S)) for v in record.velocity[:n]]
+        values = list(chain.from_iterable(zip(ids, position, current, temperature, velocity)))
     if FINGERTIP_SENSOR in codes and not model.legacy and sensor_type != SENSOR_NONE:
         for f in range(model.fingers):
             if sensor_type in FT_TYPES:
@@ -245,10 +275,10 @@ def _duty_layout(motors: int) -> struct.Struct:
 
 def encode_duty(duties: list[int]) -> bytes:
     """Duty per motor in 0.1 % (±1000 = ±100 %), motor ids 1..N."""
-    values: list[int] = [3 + 3 * len(duties), SET_DUTY]
-    for i, duty in enumerate(duties, 1):
-        values += (i, -1000 if duty < -1000 else 1000 if duty > 1000 else int(duty))
-    return _duty_layout(len(duties)).pack(*values)
+    n = len(duties)
+    clamped = [-1000 if d < -1000 else 1000 if d > 1000 else int(d) for d in duties]
+    return _duty_layout(n).pack(3 + 3 * n, SET_DUTY, *chain.from_iterable(zip(range(1, n + 1),
+                                                                              clamped)))
 
 
 def decode_duty(data: bytes) -> dict[int, int]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
+from operator import itemgetter, mul
 from urllib.parse import urlsplit
 
 from deltoctl.core.driver import Driver
@@ -21,6 +22,7 @@ from deltoctl.drivers.delto.models import (
     MODELS,
     SENSOR_NAMES,
     CurrentLimiter,
+    DeltoModel,
     effort_to_duty_percent,
     model_label,
 )
@@ -94,6 +96,8 @@ class DeltoDriver(Driver):
         self.values: dict[str, float] = {STATUS: 0.0}
         self.limiters = [CurrentLimiter() for _ in hw.joints]
         self._duty_plan: tuple = (None, [])
+        self._request = b""  # GET_DATA with this connection's data codes
+        self._reply_plan: tuple = ()
         self.warnings: list[str] = []
         self.stats = {"packets": 0, "errors": 0, "reconnects": 0}
         self._lock = threading.RLock()
@@ -151,6 +155,8 @@ class DeltoDriver(Driver):
             self.link = link
             self.model = actual
             self.codes = codec.data_codes(actual, self.fingertip_sensor, self.io and actual.gpio)
+            self._request = codec.encode_data_request(self.codes)
+            self._plan_reply(actual, sensor)
             self.identity = Identity(
                 self.configured_model, info.model_id, info.firmware, sensor,
                 info.finger_mask if info.finger_mask is not None
@@ -208,55 +214,66 @@ class DeltoDriver(Driver):
     def connected(self) -> bool:
         return self.values.get(STATUS) == 1.0
 
+    def _plan_reply(self, model: DeltoModel, sensor_type: int) -> None:
+        """Which raw value of a reply goes to which interface, with its scale: worked out once
+        per connection, so a cycle is one unpack and one C-speed pass (``_store``)."""
+        fields = codec.reply_fields(model, self.codes, sensor_type)
+        keys, indexes, scales = [], [], []
+        kinds = ["position", "effort", "temperature", "velocity"]
+        for kind, field_name in zip(kinds, ["position", "current", "temperature", "velocity"]):
+            for key, (i, scale) in zip(self._keys[kind], fields.get(field_name, ())):
+                keys.append(key)
+                indexes.append(i)
+                scales.append(scale)
+        ft = fields.get("ft", ())
+        for key, (i, scale) in zip([k for s in self._keys["ft"] for k in s], ft):
+            keys.append(key)
+            indexes.append(i)
+            scales.append(scale)
+        self._reply_plan = (model, sensor_type, keys, itemgetter(*indexes), scales,
+                            [i for i, _ in fields.get("gpio", ())])
+
     def read(self) -> dict[str, float]:
         """One GET_DATA exchange; on a lost link, the last values with status 0."""
         with self._lock:
-            link, model, identity = self.link, self.model, self.identity
-        if link is None or model is None or identity is None:
+            link, identity = self.link, self.identity
+        if link is None or identity is None:
             self._start_reconnect()
             return self.values
         self.stats["packets"] += 1
+        model, sensor_type = self._reply_plan[:2]
         timing = self.timing
         try:
             t0 = time.perf_counter()
-            request = codec.encode_data_request(self.codes)
-            t1 = time.perf_counter()
-            link.send(request)
+            link.send(self._request)
             reply = link.recv_frame(DATA_TIMEOUT)
-            t2 = time.perf_counter()
-            record = codec.decode_data_reply(reply, model, self.codes, identity.sensor_type or 0)
+            t1 = time.perf_counter()
+            raw = codec.unpack_data_reply(reply, model, self.codes, sensor_type)
         except DeviceError as exc:
             self.stats["errors"] += 1
             self._lost(exc)
             return self.values
-        self._store(record)
+        self._store(raw)
         if timing is not None:
-            t3 = time.perf_counter()
-            timing["codec"] += (t1 - t0) + (t3 - t2)
-            timing["socket"] += t2 - t1
+            timing["socket"] += t1 - t0
+            timing["codec"] += time.perf_counter() - t1
         return self.values
 
-    def _store(self, record: codec.DataRecord) -> None:
+    def _store(self, raw: tuple[int, ...]) -> None:
         v = self.values
-        keys = self._keys
-        now = time.monotonic()
-        n = len(record.position)
-        if record.velocity:
-            v.update(zip(keys["velocity"], record.velocity))
-            v.update(zip(keys["temperature"], record.temperature))
-        else:  # the DG-3F-B sends no velocity: differentiate the position
+        model, _, keys, pick, scales, gpio = self._reply_plan
+        if model.legacy:  # the DG-3F-B sends no velocity: differentiate the position
+            now = time.monotonic()
             dt = now - self._last_read if self._last_read else 0.0
-            for key, pos_key, pos in zip(keys["velocity"], keys["position"], record.position):
-                previous = v.get(pos_key)
-                v[key] = (pos - previous) / dt if previous is not None and dt > 0 else 0.0
-        self._last_read = now
-        v.update(zip(keys["position"][:n], record.position))
-        v.update(zip(keys["effort"][:n], record.current))
-        if record.ft and self.identity and self.identity.sensor_type in FT_TYPES:
-            for sensor_keys, values in zip(keys["ft"], record.ft):
-                v.update(zip(sensor_keys, values))
-        if record.gpio is not None:
-            v.update(zip(keys["gpio"], (1.0 if b else 0.0 for b in record.gpio)))
+            self._last_read = now
+            before = [v.get(k) for k in self._keys["position"]]
+        v.update(zip(keys, map(mul, pick(raw), scales)))
+        if gpio:
+            v.update(zip(self._keys["gpio"], (1.0 if raw[i] else 0.0 for i in gpio)))
+        if model.legacy:
+            for key, pos_key, previous in zip(self._keys["velocity"], self._keys["position"],
+                                              before):
+                v[key] = (v[pos_key] - previous) / dt if previous is not None and dt > 0 else 0.0
         v[STATUS] = 1.0
 
     def write_efforts(self, efforts: dict[str, float]) -> None:
