@@ -53,6 +53,17 @@ def mh5_buses():
         server.close()
 
 
+def ros2_messages(path, topics=None):
+    """(topic, decoded ROS 2 message) for each message of an MCAP file, in log order."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _, channel, _, msg in reader.iter_decoded_messages(topics=topics):
+            yield channel.topic, msg
+
+
 def mh5_targets(servers):
     return [a for bus, s in servers.items()
             for a in ("-t", f"{bus}={s.url}" if bus == "i2c" else

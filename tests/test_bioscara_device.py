@@ -14,6 +14,7 @@ from deltoctl.drivers.bioscara.driver import BioscaraDriver
 from deltoctl.errors import Refused
 from deltoctl.profile.catalog import load_profile
 from deltoctl.sim.i2c_bus import I2CSocketServer, bus_for_profile
+from tests.conftest import ros2_messages
 
 J4 = 0x14
 J4_MAX = 3.01069
@@ -139,11 +140,9 @@ def test_the_deadman_and_one_command_mode_per_joint():
 
 
 def test_record_has_the_joint_flags(cli, tmp_path):
-    from mcap_ros2.reader import read_ros2_messages
-
     out = tmp_path / "arm.mcap"
     assert cli("-p", "bioscara-arm", "--sim", "record", str(out), "-d", "0.2").exit_code == 0
-    dyn = [m.ros_msg for m in read_ros2_messages(str(out), topics=["/dynamic_joint_states"])]
+    dyn = [m for _, m in ros2_messages(out, ["/dynamic_joint_states"])]
     assert dyn and dyn[0].joint_names == ["j1", "j2", "j3", "j4"]
     j1 = dyn[0].interface_values[0]
     assert j1.interface_names == ["position", "velocity", "home", "flags"]

@@ -11,23 +11,16 @@ import threading
 import time
 
 from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
 
 from deltoctl.profile.catalog import load_profile
 from deltoctl.sim.delto import DeltoServer, firmware_for_profile
-
-
-def _messages(path, topics=None):
-    with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        for _, channel, _, msg in reader.iter_decoded_messages(topics=topics):
-            yield channel.topic, msg
+from tests.conftest import ros2_messages
 
 
 def _topics(path):
     counts = collections.Counter()
     last = {}
-    for topic, msg in _messages(path):
+    for topic, msg in ros2_messages(path):
         counts[topic] += 1
         last[topic] = msg
     return counts, last
@@ -90,10 +83,10 @@ def test_link_loss_is_marked_and_the_recording_goes_on(cli, tmp_path):
         timer.join()
     assert result.exit_code == 3, result.stderr
     assert "link was lost 1 time" in result.stderr
-    messages = [m for _, m in _messages(out, ["/diagnostics"])]
+    messages = [m for _, m in ros2_messages(out, ["/diagnostics"])]
     events = [s.message for m in messages for s in m.status if s.name == "deltoctl/link"]
     assert events == ["link lost", "link restored"]
-    statuses = [m.interface_values[-1].values[0] for _, m in _messages(out, ["/gpio"])]
+    statuses = [m.interface_values[-1].values[0] for _, m in ros2_messages(out, ["/gpio"])]
     assert statuses[0] == 1.0 and 0.0 in statuses and statuses[-1] == 1.0
 
 

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from tests.conftest import eventually, mh5_targets
+from tests.conftest import eventually, mh5_targets, ros2_messages
 
 
 def test_identify_detect_stream_with_sim(cli):
@@ -85,16 +85,14 @@ def test_torque_by_group_and_reboot_after_a_shutdown(cli, mh5_buses):
 def test_record_reports_each_bus_loop_with_the_mh5_keys(cli, mh5_buses, tmp_path):
     import threading
 
-    from mcap_ros2.reader import read_ros2_messages
-
     # once the servos have answered their pings, servo 14's replies go bad
     threading.Timer(0.5, mh5_buses["lower_body"].bus.faults.corrupt_crc.add, [14]).start()
     out = tmp_path / "mh5.mcap"
     result = cli("-p", "mh5", *mh5_targets(mh5_buses), "record", str(out), "-d", "1.3")
     assert result.exit_code == 0, result.stderr
     statuses = {st.name: {kv.key: kv.value for kv in st.values}
-                for m in read_ros2_messages(str(out), topics=["/diagnostics"])
-                for st in m.ros_msg.status if "reader" in st.name or "writer" in st.name}
+                for _, m in ros2_messages(out, ["/diagnostics"])
+                for st in m.status if "reader" in st.name or "writer" in st.name}
     assert set(statuses) == {f"deltoctl/{bus}_{loop}" for bus in ("upper_body", "lower_body")
                              for loop in ("pvl_reader", "tv_reader", "pv_writer", "t_writer")}
     upper, lower = statuses["deltoctl/upper_body_pvl_reader"], \

@@ -10,7 +10,7 @@ import pytest
 
 from deltoctl.drivers.lsm6ds3 import codec
 from deltoctl.errors import InvalidInput, ProtocolError
-from tests.conftest import mh5_targets
+from tests.conftest import mh5_targets, ros2_messages
 
 
 def test_settings_and_scaling():
@@ -87,14 +87,12 @@ def test_an_unreachable_imu_bus_leaves_the_servos_working(cli, mh5_buses):
 
 
 def test_record_writes_sensor_msgs_imu(cli, mh5_buses, tmp_path):
-    from mcap_ros2.reader import read_ros2_messages
-
     out = tmp_path / "mh5.mcap"
     result = cli("-p", "mh5", *mh5_targets(mh5_buses), "record", str(out), "-d", "0.3")
     assert result.exit_code == 0, result.stderr
-    imu = [m for m in read_ros2_messages(str(out), topics=["/imu/data_raw"])]
+    imu = [m for _, m in ros2_messages(out, ["/imu/data_raw"])]
     assert len(imu) >= 10
-    msg = imu[0].ros_msg
-    assert imu[0].schema.name == "sensor_msgs/msg/Imu" and msg.header.frame_id == "chest"
+    msg = imu[0]
+    assert type(msg).__name__ == "Imu" and msg.header.frame_id == "chest"
     assert msg.linear_acceleration.z == pytest.approx(9.80665, abs=0.2)
     assert msg.orientation_covariance[0] == -1.0  # no orientation estimate
