@@ -36,7 +36,10 @@ def run_json(cli, *args):
 
 
 def test_connect_identify_detect_stream_with_sim(cli):
-    assert cli("-p", "bioscara-arm", "--sim", "connect").exit_code == 0
+    result = cli("-p", "bioscara-arm", "--sim", "connect")
+    assert result.exit_code == 0
+    # the result is data (stdout), even for people
+    assert "round trip median" in result.stdout and "finalized" in result.stdout
     ident = run_json(cli, "--sim", "identify")
     assert ident["joints"]["j2"] == {"address": "0x12", "answers": True,
                                      "flags": "not homed, not enabled", "homed": False,
@@ -54,7 +57,7 @@ def test_detect_draws_the_bus_and_names_a_missing_joint(cli, arm):
     result = cli("-p", "bioscara-arm", "-t", target, "detect")
     assert result.exit_code == 3  # the bus differs from the profile
     assert "10: -- 11 12 -- 14 --" in result.stdout
-    assert "missing: j3" in result.stderr
+    assert "missing: j3" in result.stdout
     assert "j3 at 0x13  joint    no answer  NO" in result.stdout
 
 

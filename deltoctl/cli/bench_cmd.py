@@ -6,7 +6,7 @@ from typing import Annotated
 import typer
 
 from deltoctl.cli.context import options
-from deltoctl.cli.output import emit_json, info
+from deltoctl.cli.output import emit_json, say
 from deltoctl.errors import InvalidInput
 
 app = typer.Typer(help="Benchmarks that ship with deltoctl.", no_args_is_help=True)
@@ -36,10 +36,10 @@ def bench_loop(
     if opts.json:
         emit_json(results)
         return
-    info(f"bench loop: {prof.name} against sim serve at {results['endpoint']} "
+    say(f"bench loop: {prof.name} against sim serve at {results['endpoint']} "
          f"({os.cpu_count()} CPUs)")
     idle = results["idle_loop"]
-    info(f"  baseline: an idle {rate:g} Hz loop here reaches {100 * idle['achieved_fraction']:.2f}"
+    say(f"  baseline: an idle {rate:g} Hz loop here reaches {100 * idle['achieved_fraction']:.2f}"
          f" %, lateness p99 {idle['lateness_p99_ms']:.3f} ms, misses {idle['deadline_misses']}"
          + (f", CPU steal {idle['cpu_steal_percent']} %"
             if idle["cpu_steal_percent"] is not None else ""))
@@ -47,16 +47,16 @@ def bench_loop(
         if name not in results:
             continue
         r = results[name]
-        info(f"  {name:8} requested {r['requested_rate']:g} Hz, real {r['real_rate']:.1f} Hz"
+        say(f"  {name:8} requested {r['requested_rate']:g} Hz, real {r['real_rate']:.1f} Hz"
              + (f" ({100 * r['achieved_fraction']:.2f} %)" if r["achieved_fraction"] else "")
              + f", lateness p50 {r['lateness_p50_ms']:.3f} ms p99 {r['lateness_p99_ms']:.3f} ms"
              f", misses {r['deadline_misses']}, errors {r['errors']}"
              + (f", CPU steal {r['cpu_steal_percent']} %" if r["cpu_steal_percent"] is not None
                 else ""))
         stages = ", ".join(f"{k} {v:.1f}" for k, v in r["stage_us_per_cycle"].items())
-        info(f"           µs per cycle: {stages}; CPU {r['cpu_us_per_cycle']:.1f} in the loop, "
+        say(f"           µs per cycle: {stages}; CPU {r['cpu_us_per_cycle']:.1f} in the loop, "
              f"{r['recorder_process_cpu_us_per_cycle']:.1f} in the recorder process")
-    info("  goals: " + ", ".join(f"{k}={'yes' if v else 'NO'}"
+    say("  goals: " + ", ".join(f"{k}={'yes' if v else 'NO'}"
                                  for k, v in results["goals"].items()))
 
 
@@ -81,14 +81,14 @@ def bench_dynamixel(
     if opts.json:
         emit_json(results)
         return
-    info(f"sync read 126/10 of {servos} servos, emulator in another process:")
-    info(f"  deltoctl       {results['deltoctl_hz']:8.1f} cycles/s "
+    say(f"sync read 126/10 of {servos} servos, emulator in another process:")
+    say(f"  deltoctl       {results['deltoctl_hz']:8.1f} cycles/s "
          f"({results['deltoctl_errors']} errors)")
     if "dynamixel_sdk_hz" in results:
-        info(f"  dynamixel-sdk  {results['dynamixel_sdk_hz']:8.1f} cycles/s "
+        say(f"  dynamixel-sdk  {results['dynamixel_sdk_hz']:8.1f} cycles/s "
              f"({results['dynamixel_sdk_errors']} errors)   ratio {results['ratio']:.2f}")
     for baud, p in paced.items():
-        info(f"  paced at {int(baud) // 1000} kbps: {p['deltoctl_hz']:.1f} cycles/s of a "
+        say(f"  paced at {int(baud) // 1000} kbps: {p['deltoctl_hz']:.1f} cycles/s of a "
              f"{p['wire_limit_hz']:.1f} wire limit = {100 * p['fraction']:.1f} % "
              f"({p['errors']} errors)")
 
@@ -113,13 +113,13 @@ def bench_i2c(
     if opts.json:
         emit_json(results)
         return
-    info(f"read cycle of {results['joints']} Bioscara joints ({results['transactions_per_cycle']} "
+    say(f"read cycle of {results['joints']} Bioscara joints ({results['transactions_per_cycle']} "
          f"transactions), {cycles} cycles, I2C wire time at {clock / 1000:g} kHz:")
-    info(f"  wire time          {results['wire_us']:8.2f} µs per transaction")
-    info(f"  deltoctl           {results['deltoctl_us']:8.2f} µs "
+    say(f"  wire time          {results['wire_us']:8.2f} µs per transaction")
+    say(f"  deltoctl           {results['deltoctl_us']:8.2f} µs "
          f"({results['overhead_pct_of_wire']} % of the wire time; goal ≤ 25 %)")
-    info(f"  smbus2 by hand     {results['smbus2_loop_us']:8.2f} µs")
-    info(f"  emulator (apart)   {results['emulator_us']:8.2f} µs")
+    say(f"  smbus2 by hand     {results['smbus2_loop_us']:8.2f} µs")
+    say(f"  emulator (apart)   {results['emulator_us']:8.2f} µs")
 
 
 def register(root: typer.Typer) -> None:

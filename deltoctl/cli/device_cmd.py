@@ -6,7 +6,7 @@ from typing import Annotated, Any
 import typer
 
 from deltoctl.cli.context import Options, options
-from deltoctl.cli.output import emit_json, emit_json_line, info, stdout_is_terminal, table
+from deltoctl.cli.output import emit_json, emit_json_line, info, say, stdout_is_terminal, table
 from deltoctl.errors import WARNINGS, DeviceError, InvalidInput
 
 AllowMismatch = Annotated[bool, typer.Option(
@@ -76,9 +76,9 @@ def connect(
     if opts.json:
         emit_json(result)
     else:
-        info(f"connected to {session.url}: round trip median {result['rtt_ms']['median']} ms "
+        say(f"connected to {session.url}: round trip median {result['rtt_ms']['median']} ms "
              f"(min {result['rtt_ms']['min']}, max {result['rtt_ms']['max']}, n={len(rtts)})")
-        info("lifecycle: " + " → ".join(session.lifecycle.history))
+        say("lifecycle: " + " → ".join(session.lifecycle.history))
     finish(session)
 
 
@@ -125,7 +125,7 @@ def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> N
     if opts.json:
         emit_json({k: v for k, v in result.items() if k != "summary"})
     else:
-        info(result["summary"])
+        say(result["summary"])
         if "grid" in result:
             typer.echo(result["grid"])
         if checks:
@@ -186,7 +186,7 @@ def gpio_set(
     if opts.json:
         emit_json({n: after[n] for n in names if n in after})
     elif not opts.quiet:
-        info(f"{full} = {number:g}")
+        say(f"{full} = {number:g}")
 
 
 def _select(names: list[str], patterns: list[str]) -> list[str]:

@@ -8,7 +8,7 @@ import typer
 
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_session
-from deltoctl.cli.output import emit_json, info
+from deltoctl.cli.output import emit_json, info, say
 from deltoctl.errors import DeviceError, InvalidInput, Refused
 from deltoctl.units import parse_quantity
 
@@ -85,7 +85,7 @@ def _move(opts: Options, session, targets: dict[str, float], velocity, label: st
     if opts.json:
         emit_json(report)
     elif not opts.quiet:
-        info(f"{label}: {'settled' if result.settled else 'did not settle'} in "
+        say(f"{label}: {'settled' if result.settled else 'did not settle'} in "
              f"{result.seconds:.2f} s")
     if not result.settled:
         raise DeviceError(f"{len(result.unsettled)} joint(s) did not settle: "

@@ -38,6 +38,11 @@ def _jsonable(value: Any) -> Any:
     raise TypeError(f"cannot write {type(value).__name__} as JSON")
 
 
+def say(message: str) -> None:
+    """A line of a verb's result for people, on stdout (scripts ask for --json instead)."""
+    typer.echo(message)
+
+
 def info(message: str) -> None:
     """A diagnostic line for people, on stderr."""
     typer.echo(message, err=True)

@@ -6,7 +6,7 @@ from typing import Annotated, Any
 import typer
 
 from deltoctl.cli.context import options
-from deltoctl.cli.output import emit_json, info, table
+from deltoctl.cli.output import emit_json, info, say, table
 from deltoctl.errors import DeltoctlError, InvalidInput
 
 app = typer.Typer(help="Browse, check and convert device profiles.", no_args_is_help=True)
@@ -93,10 +93,10 @@ def show(
                    "command_interfaces": prof.command_interfaces(),
                    "profile": profile_data(prof)})
         return
-    info(f"{prof.name}: {prof.description}" + (" (discontinued)"
+    say(f"{prof.name}: {prof.description}" + (" (discontinued)"
                                                   if prof.status == "discontinued" else ""))
     for bus, url in prof.buses.items():
-        info(f"  bus {bus}: {url}")
+        say(f"  bus {bus}: {url}")
     from deltoctl.profile.validate import part_address
 
     rows = []
@@ -128,7 +128,7 @@ def _show_part(prof: Any, name: str, as_json: bool) -> None:
     if as_json:
         emit_json(data)
         return
-    info(f"{comp.kind} {comp.name}" + (f"  limits {_limits_text(comp)}" if comp.limits else ""))
+    say(f"{comp.kind} {comp.name}" + (f"  limits {_limits_text(comp)}" if comp.limits else ""))
     rows = [["command", i.name, i.min, i.max, i.initial_value, i.data_type]
             for i in comp.command_interfaces]
     rows += [["state", i.name, i.min, i.max, i.initial_value, i.data_type]
@@ -155,7 +155,7 @@ def validate_cmd(
             results.append({"profile": spec, "ok": True, **prof.counts()})
             if not opts.json and not opts.quiet:
                 c = prof.counts()
-                info(f"ok: {spec} ({c['joints']} joints, {c['sensors']} sensors, "
+                say(f"ok: {spec} ({c['joints']} joints, {c['sensors']} sensors, "
                      f"{c['gpios']} gpios)")
         except DeltoctlError as exc:
             results.append({"profile": spec, "ok": False, "error": exc.message})

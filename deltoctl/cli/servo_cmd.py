@@ -7,7 +7,7 @@ import typer
 
 from deltoctl.cli.context import options
 from deltoctl.cli.device_cmd import open_session
-from deltoctl.cli.output import emit_json, info, table
+from deltoctl.cli.output import emit_json, say, table
 from deltoctl.errors import DeviceError, InvalidInput
 
 # groups that gather other groups (MH5's torque_control)
@@ -158,4 +158,4 @@ def _report(opts: Any, data: dict, text: str) -> None:
     if opts.json:
         emit_json(data)
     elif not opts.quiet:
-        info(text)
+        say(text)
