@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import json
+import socket
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -111,6 +113,19 @@ def test_unreachable_device_exits_4(cli):
     result = cli("-p", "dg-4f", "-t", "tcp://127.0.0.1:9", "identify")
     assert result.exit_code == 4
     assert "cannot connect" in result.stderr
+
+
+def test_a_silent_peer_exits_4_naming_developer_mode(cli):
+    # something accepts the connection (a gripper in Modbus mode, another service) and
+    # closes it without a version reply
+    with socket.create_server(("127.0.0.1", 0)) as listener:
+        port = listener.getsockname()[1]
+        closer = threading.Thread(target=lambda: listener.accept()[0].close())
+        closer.start()
+        result = cli("-p", "dg-4f", "-t", f"tcp://127.0.0.1:{port}", "identify")
+        closer.join()
+    assert result.exit_code == 4
+    assert "no version reply" in result.stderr and "developer mode" in result.stderr
 
 
 def test_gpio_get_and_set(cli, gripper):

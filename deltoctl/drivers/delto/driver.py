@@ -26,9 +26,9 @@ from deltoctl.drivers.delto.models import (
     effort_to_duty_percent,
     model_label,
 )
-from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput
+from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Unreachable
 from deltoctl.profile.model import Hardware, Profile
-from deltoctl.transport.tcp import TcpLink
+from deltoctl.transport.tcp import LinkLost, TcpLink
 
 VERSION_TIMEOUT = 3.0
 DATA_TIMEOUT = 0.5
@@ -126,6 +126,11 @@ class DeltoDriver(Driver):
         try:
             link.send(codec.encode_version_request())
             info = codec.decode_version_reply(link.recv_frame(VERSION_TIMEOUT))
+        except LinkLost as exc:  # something listens there, but it is not a gripper answering
+            link.close()
+            raise Unreachable(f"no version reply: {exc}", hint="check that the gripper is in "
+                              "developer mode (DIP switches 2 and 4): in operator mode it "
+                              "speaks Modbus TCP on the same port") from None
         except DeviceError:
             link.close()
             raise
