@@ -74,6 +74,25 @@ def test_stream_selects_interfaces(cli):
     assert cli("--sim", "-p", "dg-5f-right", "stream", "-d", "0.05", "-i", "nope*").exit_code == 2
 
 
+def test_the_live_table_has_a_row_per_part(cli):
+    from rich.console import Console
+
+    from deltoctl.cli.device_cmd import live_tables
+
+    result = cli("--sim", "-p", "dg-5f-right", "stream", "-d", "0.05")
+    sample = json.loads(result.stdout.splitlines()[-1])["values"]
+    console = Console(record=True, width=120)
+    console.print(live_tables(sample, "3 samples at 50 Hz"))
+    lines = [line for line in console.export_text().splitlines() if line.strip()]
+    assert "3 samples at 50 Hz · link up" in lines[0]
+    assert lines[1].split() == ["position", "velocity", "effort", "temperature"]
+    rows = {line.split()[0]: line.split()[1:] for line in lines if line.strip()[:3] in
+            ("rj_", "rig", "gpi")}
+    assert len(rows) == 20 + 5 + 1  # joints, fingertips, the GPIO block
+    assert rows["rj_dg_1_1"][3] == f"{sample['rj_dg_1_1/temperature']:.4g}"
+    assert len(rows["right_fingertip_finger_3"]) == 6 and len(rows["gpio"]) == 4
+
+
 def test_old_firmware_selects_the_legacy_direction_map(cli, gripper):
     server = gripper("dg-5f-right", firmware=(2, 7))
     ident = json.loads(cli("-p", "dg-5f-right", "-t", server.endpoint, "identify",

@@ -201,6 +201,7 @@ def _select(names: list[str], patterns: list[str]) -> list[str]:
     return chosen
 
 
+LIVE_PERIOD = 0.05  # s between redraws of the live table: people read at most 20 a second
 RateOpt = Annotated[float, typer.Option("--rate", "-r", help="Samples per second.")]
 DurationOpt = Annotated[float | None, typer.Option(
     "--duration", "-d", help="Stop after this many seconds (default: Ctrl-C or SIGTERM).")]
@@ -237,7 +238,7 @@ def stream(
 
             live = Live(auto_refresh=False)
             live.start()
-        samples = 0
+        samples, shown = 0, 0.0
         try:
             for _ in CycleLoop(rate, duration):
                 values = driver.read()
@@ -245,8 +246,10 @@ def stream(
                 samples += 1
                 if live is None:
                     emit_json_line({"t": time.time_ns(), "values": sample})
-                else:
-                    live.update(_live_table(sample), refresh=True)
+                elif time.monotonic() - shown >= LIVE_PERIOD:
+                    live.update(live_tables(sample, f"{samples} samples at {rate:g} Hz"),
+                                refresh=True)
+                    shown = time.monotonic()
         except KeyboardInterrupt:
             pass
         finally:
@@ -257,10 +260,29 @@ def stream(
     finish(session)
 
 
-def _live_table(sample: dict[str, Any]):  # type: ignore[no-untyped-def]
+def live_tables(sample: dict[str, Any], title: str):  # type: ignore[no-untyped-def]
+    """One row per part and a column per interface: a table for each set of interfaces
+    (joints, F/T sensors, GPIO), so a hand of 20 joints fits on a screen."""
+    from rich import box
+    from rich.console import Group
     from rich.table import Table
 
-    t = Table("interface", "value")
+    parts: dict[str, dict[str, Any]] = {}
     for name, value in sample.items():
-        t.add_row(name, "—" if value is None else f"{value:.4g}")
-    return t
+        part, _, interface = name.rpartition("/")
+        parts.setdefault(part, {})[interface] = value
+    link = parts.pop("system", {}).get("connection_status")
+    if link is not None:
+        title += " · link up" if link else " · [bold red]link lost, reconnecting[/]"
+    tables: dict[tuple[str, ...], Table] = {}
+    for part, values in parts.items():
+        columns = tuple(values)
+        if columns not in tables:
+            tables[columns] = t = Table(title=None if tables else title, title_justify="left",
+                                        box=box.SIMPLE_HEAD)
+            t.add_column(no_wrap=True)
+            for column in columns:
+                t.add_column(column, justify="right")
+        tables[columns].add_row(part, *("—" if v is None else f"{v:.4g}"
+                                        for v in values.values()))
+    return Group(*tables.values())
