@@ -86,3 +86,39 @@ def test_ctrl_c_during_a_jog_leaves_duty_zero(server):
     time.sleep(0.05)
     assert server.firmware.duty == [0] * 20
     assert server.firmware.position[5] < math.radians(20)
+
+
+def test_the_progress_bar_stays_off_stdout(server, tmp_path):
+    """A person watching stderr sees the bar; the result piped from stdout stays clean."""
+    import os
+    import pty
+    import threading
+
+    watcher, terminal = pty.openpty()
+    drawn: list[bytes] = []
+
+    def drain() -> None:  # read as it is drawn, so a full pty buffer never blocks deltoctl
+        while True:
+            try:
+                chunk = os.read(watcher, 4096)
+            except OSError:  # the terminal side is closed and everything was read
+                return
+            if not chunk:
+                return
+            drawn.append(chunk)
+
+    reader = threading.Thread(target=drain)
+    reader.start()
+    try:
+        out = subprocess.run(
+            [sys.executable, "-m", "deltoctl", "-p", "dg-5f-right", "-t", server.endpoint,
+             "jog", "rj_dg_2_2", "10deg", "--yes"],
+            stdout=subprocess.PIPE, stderr=terminal, text=True, timeout=30)
+    finally:
+        os.close(terminal)
+        reader.join(timeout=5)
+        os.close(watcher)
+    assert out.returncode == 0
+    assert out.stdout.splitlines() == [out.stdout.strip()]  # the result line alone
+    assert out.stdout.startswith("jog rj_dg_2_2: settled")
+    assert b"jog" in b"".join(drawn)  # the bar's label went to the terminal

@@ -8,7 +8,7 @@ import typer
 
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_session
-from deltoctl.cli.output import emit_json, info, say
+from deltoctl.cli.output import emit_json, info, progress, say
 from deltoctl.errors import DeviceError, InvalidInput, Refused
 from deltoctl.units import parse_quantity
 
@@ -51,25 +51,16 @@ def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
     return complete_part(ctx, incomplete)
 
 
-def _progress(opts: Options, label: str):  # type: ignore[no-untyped-def]
-    """A rich progress bar on stderr for people; nothing for scripts."""
-    if opts.json or opts.quiet or not sys.stderr.isatty():
-        return None, None
-    from rich.progress import Progress
-
-    bar = Progress(transient=True)
-    task = bar.add_task(label, total=1.0)
-    bar.start()
-    return bar, lambda fraction: bar.update(task, completed=fraction)
-
-
 def _move(opts: Options, session, targets: dict[str, float], velocity, label: str):  # type: ignore[no-untyped-def]
     import signal
 
     signal.signal(signal.SIGTERM, signal.default_int_handler)
-    bar, progress = _progress(opts, label)
+    bar = progress(opts)
+    task = bar.add_task(label, total=1.0) if bar else None
     try:
-        result = session.driver.move(targets, session.profile, velocity, progress)
+        result = session.driver.move(
+            targets, session.profile, velocity,
+            None if bar is None else lambda fraction: bar.update(task, completed=fraction))
     finally:
         session.driver.stop()
         if bar is not None:
@@ -148,16 +139,10 @@ def _home_routine(opts: Options, profile, homing: list[str], chosen: list[str], 
     confirm_motion(opts, f"home {', '.join(order)} of {profile.name} one at a time, each "
                    "running into its hard stop")
     signal.signal(signal.SIGTERM, signal.default_int_handler)
-    bar = None
-    tasks: dict[str, int] = {}
-    if not (opts.json or opts.quiet) and sys.stderr.isatty():
-        from rich.progress import Progress
+    bar = progress(opts, transient=False)
+    tasks = {j: bar.add_task(f"{j}: waiting", total=1.0) for j in order} if bar else {}
 
-        bar = Progress(transient=False)
-        tasks = {j: bar.add_task(f"{j}: waiting", total=1.0) for j in order}
-        bar.start()
-
-    def progress(name: str, status: str, fraction: float) -> None:
+    def show(name: str, status: str, fraction: float) -> None:
         if bar is not None:
             bar.update(tasks[name], completed=fraction, description=f"{name}: {status}")
         elif not (opts.json or opts.quiet):
@@ -165,7 +150,7 @@ def _home_routine(opts: Options, profile, homing: list[str], chosen: list[str], 
 
     with open_session(opts, profile=profile) as session:
         try:
-            outcome = session.driver.home(order, force, progress)
+            outcome = session.driver.home(order, force, show)
         finally:
             if bar is not None:
                 bar.stop()

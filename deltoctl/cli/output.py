@@ -48,6 +48,19 @@ def info(message: str) -> None:
     typer.echo(message, err=True)
 
 
+def progress(opts: Any, *columns: Any, transient: bool = True):  # type: ignore[no-untyped-def]
+    """A started rich Progress on stderr while a person watches; None for scripts (--json, -q,
+    stderr not a terminal). stdout stays for the verb's result."""
+    if opts.json or opts.quiet or not sys.stderr.isatty():
+        return None
+    from rich.console import Console
+    from rich.progress import Progress
+
+    bar = Progress(*columns, console=Console(stderr=True), transient=transient)
+    bar.start()
+    return bar
+
+
 def table(title: str | None, columns: Sequence[str], rows: Sequence[Sequence[Any]]) -> None:
     cells = [["" if c is None else str(c) for c in row] for row in rows]
     if stdout_is_terminal():

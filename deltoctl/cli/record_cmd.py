@@ -12,6 +12,23 @@ from deltoctl.cli.output import emit_json, info
 from deltoctl.errors import WARNINGS, InvalidInput
 
 STATS_PERIOD = 1.0  # s between loop-statistics diagnostics
+SHOW_PERIOD = 0.25  # s between updates of the status line people watch
+
+
+def _status_bar(opts, duration: float | None):  # type: ignore[no-untyped-def]
+    """Elapsed time (against --duration), cycles, file size and the link, on stderr."""
+    from rich.progress import BarColumn, TextColumn, TimeElapsedColumn
+
+    from deltoctl.cli.output import progress
+
+    bar = progress(opts, TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn())
+    return bar, bar.add_task("recording", total=duration) if bar else None
+
+
+def _status(output: Path, cycles: int, link: float | None) -> str:
+    size = output.stat().st_size if output.exists() else 0
+    state = "" if link is None else " · link up" if link else " · [red]link lost[/]"
+    return f"recording {output.name}: {cycles} cycles, {size / 1e6:.1f} MB{state}"
 
 
 def _create(path: Path) -> None:
@@ -55,7 +72,8 @@ def record(
         }, driver.extra_states)
         loop = CycleLoop(rate, duration)
         comm_loops = driver.comm_loops()  # a bus's own loops (Dynamixel)
-        next_stats = time.monotonic() + STATS_PERIOD
+        bar, task = _status_bar(opts, duration)
+        next_stats = next_show = time.monotonic() + STATS_PERIOD
         try:
             for _ in loop:
                 before = driver.stats["errors"]
@@ -63,7 +81,12 @@ def record(
                 loop.stats.packets += 1
                 loop.stats.errors += driver.stats["errors"] - before
                 recorder.write(values, time.time_ns())
-                if time.monotonic() >= next_stats:
+                now = time.monotonic()
+                if bar is not None and now >= next_show:
+                    next_show = now + SHOW_PERIOD
+                    bar.update(task, completed=now - loop.stats.started, description=_status(
+                        output, loop.stats.cycles, values.get("system/connection_status")))
+                if now >= next_stats:
                     next_stats += STATS_PERIOD
                     recorder.diagnostics(time.time_ns(), [
                         (OK, "loop", "record loop", loop.stats.summary()),
@@ -72,6 +95,8 @@ def record(
         except KeyboardInterrupt:
             pass
         finally:
+            if bar is not None:
+                bar.stop()
             summary = loop.stats.summary()
             recorder.close(summary)
     result = {"output": str(output), "messages": recorder.counts,
