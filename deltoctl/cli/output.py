@@ -48,14 +48,17 @@ def info(message: str) -> None:
     typer.echo(message, err=True)
 
 
-def progress(opts: Any, *columns: Any, transient: bool = True):  # type: ignore[no-untyped-def]
+def progress(opts: Any, transient: bool = True, elapsed: bool = False):  # type: ignore[no-untyped-def]
     """A started rich Progress on stderr while a person watches; None for scripts (--json, -q,
-    stderr not a terminal). stdout stays for the verb's result."""
+    stderr not a terminal). stdout stays for the verb's result. ``elapsed``: the time so far
+    instead of the time left."""
     if opts.json or opts.quiet or not sys.stderr.isatty():
         return None
     from rich.console import Console
-    from rich.progress import Progress
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+    columns = ((TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn()) if elapsed
+               else Progress.get_default_columns())
     bar = Progress(*columns, console=Console(stderr=True), transient=transient)
     bar.start()
     return bar

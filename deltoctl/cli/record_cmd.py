@@ -8,24 +8,15 @@ import typer
 
 from deltoctl.cli.context import options
 from deltoctl.cli.device_cmd import AllowMismatch, DurationOpt, RateOpt, finish, open_session
-from deltoctl.cli.output import emit_json, info
+from deltoctl.cli.output import emit_json, info, progress
 from deltoctl.errors import WARNINGS, InvalidInput
 
 STATS_PERIOD = 1.0  # s between loop-statistics diagnostics
 SHOW_PERIOD = 0.25  # s between updates of the status line people watch
 
 
-def _status_bar(opts, duration: float | None):  # type: ignore[no-untyped-def]
-    """Elapsed time (against --duration), cycles, file size and the link, on stderr."""
-    from rich.progress import BarColumn, TextColumn, TimeElapsedColumn
-
-    from deltoctl.cli.output import progress
-
-    bar = progress(opts, TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn())
-    return bar, bar.add_task("recording", total=duration) if bar else None
-
-
 def _status(output: Path, cycles: int, link: float | None) -> str:
+    """The status line people watch (the time so far is the bar's, against --duration)."""
     size = output.stat().st_size if output.exists() else 0
     state = "" if link is None else " · link up" if link else " · [red]link lost[/]"
     return f"recording {output.name}: {cycles} cycles, {size / 1e6:.1f} MB{state}"
@@ -72,8 +63,10 @@ def record(
         }, driver.extra_states)
         loop = CycleLoop(rate, duration)
         comm_loops = driver.comm_loops()  # a bus's own loops (Dynamixel)
-        bar, task = _status_bar(opts, duration)
-        next_stats = next_show = time.monotonic() + STATS_PERIOD
+        bar = progress(opts, elapsed=True)
+        task = bar.add_task(f"recording {output.name}", total=duration) if bar else None
+        next_show = time.monotonic()
+        next_stats = next_show + STATS_PERIOD
         try:
             for _ in loop:
                 before = driver.stats["errors"]
