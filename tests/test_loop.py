@@ -45,5 +45,6 @@ def test_a_stalled_cycle_is_one_deadline_miss_and_no_burst_follows():
     assert summary["deadline_misses"] >= 1
     assert summary["cycles"] == len(starts) < 20
     assert summary["lateness_p99_ms"] >= 25  # the stalled cycle's lateness is kept
+    assert summary["period_jitter_p99_ms"] >= 25  # and the long period it made
     gaps = [b - a for a, b in itertools.pairwise(starts)]
     assert min(gaps) >= 0.0099  # the schedule restarts after the stall instead of catching up

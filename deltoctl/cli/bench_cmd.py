@@ -50,6 +50,7 @@ def bench_loop(
         say(f"  {name:8} requested {r['requested_rate']:g} Hz, real {r['real_rate']:.1f} Hz"
              + (f" ({100 * r['achieved_fraction']:.2f} %)" if r["achieved_fraction"] else "")
              + f", lateness p50 {r['lateness_p50_ms']:.3f} ms p99 {r['lateness_p99_ms']:.3f} ms"
+             f", period jitter p99 {r['period_jitter_p99_ms']:.3f} ms"
              f", misses {r['deadline_misses']}, errors {r['errors']}"
              + (f", CPU steal {r['cpu_steal_percent']} %" if r["cpu_steal_percent"] is not None
                 else ""))

@@ -1,4 +1,5 @@
-"""The fixed-rate cycle loop: deadlines, lateness percentiles and communication statistics."""
+"""The fixed-rate cycle loop: deadlines, lateness and period-jitter percentiles, and
+communication statistics."""
 
 from __future__ import annotations
 
@@ -54,6 +55,7 @@ class LoopStats:
     cycles: int = 0
     deadline_misses: int = 0  # a cycle that started a whole period late
     lateness: Histogram = field(default_factory=Histogram)  # s, actual − scheduled start
+    jitter: Histogram = field(default_factory=Histogram)  # s, |actual period − period|
     started: float = field(default_factory=time.monotonic)
     ended: float | None = None  # when the loop stopped; None while it runs
     packets: int = 0
@@ -68,6 +70,8 @@ class LoopStats:
             "deadline_misses": self.deadline_misses,
             "lateness_p50_ms": round(self.lateness.percentile(50) * 1e3, 4),
             "lateness_p99_ms": round(self.lateness.percentile(99) * 1e3, 4),
+            "period_jitter_p50_ms": round(self.jitter.percentile(50) * 1e3, 4),
+            "period_jitter_p99_ms": round(self.jitter.percentile(99) * 1e3, 4),
             "packets": self.packets,
             "errors": self.errors,
             "error_rate_perc": round(100 * self.errors / self.packets, 3) if self.packets else 0.0,
@@ -105,6 +109,7 @@ class CycleLoop:
         self.stats.started = start
         scheduled = start
         end = None if self.duration is None else start + self.duration
+        previous = None  # the last cycle's actual start
         while end is None or scheduled < end:
             now = time.monotonic()
             if period:
@@ -114,6 +119,9 @@ class CycleLoop:
                     now = time.monotonic()
                 late = now - scheduled
                 self.stats.lateness.add(late)
+                if previous is not None:
+                    self.stats.jitter.add(abs(now - previous - period))
+                previous = now
                 if late > period:
                     self.stats.deadline_misses += 1
                     scheduled = now
