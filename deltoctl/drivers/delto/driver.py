@@ -223,19 +223,16 @@ class DeltoDriver(Driver):
         """Which raw value of a reply goes to which interface, with its scale: worked out once
         per connection, so a cycle is one unpack and one C-speed pass (``_store``)."""
         fields = codec.reply_fields(model, self.codes, sensor_type)
-        keys, indexes, scales = [], [], []
-        kinds = ["position", "effort", "temperature", "velocity"]
-        for kind, field_name in zip(kinds, ["position", "current", "temperature", "velocity"]):
-            for key, (i, scale) in zip(self._keys[kind], fields.get(field_name, ())):
-                keys.append(key)
-                indexes.append(i)
-                scales.append(scale)
-        ft = fields.get("ft", ())
-        for key, (i, scale) in zip([k for s in self._keys["ft"] for k in s], ft):
-            keys.append(key)
-            indexes.append(i)
-            scales.append(scale)
-        self._reply_plan = (model, sensor_type, keys, itemgetter(*indexes), scales,
+        ft_keys = [k for sensor in self._keys["ft"] for k in sensor]
+        plan = [(key, field)
+                for keys, name in ((self._keys["position"], "position"),
+                                   (self._keys["effort"], "current"),
+                                   (self._keys["temperature"], "temperature"),
+                                   (self._keys["velocity"], "velocity"), (ft_keys, "ft"))
+                for key, field in zip(keys, fields.get(name, ()))]
+        self._reply_plan = (model, sensor_type, [key for key, _ in plan],
+                            itemgetter(*(i for _, (i, _) in plan)),
+                            [scale for _, (_, scale) in plan],
                             [i for i, _ in fields.get("gpio", ())])
 
     def read(self) -> dict[str, float]:
