@@ -38,7 +38,7 @@ def eventually(predicate, timeout: float = 2.0) -> bool:
 def mh5_buses():
     """The MH5's two Dynamixel buses on ptys and its I2C bus (the IMU) on loopback."""
     from deltoctl.profile.catalog import load_profile
-    from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+    from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
     from deltoctl.sim.i2c_bus import I2CSocketServer, bus_for_profile
 
     profile = load_profile("mh5")

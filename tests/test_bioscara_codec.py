@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from deltoctl.drivers.bioscara import codec
+from deltoctl.families.bioscara import codec
 from deltoctl.errors import InvalidInput, ProtocolError
 
 

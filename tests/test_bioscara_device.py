@@ -9,8 +9,8 @@ import sys
 
 import pytest
 
-from deltoctl.drivers.bioscara import codec
-from deltoctl.drivers.bioscara.driver import BioscaraDriver
+from deltoctl.families.bioscara import codec
+from deltoctl.families.bioscara.driver import BioscaraDriver
 from deltoctl.errors import Refused
 from deltoctl.profile.catalog import load_profile
 from deltoctl.sim.i2c_bus import I2CSocketServer, bus_for_profile

@@ -6,8 +6,8 @@ import struct
 
 import pytest
 
-from deltoctl.drivers.bioscara import codec
-from deltoctl.sim.bioscara import JointFirmware
+from deltoctl.families.bioscara import codec
+from deltoctl.families.bioscara.emulator import JointFirmware
 
 
 class Clock:

@@ -97,7 +97,7 @@ def test_completion_of_verbs_profiles_and_parts():
 
 def test_start_up_imports_only_what_the_verb_needs():
     """Protocol, transport, xacro and mcap modules load only in the verbs that use them."""
-    heavy = ("deltoctl.drivers", "deltoctl.transport", "deltoctl.sim", "mcap", "xacro",
+    heavy = ("deltoctl.transport", "deltoctl.sim", "mcap", "xacro",
              "serial", "smbus2", "rich", "yaml")
     for args in (["--version"], ["profile", "list"]):
         out = subprocess.run([sys.executable, "-X", "importtime", "-m", "deltoctl", *args],

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 
 from deltoctl.profile.catalog import load_profile
-from deltoctl.sim.delto import DeltoServer, firmware_for_profile
+from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
 
 
 def test_tare_removes_the_offset_and_writes_a_report(cli, tmp_path):

@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from deltoctl.drivers.delto import codec
-from deltoctl.drivers.delto.models import FT_6AXIS, MODELS, SENSOR_NONE, TACTILE_M, TACTILE_S
+from deltoctl.families.delto import codec
+from deltoctl.families.delto.models import FT_6AXIS, MODELS, SENSOR_NONE, TACTILE_M, TACTILE_S
 from deltoctl.errors import ProtocolError
 
 DG5F_R, DG3F_B, DG5F_S = MODELS[0x5F22], MODELS[0x3F01], MODELS[0x5F24]
@@ -117,7 +117,7 @@ def test_direction_maps_follow_firmware():
 
 
 def test_effort_to_duty_and_current_limiter():
-    from deltoctl.drivers.delto.models import CurrentLimiter, effort_to_duty_percent
+    from deltoctl.families.delto.models import CurrentLimiter, effort_to_duty_percent
 
     assert effort_to_duty_percent(0.5) == pytest.approx(0.5 * 13.875 / 1.15 / 12.0 * 100)
     assert effort_to_duty_percent(2.0) == 100.0 and effort_to_duty_percent(-2.0) == -100.0

@@ -13,7 +13,7 @@ import pytest
 
 from deltoctl.core.session import Session
 from deltoctl.profile.catalog import load_profile
-from deltoctl.sim.delto import DeltoServer, firmware_for_profile
+from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
 
 DELTO = ["dg-3f-b", "dg-3f-m", "dg-4f", "dg-5f-left", "dg-5f-right", "dg-5f-s-left",
          "dg-5f-s-right", "dg-5f-s15-left", "dg-5f-s15-right"]

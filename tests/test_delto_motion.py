@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from deltoctl.profile.catalog import load_profile
-from deltoctl.sim.delto import DeltoServer, firmware_for_profile
+from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
 
 
 @pytest.fixture

@@ -13,7 +13,7 @@ import time
 from mcap.reader import make_reader
 
 from deltoctl.profile.catalog import load_profile
-from deltoctl.sim.delto import DeltoServer, firmware_for_profile
+from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
 from tests.conftest import ros2_messages
 
 

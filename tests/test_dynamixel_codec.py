@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from deltoctl.drivers.dynamixel import codec
+from deltoctl.families.dynamixel import codec
 from deltoctl.errors import ProtocolError
 
 
@@ -75,7 +75,7 @@ def test_sync_write_bulk_and_fast_sync():
 
 
 def test_sync_replies_by_offsets_and_by_the_reader():
-    from deltoctl.drivers.dynamixel import codec
+    from deltoctl.families.dynamixel import codec
 
     ids = [1, 2, 3]
     replies = [codec.status(i, 0, bytes([i] * 10)) for i in ids]
@@ -95,7 +95,7 @@ def test_sync_replies_by_offsets_and_by_the_reader():
 
 
 def test_crc16_two_bytes_a_step_matches_the_byte_table():
-    from deltoctl.drivers.dynamixel import codec
+    from deltoctl.families.dynamixel import codec
 
     data = bytes(range(37))
     crc = 0

@@ -149,8 +149,8 @@ def test_register_get_and_set_with_the_eeprom_rule(cli, mh5_buses):
 
 
 def test_register_reads_retry_then_say_so(mh5_buses):
-    from deltoctl.drivers.dynamixel.control_table import BY_NAME
-    from deltoctl.drivers.dynamixel.driver import DynamixelDriver
+    from deltoctl.families.dynamixel.control_table import BY_NAME
+    from deltoctl.families.dynamixel.driver import DynamixelDriver
     from deltoctl.errors import DeviceError
     from deltoctl.profile.catalog import load_profile
 
@@ -221,7 +221,7 @@ def test_a_silent_bus_is_unreachable(cli, mh5_buses):
 
 
 def test_detect_finds_a_whole_bus_at_another_baud_rate(cli):
-    from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+    from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
 
     bus = DynamixelBus([Servo(i) for i in (11, 12)], baud=2_000_000)
     for servo in bus.servos.values():

@@ -8,7 +8,7 @@ import tty
 
 import pytest
 
-from deltoctl.drivers.dynamixel import codec
+from deltoctl.families.dynamixel import codec
 
 sdk = pytest.importorskip("dynamixel_sdk")
 

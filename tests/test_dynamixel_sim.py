@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
 from tests.conftest import eventually
 
 sdk = pytest.importorskip("dynamixel_sdk")
@@ -121,10 +121,10 @@ def test_sim_serve_mh5_serves_every_bus(tmp_path):
 def test_a_paced_bus_takes_the_wire_time():
     import time
 
-    from deltoctl.drivers.dynamixel import codec
-    from deltoctl.drivers.dynamixel.driver import DynamixelDriver
+    from deltoctl.families.dynamixel import codec
+    from deltoctl.families.dynamixel.driver import DynamixelDriver
     from deltoctl.profile.model import Component, Hardware, Profile
-    from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+    from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
 
     servos = [Servo(i) for i in range(1, 12)]
     for servo in servos:
@@ -145,7 +145,7 @@ def test_a_paced_bus_takes_the_wire_time():
 
 
 def test_sdk_fast_sync_read_and_the_driver_agree(bus):
-    from deltoctl.drivers.dynamixel.driver import DynamixelDriver
+    from deltoctl.families.dynamixel.driver import DynamixelDriver
     from deltoctl.profile.model import Component, Hardware, Profile
 
     servos, port, ph = bus

@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from deltoctl.drivers.generic.driver import GenericDriver
+from deltoctl.families.generic.driver import GenericDriver
 from deltoctl.errors import InvalidInput
 from deltoctl.profile.catalog import load_profile
 from deltoctl.profile.model import Interface

@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from deltoctl.drivers.lsm6ds3 import codec
+from deltoctl.families.lsm6ds3 import codec
 from deltoctl.errors import InvalidInput, ProtocolError
 from tests.conftest import mh5_targets, ros2_messages
 

@@ -9,7 +9,7 @@ import time
 
 _SERVE_BUS = """
 import sys
-from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
 servos = [Servo(i) for i in range(1, {n} + 1)]
 for servo in servos:
     servo.set("Return Delay Time", 0)  # as the MH5 sets it
@@ -34,7 +34,7 @@ def _stop(proc) -> None:  # type: ignore[no-untyped-def]
 
 def _deltoctl_rate(pty: str, servos: int, baud: int, duration: float) -> tuple[float, int]:
     """Sync reads (126, 10) per second through deltoctl's driver, and its errors."""
-    from deltoctl.drivers.dynamixel.driver import DynamixelDriver
+    from deltoctl.families.dynamixel.driver import DynamixelDriver
     from deltoctl.profile.model import Component, Hardware, Profile
 
     hw = Hardware("bus", family="dynamixel", joints=[
@@ -77,7 +77,7 @@ def _sdk_rate(pty: str, servos: int, duration: float) -> tuple[float, int] | Non
 def _wire_limit(servos: int, baud: int) -> float:
     """Sync reads per second the wire allows: the instruction and every status, 10 bits a
     byte, no return delay."""
-    from deltoctl.drivers.dynamixel import codec
+    from deltoctl.families.dynamixel import codec
 
     ids = list(range(1, servos + 1))
     sent = len(codec.sync_read(126, 10, ids)) + sum(len(codec.status(i, 0, bytes(10)))

@@ -8,8 +8,8 @@ import time
 
 from smbus2 import i2c_msg
 
-from deltoctl.drivers.bioscara import codec
-from deltoctl.drivers.bioscara.driver import BioscaraDriver
+from deltoctl.families.bioscara import codec
+from deltoctl.families.bioscara.driver import BioscaraDriver
 from deltoctl.profile.catalog import load_profile
 from deltoctl.sim.i2c_bus import bus_for_profile
 from deltoctl.transport.i2c import wire_bits

@@ -26,6 +26,8 @@ class Options:
         quiet: bool = False,
         xacro_args: dict[str, str] | None = None,
         package_paths: dict[str, str] | None = None,
+        hardware: list[str] | None = None,
+        xacro: bool = False,
     ) -> None:
         self.profile = profile
         self.target = target or []
@@ -36,6 +38,8 @@ class Options:
         self.quiet = quiet
         self.xacro_args = xacro_args or {}
         self.package_paths = package_paths or {}
+        self.hardware = hardware or []  # --hardware: the blocks a verb works on (all if empty)
+        self.xacro = xacro  # run xacro on a file not named .xacro
 
     def load_profile(self, spec: str | None = None) -> Profile:
         from deltoctl.profile.catalog import load_profile
@@ -44,7 +48,7 @@ class Options:
         if not spec:
             raise InvalidInput("no profile given: pass --profile NAME|PATH (or set "
                                "DELTOCTL_PROFILE); 'deltoctl profile list' shows the catalog")
-        return load_profile(spec, self.xacro_args, self.package_paths)
+        return load_profile(spec, self.xacro_args, self.package_paths, xacro=self.xacro)
 
 
 def options(ctx: typer.Context) -> Options:

@@ -137,6 +137,12 @@ def _complete_profile(incomplete: str) -> list[str]:
     return [n for n in catalog_names() if n.startswith(incomplete)]
 
 
+def _complete_hardware(ctx: typer.Context, incomplete: str) -> list[str]:
+    from deltoctl.cli.profile_cmd import complete_blocks
+
+    return complete_blocks(ctx, incomplete)
+
+
 @app.callback()
 def root(
     ctx: typer.Context,
@@ -158,6 +164,12 @@ def root(
         "--quiet", "-q", help="Fewer diagnostics on stderr.")] = False,
     xacro_arg: Annotated[list[str] | None, typer.Option(
         "--arg", metavar="NAME:=VALUE", help="A xacro argument (repeatable).")] = None,
+    hardware: Annotated[list[str] | None, typer.Option(
+        "--hardware", metavar="NAME", autocompletion=_complete_hardware,
+        help="Only this <ros2_control> block of the profile (repeatable; default: all).")]
+        = None,
+    xacro: Annotated[bool, typer.Option(
+        "--xacro", help="Run xacro on a profile file that is not named .xacro.")] = False,
     package_path: Annotated[list[str] | None, typer.Option(
         "--package-path", metavar="PKG=DIR",
         help="Where $(find PKG) points, for xacro files (repeatable).")] = None,
@@ -175,6 +187,8 @@ def root(
             verbose=verbose,
             quiet=quiet,
             xacro_args=parse_pairs(list(xacro_arg or []), ":=", "--arg", "NAME:=VALUE"),
+            hardware=list(hardware or []),
+            xacro=xacro,
             package_paths=parse_pairs(list(package_path or []), "=", "--package-path", "PKG=DIR"),
         )
     except DeltoctlError as exc:

@@ -51,16 +51,31 @@ def _limits_text(joint: Any) -> str:
     return f"[{lim.lower:.4g}, {lim.upper:.4g}] {unit}"
 
 
-def complete_part(ctx: typer.Context, incomplete: str) -> list[str]:
-    """Joint, sensor and GPIO names of the profile given on the command line."""
+def _completion_profile(ctx: typer.Context):  # type: ignore[no-untyped-def]
+    """The profile named on the command line being completed, or None."""
     spec = ctx.params.get("profile") or (ctx.find_root().params or {}).get("profile")
     if not spec:
-        return []
+        return None
     try:
-        prof = options(ctx).load_profile(spec)
+        return options(ctx).load_profile(spec)
     except DeltoctlError:
+        return None
+
+
+def complete_part(ctx: typer.Context, incomplete: str) -> list[str]:
+    """Joint, sensor and GPIO names of the profile given on the command line."""
+    prof = _completion_profile(ctx)
+    if prof is None:
         return []
     return [c.name for _, c in prof.components() if c.name.startswith(incomplete)]
+
+
+def complete_blocks(ctx: typer.Context, incomplete: str) -> list[str]:
+    """The names of the profile's <ros2_control> blocks (for --hardware)."""
+    prof = _completion_profile(ctx)
+    if prof is None:
+        return []
+    return [hw.name for hw in prof.hardware if hw.name.startswith(incomplete)]
 
 
 def _complete_profile(incomplete: str) -> list[str]:

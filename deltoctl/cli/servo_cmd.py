@@ -46,7 +46,7 @@ def register(root: typer.Typer) -> None:
 
 def _item(name: str):  # type: ignore[no-untyped-def]
     """A control table item by name (any case; spaces, - or _) or by address."""
-    from deltoctl.drivers.dynamixel.control_table import XL430
+    from deltoctl.families.dynamixel.control_table import XL430
 
     key = name.lower().replace("_", " ").replace("-", " ")
     for item in XL430:
@@ -72,7 +72,7 @@ def register_get(
         help="Items to read (default: the whole table, in one read).")] = None,
 ) -> None:
     """Read control table items of one servo."""
-    from deltoctl.drivers.dynamixel.control_table import XL430
+    from deltoctl.families.dynamixel.control_table import XL430
 
     opts = options(ctx)
     chosen = [_item(i) for i in items or []]

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from deltoctl.core.loop import CycleLoop
-from deltoctl.drivers.delto.models import KT
+from deltoctl.families.delto.models import KT
 from deltoctl.errors import DeviceError, Refused
 from deltoctl.profile.model import Component, Profile
 

@@ -46,13 +46,13 @@ class Session:
             self._open_buses(targets, sim)
             return
         if family == "bioscara":
-            from deltoctl.drivers.bioscara.driver import BioscaraDriver
+            from deltoctl.families.bioscara.driver import BioscaraDriver
 
             smbus, self.url = self._i2c(self.hw, targets, sim)
             self.driver = BioscaraDriver(profile, self.hw, self.url, smbus, probe)
             return
         if family == "generic":  # simulated only: no transport
-            from deltoctl.drivers.generic.driver import GenericDriver
+            from deltoctl.families.generic.driver import GenericDriver
 
             self.url = "mock://" + profile.name
             self.driver = GenericDriver(profile, [h for h in profile.hardware
@@ -89,8 +89,8 @@ class Session:
     def _open_buses(self, targets: list[str], sim: bool) -> None:
         """One driver per Dynamixel bus (with --sim, a pseudo-terminal bus for each), and
         one per I2C sensor block."""
-        from deltoctl.drivers.dynamixel.driver import BusesDriver, DynamixelDriver
-        from deltoctl.drivers.lsm6ds3.driver import Lsm6ds3Driver
+        from deltoctl.families.dynamixel.driver import BusesDriver, DynamixelDriver
+        from deltoctl.families.lsm6ds3.driver import Lsm6ds3Driver
 
         drivers: list = []
         servers = []
@@ -102,7 +102,7 @@ class Session:
             if self.profile.family_of(hw) != "dynamixel":
                 continue
             if sim:
-                from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+                from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
 
                 servos = [Servo(j.address) for j in hw.joints if j.address is not None]
                 server = DynamixelPtyServer(DynamixelBus(servos, baud=1000000)).start()
@@ -116,12 +116,12 @@ class Session:
         self.driver = BusesDriver(drivers)
 
     def _start_sim(self):  # type: ignore[no-untyped-def]
-        from deltoctl.sim.delto import DeltoServer, firmware_for_profile
+        from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
 
         return DeltoServer(firmware_for_profile(self.profile)).start()
 
     def _make_driver(self, allow_model_mismatch: bool):  # type: ignore[no-untyped-def]
-        from deltoctl.drivers.delto.driver import DeltoDriver
+        from deltoctl.families.delto.driver import DeltoDriver
 
         return DeltoDriver(self.profile, self.hw, self.url, allow_model_mismatch)
 

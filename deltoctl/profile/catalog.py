@@ -74,8 +74,10 @@ def load_profile(
     spec: str | Path,
     xacro_args: Mapping[str, str] | None = None,
     packages: Mapping[str, str] | None = None,
+    xacro: bool = False,
 ) -> Profile:
-    """Load and validate a profile from a catalog name or a YAML/URDF/xacro path."""
+    """Load and validate a profile from a catalog name or a YAML/URDF/xacro path; xacro runs
+    on a ``.xacro`` file, or on another URDF file when ``xacro`` is true."""
     from deltoctl.profile.validate import validate
 
     path = spec if isinstance(spec, Path) else resolve(spec)
@@ -87,7 +89,7 @@ def load_profile(
     elif suffix in URDF_SUFFIXES:
         from deltoctl.profile.urdf_loader import load_urdf_profile
 
-        profile = load_urdf_profile(path, xacro_args, packages)
+        profile = load_urdf_profile(path, xacro_args, packages, xacro=xacro)
     else:
         raise ProfileError(
             "unknown profile format (expected .yaml/.yml, or .urdf/.xacro/.xml)", str(path))

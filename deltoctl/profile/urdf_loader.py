@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from deltoctl.errors import ProfileError
-from deltoctl.profile.families import family_for_plugin
+from deltoctl import registry
 from deltoctl.profile.model import (
     Component,
     Hardware,
@@ -34,7 +34,6 @@ _ROS2_CONTROL_CHILDREN = {"hardware", "properties", "joint", "sensor", "gpio", "
 _HARDWARE_CHILDREN = {"plugin", "param", "group"}
 _COMPONENT_CHILDREN = {"command_interface", "state_interface", "param", "limits"}
 _INTERFACE_SPECIAL = {"min", "max", "initial_value", "data_type", "size"}
-_XACRO_MARKS = ("xmlns:xacro", "$(", "${", "<xacro:")
 
 
 @dataclass
@@ -78,6 +77,7 @@ def load_urdf_profile(
     path: Path,
     xacro_args: Mapping[str, str] | None = None,
     packages: Mapping[str, str] | None = None,
+    xacro: bool = False,
 ) -> Profile:
     source = str(path)
     try:
@@ -86,7 +86,7 @@ def load_urdf_profile(
         raise ProfileError(f"cannot read the file: {exc.strerror}", source) from None
     except UnicodeDecodeError:
         raise ProfileError("not a text file (expected URDF or xacro XML)", source) from None
-    expanded = path.name.endswith(".xacro") or any(m in raw for m in _XACRO_MARKS)
+    expanded = path.name.endswith(".xacro") or xacro
     files: list[str] = []
     text = raw
     if expanded:
@@ -137,7 +137,7 @@ def profile_from_urdf(root: Node, loc: _Locator, path: Path) -> Profile:
     profile.hardware = hardware
     for hw in hardware:
         if hw.family is None and profile.family is None:
-            hw.family = family_for_plugin(hw.plugin)
+            hw.family = registry.for_plugin(hw.plugin)
         _import_endpoint(profile, hw)
     return profile
 
@@ -350,13 +350,15 @@ def _safety(params: dict[str, str], loc: _Locator) -> Safety:
 
 
 def _import_endpoint(profile: Profile, hw: Hardware) -> None:
-    """A third-party Delto block names its gripper by params; turn them into a bus."""
-    if hw.bus is not None or profile.family_of(hw) != "delto":
+    """A third-party block that names its device by params (host, port) gets a bus."""
+    family = registry.get(profile.family_of(hw))
+    if hw.bus is not None or family is None or family.endpoint_params is None:
         return
-    ip = hw.params.get("delto_ip")
+    host_param, port_param, default_port = family.endpoint_params
+    ip = hw.params.get(host_param)
     if not ip:
         return
-    port = hw.params.get("delto_port", "502")
+    port = hw.params.get(port_param, str(default_port))
     bus = "gripper" if "gripper" not in profile.buses else f"{hw.name}-gripper"
-    profile.buses[bus] = f"tcp://{ip}:{port}"
+    profile.buses[bus] = f"{family.schemes[0]}://{ip}:{port}"
     hw.bus = bus

@@ -8,7 +8,7 @@ from __future__ import annotations
 from urllib.parse import urlsplit
 
 from deltoctl.errors import ProfileError
-from deltoctl.profile.families import FAMILIES
+from deltoctl import registry
 from deltoctl.profile.model import (
     DATA_TYPES,
     HARDWARE_TYPES,
@@ -23,7 +23,7 @@ def part_address(profile: Profile, hw: Hardware, comp: Component) -> int | None:
     """The address of a part: given explicitly, carried by a plugin param, or its position."""
     if comp.address is not None:
         return comp.address
-    family = FAMILIES.get(profile.family_of(hw) or "")
+    family = registry.get(profile.family_of(hw))
     if family and family.address_param and family.address_param in comp.params:
         raw = comp.params[family.address_param]
         try:
@@ -33,7 +33,7 @@ def part_address(profile: Profile, hw: Hardware, comp: Component) -> int | None:
                 f"{family.address_param} of {comp.name!r} must be a number, got {raw!r}",
                 profile.source, comp.line,
             ) from None
-    if family and family.name == "delto" and comp.kind == "joint":
+    if family and family.address_by_position and comp.kind == "joint":
         return hw.joints.index(comp) + 1
     return None
 
@@ -46,12 +46,14 @@ def validate(profile: Profile) -> Profile:
 
     if profile.status not in ("current", "discontinued"):
         raise fail(f"status must be 'current' or 'discontinued', got {profile.status!r}", None)
-    if profile.family is not None and profile.family not in FAMILIES:
+    known = registry.families()
+    if profile.family is not None and profile.family not in known:
         raise fail(f"unknown driver family {profile.family!r} "
-                   f"(known: {', '.join(FAMILIES)})", None)
+                   f"(known: {', '.join(known)})", None)
+    schemes = {s for f in known.values() for s in f.schemes}
     for bus, url in profile.buses.items():
         scheme = urlsplit(url).scheme
-        if scheme not in ("tcp", "serial", "i2c", "sim"):
+        if scheme not in schemes:
             raise fail(f"bus {bus!r}: {url!r} is not a target URL "
                        "(expected tcp://HOST:PORT, serial:///dev/PORT or i2c:///dev/i2c-N)", None)
 
@@ -68,10 +70,10 @@ def validate(profile: Profile) -> Profile:
         if not hw.plugin:
             raise fail(f"missing <plugin> in the <hardware> of {hw.name!r}", hw.line)
         family_name = profile.family_of(hw)
-        if family_name is not None and family_name not in FAMILIES:
+        if family_name is not None and family_name not in known:
             raise fail(f"unknown driver family {family_name!r} in {hw.name!r} "
-                       f"(known: {', '.join(FAMILIES)})", hw.line)
-        family = FAMILIES.get(family_name or "")
+                       f"(known: {', '.join(known)})", hw.line)
+        family = known.get(family_name or "")
         if hw.bus is not None and hw.bus not in profile.buses:
             raise fail(f"{hw.name!r} names unknown bus {hw.bus!r} "
                        f"(the profile's buses: {', '.join(profile.buses) or 'none'})", hw.line)
@@ -112,7 +114,7 @@ def validate(profile: Profile) -> Profile:
             if family and family.address_range:
                 low, high = family.address_range
                 if not low <= address <= high:
-                    show = hex if family.address_kind == "I2C address" else str
+                    show = family.show_address
                     raise fail(f"{family.address_kind} of {comp.name!r} must be within "
                                f"{show(low)}..{show(high)}, got {show(address)}", where)
             key = (bus or hw.name, address)

@@ -224,8 +224,8 @@ class I2CSocketServer:
 def bus_for_profile(profile, missing: tuple[int, ...] = ()) -> SimSMBus:  # type: ignore[no-untyped-def]
     """Every I2C device of the profile on one simulated bus: the Bioscara joints and the
     LSM6DS3 chips, at their addresses (less the ``missing`` ones)."""
-    from deltoctl.sim.bioscara import joints_for_profile
-    from deltoctl.sim.lsm6ds3 import Lsm6ds3Chip
+    from deltoctl.families.bioscara.emulator import joints_for_profile
+    from deltoctl.families.lsm6ds3.emulator import Lsm6ds3Chip
 
     devices: dict[int, I2CDevice] = dict(joints_for_profile(profile))
     for hw in profile.hardware:

@@ -65,8 +65,8 @@ def serve_profile(stack: contextlib.ExitStack, prof: Profile, options: ServeOpti
 
 
 def _serve_delto(stack: contextlib.ExitStack, prof: Profile, o: ServeOptions) -> dict:
-    from deltoctl.drivers.delto.models import MODELS
-    from deltoctl.sim.delto import DeltoServer, firmware_for_profile
+    from deltoctl.families.delto.models import MODELS
+    from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
 
     try:
         major, minor = (int(x) for x in o.firmware.split("."))
@@ -109,7 +109,7 @@ def _serve_dynamixel(stack: contextlib.ExitStack, prof: Profile, pace: bool, mis
                      wrong_baud: set[int]) -> dict[str, str]:
     """One pseudo-terminal per Dynamixel bus of the profile, its servos at the joints' IDs,
     listening at the bus URL's baud rate."""
-    from deltoctl.sim.dynamixel import DynamixelBus, DynamixelPtyServer, Servo
+    from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
     from deltoctl.transport.serial_port import parse_serial_url
 
     buses = {}
@@ -132,10 +132,10 @@ def _serve_dynamixel(stack: contextlib.ExitStack, prof: Profile, pace: bool, mis
 def _serve_i2c(stack: contextlib.ExitStack, prof: Profile, o: ServeOptions, missing: set[int],
                blocked: set[int]) -> dict[str, str]:
     """The profile's I2C devices on one simulated bus, served over loopback TCP."""
-    from deltoctl.drivers.lsm6ds3.codec import WHO_AM_I
-    from deltoctl.sim.bioscara import JointFirmware
+    from deltoctl.families.lsm6ds3.codec import WHO_AM_I
+    from deltoctl.families.bioscara.emulator import JointFirmware
     from deltoctl.sim.i2c_bus import I2CSocketServer, bus_for_profile
-    from deltoctl.sim.lsm6ds3 import Lsm6ds3Chip
+    from deltoctl.families.lsm6ds3.emulator import Lsm6ds3Chip
 
     bus = bus_for_profile(prof, missing=tuple(missing))
     for address, device in bus.devices.items():

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import random
 
-from deltoctl.drivers.lsm6ds3 import codec
+from deltoctl.families.lsm6ds3 import codec
 
 ACCEL_NOISE = 0.02  # m/s², one sigma
 GYRO_NOISE = 0.002  # rad/s

@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 
 from deltoctl.core.driver import Driver
-from deltoctl.drivers.bioscara import codec
+from deltoctl.families.bioscara import codec
 from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Refused
 from deltoctl.profile.model import Component, Hardware, Profile
 from deltoctl.transport.i2c import I2CBus, NoAnswer

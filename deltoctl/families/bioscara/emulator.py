@@ -13,7 +13,7 @@ import math
 import random
 import time
 
-from deltoctl.drivers.bioscara import codec
+from deltoctl.families.bioscara import codec
 
 TICK = 0.01  # s, the firmware's loop period
 DEADMAN = 0.05  # s without an I2C request while a velocity is set

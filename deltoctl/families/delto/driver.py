@@ -15,8 +15,8 @@ from operator import itemgetter, mul
 from urllib.parse import urlsplit
 
 from deltoctl.core.driver import Driver
-from deltoctl.drivers.delto import codec
-from deltoctl.drivers.delto.models import (
+from deltoctl.families.delto import codec
+from deltoctl.families.delto.models import (
     DUTY_WIRE_LIMIT,
     FT_TYPES,
     MODELS,
@@ -151,7 +151,7 @@ class DeltoDriver(Driver):
         sensor = info.sensor_type
         short = sensor is None
         if short:  # old firmware: assume 6-axis F/T when the profile has fingertip sensors
-            from deltoctl.drivers.delto.models import FT_6AXIS, SENSOR_NONE
+            from deltoctl.families.delto.models import FT_6AXIS, SENSOR_NONE
 
             sensor = FT_6AXIS if self.fingertip_sensor else SENSOR_NONE
         direction = actual.direction(info.firmware)

@@ -9,8 +9,8 @@ import struct
 
 from deltoctl.core.driver import Driver
 from deltoctl.core.loop import CommLoop
-from deltoctl.drivers.dynamixel import codec
-from deltoctl.drivers.dynamixel.control_table import (
+from deltoctl.families.dynamixel import codec
+from deltoctl.families.dynamixel.control_table import (
     BAUD_RATES,
     BY_NAME,
     TABLE_SIZE,

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from itertools import chain
 
-from deltoctl.drivers.delto.models import (
+from deltoctl.families.delto.models import (
     FT_TYPES,
     MODELS,
     SENSOR_NONE,

@@ -18,8 +18,8 @@ import time
 from dataclasses import dataclass, field
 from operator import add, sub
 
-from deltoctl.drivers.delto import codec
-from deltoctl.drivers.delto.models import (
+from deltoctl.families.delto import codec
+from deltoctl.families.delto.models import (
     FT_6AXIS,
     FT_TYPES,
     KT,

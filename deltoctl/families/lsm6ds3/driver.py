@@ -4,7 +4,7 @@ accelerometer and temperature into a sensor's interfaces (``imu/angular_velocity
 from __future__ import annotations
 
 from deltoctl.core.driver import Driver
-from deltoctl.drivers.lsm6ds3 import codec
+from deltoctl.families.lsm6ds3 import codec
 from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, ProtocolError
 from deltoctl.profile.model import Hardware, Profile
 from deltoctl.transport.i2c import I2CBus

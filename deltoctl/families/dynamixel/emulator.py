@@ -20,8 +20,8 @@ import time
 import tty
 from dataclasses import dataclass, field
 
-from deltoctl.drivers.dynamixel import codec
-from deltoctl.drivers.dynamixel.control_table import (
+from deltoctl.families.dynamixel import codec
+from deltoctl.families.dynamixel.control_table import (
     BAUD_RATES,
     BY_NAME,
     TABLE_SIZE,

@@ -1,1 +1,0 @@
-"""Tesollo Delto grippers: developer-mode TCP protocol (codec), driver and model table."""

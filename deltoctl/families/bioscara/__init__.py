@@ -1,0 +1,19 @@
+"""The Bioscara SCARA arm: uStepper joints on I2C (codec, driver with stall-detection homing,
+and the joints' firmware emulated on a simulated bus)."""
+
+from deltoctl.registry import Family
+
+FAMILY = Family(
+    name="bioscara",
+    summary="Bioscara SCARA arm: uStepper joints on I2C",
+    driver="deltoctl.families.bioscara.driver:BioscaraDriver",
+    emulator="deltoctl.families.bioscara.emulator:serve",
+    plugins=("bioscara_hardware_interfaces/BioscaraArmHardwareInterface",),
+    schemes=("i2c", "i2c+tcp"),
+    address_range=(0x08, 0x77),
+    address_param="i2c_address",
+    address_kind="I2C address",
+    address_format="#04x",
+    capabilities=frozenset({"identify", "detect", "home", "jog"}),
+    serve_options=("missing", "stall"),
+)

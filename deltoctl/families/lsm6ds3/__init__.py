@@ -1,0 +1,17 @@
+"""The LSM6DS3 / LSM6DS3TR-C IMU on I2C (the MH5's chest IMU): registers, driver, emulator."""
+
+from deltoctl.registry import Family
+
+FAMILY = Family(
+    name="lsm6ds3",
+    summary="LSM6DS3 IMU on I2C",
+    driver="deltoctl.families.lsm6ds3.driver:Lsm6ds3Driver",
+    emulator="deltoctl.families.lsm6ds3.emulator:serve",
+    plugins=("mh5_hardware/MH5I2CInterface",),
+    schemes=("i2c", "i2c+tcp"),
+    address_range=(0x08, 0x77),
+    address_kind="I2C address",
+    address_format="#04x",
+    capabilities=frozenset({"identify", "detect"}),
+    serve_options=("who_am_i", "orientation"),
+)
