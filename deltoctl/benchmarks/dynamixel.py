@@ -34,12 +34,17 @@ def _stop(proc) -> None:  # type: ignore[no-untyped-def]
 
 def _deltoctl_rate(pty: str, servos: int, baud: int, duration: float) -> tuple[float, int]:
     """Sync reads (126, 10) per second through deltoctl's driver, and its errors."""
+    from deltoctl import registry
+    from deltoctl.core.driver import Block
     from deltoctl.families.dynamixel.driver import DynamixelDriver
     from deltoctl.profile.model import Component, Hardware, Profile
 
-    hw = Hardware("bus", family="dynamixel", joints=[
+    family = registry.get("dynamixel")
+    assert family is not None
+    hw = Hardware("bus", family=family.name, joints=[
         Component("joint", f"j{i}", address=i) for i in range(1, servos + 1)])
-    driver = DynamixelDriver(Profile("bench", hardware=[hw]), hw, f"serial://{pty}?baud={baud}")
+    driver = DynamixelDriver(Block(Profile("bench", hardware=[hw]), hw, family,
+                                   f"serial://{pty}?baud={baud}"))
     driver.configure()
     ids = list(range(1, servos + 1))
     errors = driver.stats["errors"]

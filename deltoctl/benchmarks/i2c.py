@@ -8,11 +8,14 @@ import time
 
 from smbus2 import i2c_msg
 
+from deltoctl import registry
+from deltoctl.core.driver import Block, Links
 from deltoctl.families.bioscara import codec
 from deltoctl.families.bioscara.driver import BioscaraDriver
+from deltoctl.families.bioscara.emulator import joints_for_block
 from deltoctl.profile.catalog import load_profile
-from deltoctl.sim.i2c_bus import bus_for_profile
-from deltoctl.transport.i2c import wire_bits
+from deltoctl.sim.i2c_bus import SimSMBus
+from deltoctl.transport.i2c import I2CBus, wire_bits
 
 
 class _Timed:
@@ -35,8 +38,14 @@ def measure(cycles: int, clock: int) -> dict:
     """deltoctl's time per transaction (the emulator's own time taken out), the wire time of
     those transactions at ``clock`` Hz, and the hand-written smbus2 loop."""
     profile = load_profile("bioscara-arm")
-    timed = _Timed(bus_for_profile(profile))
-    driver = BioscaraDriver(profile, profile.hardware[0], "i2c+sim://bench", timed)
+    hw = profile.hardware[0]
+    timed = _Timed(SimSMBus(joints_for_block(hw)))
+    url = "i2c:///dev/i2c-bench"
+    links = Links()
+    links.open[url] = I2CBus(timed, url)  # the emulator in-process: no socket in the way
+    family = registry.get(profile.family_of(hw))
+    assert family is not None
+    driver = BioscaraDriver(Block(profile, hw, family, url, links=links))
     driver.configure()
     for _ in range(200):
         driver.read()

@@ -19,46 +19,61 @@ def bench_loop(
     duration: Annotated[float, typer.Option("--duration", help="Seconds per run.")] = 10.0,
     unpaced: Annotated[float, typer.Option(
         "--unpaced", help="Seconds of the unpaced run (0: skip).")] = 5.0,
+    hands: Annotated[str, typer.Option(
+        "--hands", help="Numbers of simulated hands to run, e.g. 1,2,4 (each hand served by "
+                        "its own process).")] = "1",
 ) -> None:
-    """The Delto read+write cycle while recording, paced and unpaced.
+    """The read+write cycle of N hands while recording, paced and unpaced.
 
-    A Delto profile (default dg-5f-right: F/T and IO) against `sim serve` over loopback TCP,
-    recording to MCAP; beside it, the same loop idle (what this machine allows)."""
+    A gripper profile (default dg-5f-right: F/T and IO), N copies of its block, each against
+    its own `sim serve` over loopback TCP, through the cycle runner, recording to MCAP; beside
+    it, the same loop idle (what this machine allows)."""
+    import math
     import os
 
     from deltoctl.benchmarks.loop import measure
 
     opts = options(ctx)
-    if rate <= 0 or duration <= 0 or unpaced < 0:
+    if not all(math.isfinite(x) for x in (rate, duration, unpaced)) or rate <= 0 \
+            or duration <= 0 or unpaced < 0:
         raise InvalidInput("--rate and --duration must be positive, --unpaced not negative")
+    try:
+        counts = tuple(sorted({int(n) for n in hands.split(",") if n.strip()}))
+    except ValueError:
+        raise InvalidInput(f"--hands takes numbers, e.g. 1,2,4; got {hands!r}") from None
+    if not counts or not all(1 <= n <= 16 for n in counts):
+        raise InvalidInput("--hands takes 1 to 16 hands")
     prof = opts.load_profile(opts.profile or "dg-5f-right")
-    results = measure(prof, rate, duration, unpaced)
+    results = measure(prof, rate, duration, unpaced, counts)
     if opts.json:
         emit_json(results)
         return
-    say(f"bench loop: {prof.name} against sim serve at {results['endpoint']} "
-         f"({os.cpu_count()} CPUs)")
+    say(f"bench loop: {prof.name}, {', '.join(map(str, counts))} hand(s), each against its own "
+        f"sim serve ({os.cpu_count()} CPUs)")
     idle = results["idle_loop"]
     say(f"  baseline: an idle {rate:g} Hz loop here reaches {100 * idle['achieved_fraction']:.2f}"
-         f" %, lateness p99 {idle['lateness_p99_ms']:.3f} ms, misses {idle['deadline_misses']}"
-         + (f", CPU steal {idle['cpu_steal_percent']} %"
-            if idle["cpu_steal_percent"] is not None else ""))
-    for name in ("paced", "unpaced"):
-        if name not in results:
-            continue
-        r = results[name]
-        say(f"  {name:8} requested {r['requested_rate']:g} Hz, real {r['real_rate']:.1f} Hz"
-             + (f" ({100 * r['achieved_fraction']:.2f} %)" if r["achieved_fraction"] else "")
-             + f", lateness p50 {r['lateness_p50_ms']:.3f} ms p99 {r['lateness_p99_ms']:.3f} ms"
-             f", period jitter p99 {r['period_jitter_p99_ms']:.3f} ms"
-             f", misses {r['deadline_misses']}, errors {r['errors']}"
-             + (f", CPU steal {r['cpu_steal_percent']} %" if r["cpu_steal_percent"] is not None
-                else ""))
-        stages = ", ".join(f"{k} {v:.1f}" for k, v in r["stage_us_per_cycle"].items())
-        say(f"           µs per cycle: {stages}; CPU {r['cpu_us_per_cycle']:.1f} in the loop, "
-             f"{r['recorder_process_cpu_us_per_cycle']:.1f} in the recorder process")
+        f" %, lateness p99 {idle['lateness_p99_ms']:.3f} ms, misses {idle['deadline_misses']}"
+        + (f", CPU steal {idle['cpu_steal_percent']} %"
+           if idle["cpu_steal_percent"] is not None else ""))
+    for n, run in results["hands"].items():
+        for name in ("paced", "unpaced"):
+            if name not in run:
+                continue
+            r = run[name]
+            say(f"  {n} hand(s) {name:8} requested {r['requested_rate']:g} Hz, real "
+                f"{r['real_rate']:.1f} Hz"
+                + (f" ({100 * r['achieved_fraction']:.2f} %)" if r["achieved_fraction"] else "")
+                + f", lateness p50 {r['lateness_p50_ms']:.3f} ms p99 "
+                f"{r['lateness_p99_ms']:.3f} ms, period jitter p99 "
+                f"{r['period_jitter_p99_ms']:.3f} ms, misses {r['deadline_misses']}, errors "
+                f"{r['errors']}"
+                + (f", CPU steal {r['cpu_steal_percent']} %"
+                   if r["cpu_steal_percent"] is not None else ""))
+            stages = ", ".join(f"{k} {v:.1f}" for k, v in r["stage_us_per_cycle"].items())
+            say(f"      µs per cycle: {stages}; CPU {r['cpu_us_per_cycle']:.1f} in the loop, "
+                f"{r['recorder_process_cpu_us_per_cycle']:.1f} in the recorder process")
     say("  goals: " + ", ".join(f"{k}={'yes' if v else 'NO'}"
-                                 for k, v in results["goals"].items()))
+                                for k, v in results["goals"].items()))
 
 
 @app.command("dynamixel")

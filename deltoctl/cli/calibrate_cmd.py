@@ -2,12 +2,12 @@
 
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
 from deltoctl.cli.context import options
-from deltoctl.cli.device_cmd import AllowMismatch, open_session
+from deltoctl.cli.device_cmd import AllowMismatch, finish, open_system
 from deltoctl.cli.output import emit_json, info, table
 from deltoctl.errors import DeviceError, InvalidInput
 
@@ -16,11 +16,12 @@ app = typer.Typer(help="Calibration routines that write a report.", no_args_is_h
 AXES = ("force.x", "force.y", "force.z", "torque.x", "torque.y", "torque.z")
 
 
-def _collect(driver, sensors: list[str], count: int, rate: float) -> dict[str, dict[str, list]]:  # type: ignore[no-untyped-def]
-    samples = {s: {a: [] for a in AXES} for s in sensors}
+def _collect(system: Any, sensors: list[str], count: int,
+             rate: float) -> dict[str, dict[str, list]]:
+    samples: dict[str, dict[str, list]] = {s: {a: [] for a in AXES} for s in sensors}
     for _ in range(count):
-        values = driver.read()
-        if not driver.connected:
+        values = system.read()
+        if not system.connected:
             raise DeviceError("the link was lost during calibration; nothing was saved")
         for s in sensors:
             for a in AXES:
@@ -29,82 +30,105 @@ def _collect(driver, sensors: list[str], count: int, rate: float) -> dict[str, d
     return samples
 
 
-@app.command("ft")
-def calibrate_ft(
-    ctx: typer.Context,
-    samples: Annotated[int, typer.Option("--samples", "-n", help="Samples per check.")] = 50,
-    force_tolerance: Annotated[float, typer.Option(
-        help="Largest residual force after the tare, N (norm of the mean).")] = 0.3,
-    torque_tolerance: Annotated[float, typer.Option(
-        help="Largest residual torque after the tare, N·m (norm of the mean).")] = 0.03,
-    output_dir: Annotated[Path, typer.Option(
-        "--output-dir", "-o", help="Where the JSON report goes.")] = Path("."),
-    allow_model_mismatch: AllowMismatch = False,
-) -> None:
-    """Tare (SET_FT_SENSOR_OFFSET), then check the residual over N samples; exit 1 when over
-    tolerance. The report is saved as calibration-<model>-<address>-<time>.json."""
-    import json
+def _residuals(before: dict, after: dict, force_tol: float, torque_tol: float) -> dict:
     import math
     import statistics
-    from datetime import datetime, timezone
 
-    opts = options(ctx)
-    if samples < 2:
-        raise InvalidInput("--samples must be at least 2")
-    if not output_dir.is_dir():
-        raise InvalidInput(f"--output-dir {output_dir} is not a directory")
-    with open_session(opts, allow_model_mismatch) as session:
-        driver = session.driver
-        sensors = [s.name for s in session.hw.sensors if s.state("force.x")]
-        if not sensors:
-            raise InvalidInput(f"{session.profile.name} has no F/T sensors")
-        before = _collect(driver, sensors, samples, 200.0)
-        driver.tare_ft()
-        time.sleep(0.05)
-        driver.read()
-        after = _collect(driver, sensors, samples, 200.0)
-        ident = driver.identity.as_dict()
     per_sensor = {}
-    passed = True
-    for s in sensors:
+    for s in after:
         mean_b = {a: statistics.fmean(before[s][a]) for a in AXES}
         mean_a = {a: statistics.fmean(after[s][a]) for a in AXES}
         std_a = {a: statistics.stdev(after[s][a]) for a in AXES}
         force = math.sqrt(sum(mean_a[a] ** 2 for a in AXES[:3]))
         torque = math.sqrt(sum(mean_a[a] ** 2 for a in AXES[3:]))
-        ok = force <= force_tolerance and torque <= torque_tolerance
-        passed &= ok
         per_sensor[s] = {"offset_removed": {a: round(mean_b[a] - mean_a[a], 5) for a in AXES},
                          "residual_mean": {a: round(mean_a[a], 5) for a in AXES},
                          "residual_std": {a: round(std_a[a], 5) for a in AXES},
                          "residual_force_n": round(force, 5),
-                         "residual_torque_nm": round(torque, 5), "pass": ok}
+                         "residual_torque_nm": round(torque, 5),
+                         "pass": force <= force_tol and torque <= torque_tol}
+    return per_sensor
+
+
+@app.command("ft")
+def calibrate_ft(
+    ctx: typer.Context,
+    samples: Annotated[int, typer.Option("--samples", "-n", min=2, max=100000,
+                                         help="Samples per check.")] = 50,
+    force_tolerance: Annotated[float, typer.Option(
+        help="Largest residual force after the tare, N (norm of the mean).")] = 0.3,
+    torque_tolerance: Annotated[float, typer.Option(
+        help="Largest residual torque after the tare, N·m (norm of the mean).")] = 0.03,
+    output_dir: Annotated[Path, typer.Option(
+        "--output-dir", "-o", help="Where the JSON reports go.")] = Path("."),
+    allow_model_mismatch: AllowMismatch = False,
+) -> None:
+    """Tare the F/T sensors of every block that has them (SET_FT_SENSOR_OFFSET), then check
+    the residual over N samples; exit 1 when over tolerance. One report per block, saved as
+    calibration-<model>-<address>-<time>.json."""
+    import json
+    import math
+    from datetime import datetime, timezone
+
+    opts = options(ctx)
+    if not all(math.isfinite(t) and t > 0 for t in (force_tolerance, torque_tolerance)):
+        raise InvalidInput("the tolerances must be positive numbers")
+    if not output_dir.is_dir():
+        raise InvalidInput(f"--output-dir {output_dir} is not a directory")
+    reports = []
+    with open_system(opts, allow_model_mismatch) as system:
+        blocks = {m.name: [s.name for s in m.hw.sensors if s.state("force.x")]
+                  for m in system.able("calibrate_ft")}
+        blocks = {name: sensors for name, sensors in blocks.items() if sensors}
+        if not blocks:
+            raise InvalidInput(f"{system.profile.name} has no F/T sensors to calibrate")
+        unable = [m.name for m in system if m.name not in blocks
+                  and any(s.state("force.x") for s in m.hw.sensors)]
+        sensors = [s for names in blocks.values() for s in names]
+        before = _collect(system, sensors, samples, 200.0)
+        for name in blocks:
+            system.member(blocks[name][0]).driver.tare_ft()
+        time.sleep(0.05)
+        system.read()
+        after = _collect(system, sensors, samples, 200.0)
+        identities = {name: system.member(names[0]).driver.identify()
+                      for name, names in blocks.items()}
+        urls = {name: system.member(names[0]).url for name, names in blocks.items()}
     now = datetime.now(timezone.utc)
-    model = ident["reported_model"].split(" ")[0]
-    address = session.url.split("://", 1)[1].replace(":", "_").replace("/", "_")
-    report = {
-        "kind": "ft_tare", "profile": session.profile.name, "model": ident["reported_model"],
-        "firmware": ident["firmware"], "target": session.url,
-        "time": now.isoformat(timespec="seconds"), "time_ns": time.time_ns(),
-        "samples": samples, "tolerance": {"force_n": force_tolerance,
-                                          "torque_nm": torque_tolerance},
-        "pass": passed, "sensors": per_sensor,
-    }
-    path = output_dir / f"calibration-{model}-{address}-{now.strftime('%Y%m%dT%H%M%SZ')}.json"
-    path.write_text(json.dumps(report, indent=2) + "\n")
-    report["report_file"] = str(path)
+    for name, names in blocks.items():
+        ident = identities[name]
+        per_sensor = _residuals({s: before[s] for s in names}, {s: after[s] for s in names},
+                                force_tolerance, torque_tolerance)
+        model = str(ident.get("reported_model", name)).split(" ")[0]
+        address = urls[name].split("://", 1)[-1].replace(":", "_").replace("/", "_")
+        report = {
+            "kind": "ft_tare", "profile": system.profile.name, "block": name,
+            "model": ident.get("reported_model"), "firmware": ident.get("firmware"),
+            "target": urls[name], "time": now.isoformat(timespec="seconds"),
+            "time_ns": time.time_ns(), "samples": samples,
+            "tolerance": {"force_n": force_tolerance, "torque_nm": torque_tolerance},
+            "pass": all(r["pass"] for r in per_sensor.values()), "sensors": per_sensor,
+        }
+        path = output_dir / (f"calibration-{model}-{address}-"
+                             f"{now.strftime('%Y%m%dT%H%M%SZ')}.json")
+        path.write_text(json.dumps(report, indent=2) + "\n")
+        report["report_file"] = str(path)
+        reports.append(report)
     if opts.json:
-        emit_json(report)
+        emit_json({"pass": all(r["pass"] for r in reports), "blocks": reports})
     else:
-        table(None, ["sensor", "residual force N", "residual torque N·m", "pass"],
-              [[s, r["residual_force_n"], r["residual_torque_nm"], "yes" if r["pass"] else "NO"]
-               for s, r in per_sensor.items()])
-        info(f"report: {path}")
-    if not passed:
-        bad = [s for s, r in per_sensor.items() if not r["pass"]]
+        table(None, ["block", "sensor", "residual force N", "residual torque N·m", "pass"],
+              [[r["block"], s, v["residual_force_n"], v["residual_torque_nm"],
+                "yes" if v["pass"] else "NO"]
+               for r in reports for s, v in r["sensors"].items()])
+        for r in reports:
+            info(f"report: {r['report_file']}")
+    bad = [s for r in reports for s, v in r["sensors"].items() if not v["pass"]]
+    if bad:
         raise DeviceError(f"residual over tolerance after the tare on: {', '.join(bad)}",
                           hint="check the firmware (OFFSET needs v2.3 or later) and that "
                                "nothing touches the fingertips")
+    finish(system, [f"{', '.join(unable)}: cannot calibrate F/T"] if unable else None)
 
 
 def register(root: typer.Typer) -> None:

@@ -1,35 +1,49 @@
-"""The lifecycle verbs on a device: connect, identify, detect, gpio, stream."""
+"""The lifecycle verbs on every block of a robot: connect, identify, detect, gpio, stream."""
 
+import contextlib
 import time
+from collections.abc import Iterator
 from typing import Annotated, Any
 
 import typer
 
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.output import emit_json, emit_json_line, info, say, stdout_is_terminal, table
+from deltoctl.core.runner import Sink
 from deltoctl.errors import WARNINGS, DeviceError, InvalidInput
 
 AllowMismatch = Annotated[bool, typer.Option(
     "--allow-model-mismatch",
-    help="Go on when the gripper reports another model than the profile (exit 3).")]
+    help="Go on when a device reports another model than the profile (exit 3).")]
 
 
-def open_session(opts: Options, allow_model_mismatch: bool = False,  # type: ignore[no-untyped-def]
-                 profile: Any = None, probe: bool = False):
-    """A session on the selected profile (pass ``profile`` when the verb loaded it already;
-    ``probe`` for a verb that looks at a bus where nothing may answer)."""
-    from deltoctl.core.session import Session
+@contextlib.contextmanager
+def open_system(opts: Options, allow_model_mismatch: bool = False, profile: Any = None,
+                probe: bool = False) -> Iterator[Any]:
+    """The System of the selected profile's blocks (``--hardware``), configured and active;
+    with ``--sim``, each block's emulator is started first and its URL is the block's target.
+    Pass ``profile`` when the verb loaded it already; ``probe`` for a verb that looks at a bus
+    where nothing may answer."""
+    from deltoctl.core.system import System
 
-    return Session(profile or opts.load_profile(), opts.target, sim=opts.sim,
-                   allow_model_mismatch=allow_model_mismatch, probe=probe)
+    profile = profile or opts.load_profile()
+    with contextlib.ExitStack() as stack:
+        targets = opts.target
+        if opts.sim:
+            from deltoctl.sim.serve import ServeOptions, serve_profile
+
+            served = serve_profile(stack, profile, ServeOptions(), opts.hardware)
+            targets = [f"{bus}={url}" for bus, url in served["buses"].items()]
+        system = System(profile, targets, opts.hardware, probe=probe,
+                        allow_model_mismatch=allow_model_mismatch)
+        with system:
+            yield system
 
 
-def finish(session: Any) -> None:
-    """Exit 3 when the verb finished but with warnings (a model mismatch allowed, reconnects)."""
-    warnings = list(session.driver.warnings)
-    if session.driver.stats.get("reconnects"):
-        warnings.append(f"the link was lost and re-established "
-                        f"{session.driver.stats['reconnects']} time(s)")
+def finish(system: Any, extra: list[str] | None = None) -> None:
+    """Exit 3 when the verb finished but with warnings (a block left out, a model mismatch
+    allowed, reconnects)."""
+    warnings = system.warnings() + (extra or [])
     for w in warnings:
         info(f"warning: {w}")
     if warnings:
@@ -41,64 +55,78 @@ def register(app: typer.Typer) -> None:
     app.command("identify")(identify)
     app.command("detect")(detect)
     app.command("stream")(stream)
-    gpio_app = typer.Typer(help="Read and set the gripper's GPIO.", no_args_is_help=True)
+    gpio_app = typer.Typer(help="Read and set GPIOs (a Delto's outputs: motor on, grasp, "
+                           "release; vacuum, digital and analog IOs).", no_args_is_help=True)
     gpio_app.command("get")(gpio_get)
     gpio_app.command("set")(gpio_set)
     app.add_typer(gpio_app, name="gpio")
 
 
+def block_entry(m: Any, **data: Any) -> dict[str, Any]:
+    """One block in a verb's JSON: the same keys first whatever the family."""
+    return {"name": m.name, "family": m.family.name, "target": m.url or None,
+            "state": m.lifecycle.state, **data}
+
+
 def connect(
     ctx: typer.Context,
-    count: Annotated[int, typer.Option("--count", "-n", help="Round trips to time.")] = 20,
+    count: Annotated[int, typer.Option("--count", "-n", min=1, max=100000,
+                                       help="Round trips to time, per block.")] = 20,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
-    """Reach the device, time round trips, and run the lifecycle to active and back."""
+    """Reach every block, time round trips, and run the lifecycle to active and back."""
     import statistics
 
     opts = options(ctx)
-    session = open_session(opts, allow_model_mismatch)
-    with session:
-        rtts = []
-        for _ in range(max(1, count)):
-            start = time.perf_counter()
-            session.driver.round_trip()
-            rtts.append((time.perf_counter() - start) * 1e3)
-        if not session.driver.connected:
-            raise DeviceError(f"{session.url} stopped answering during the round trips")
-    result = {
-        "target": session.url,
-        "reachable": True,
-        "round_trips": len(rtts),
-        "rtt_ms": {"median": round(statistics.median(rtts), 3), "min": round(min(rtts), 3),
-                   "max": round(max(rtts), 3)},
-        "lifecycle": session.lifecycle.history,
-    }
+    blocks = []
+    with open_system(opts, allow_model_mismatch) as system:
+        for m in system:
+            rtts = []
+            for _ in range(count):
+                start = time.perf_counter()
+                m.driver.round_trip()
+                rtts.append((time.perf_counter() - start) * 1e3)
+            if not m.driver.connected:
+                raise DeviceError(f"{m.name} ({m.url}) stopped answering during the round "
+                                  "trips")
+            blocks.append((m, {"reachable": True, "round_trips": len(rtts), "rtt_ms": {
+                "median": round(statistics.median(rtts), 3), "min": round(min(rtts), 3),
+                "max": round(max(rtts), 3)}}))
+    result = {"profile": system.profile.name,
+              "blocks": [block_entry(m, **data, lifecycle=m.lifecycle.history)
+                         for m, data in blocks]}
     if opts.json:
         emit_json(result)
     else:
-        say(f"connected to {session.url}: round trip median {result['rtt_ms']['median']} ms "
-             f"(min {result['rtt_ms']['min']}, max {result['rtt_ms']['max']}, n={len(rtts)})")
-        say("lifecycle: " + " → ".join(session.lifecycle.history))
-    finish(session)
+        for m, data in blocks:
+            rtt = data["rtt_ms"]
+            say(f"{m.name}: connected to {m.url or 'the in-process mock'}: round trip median "
+                f"{rtt['median']} ms (min {rtt['min']}, max {rtt['max']}, "
+                f"n={data['round_trips']})")
+            say(f"{m.name}: lifecycle " + " → ".join(m.lifecycle.history))
+    finish(system)
 
 
 def identify(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
-    """What the device says it is (model, firmware, direction map, flags), against the profile."""
+    """What each block's device says it is (model, firmware, servos, joints), against the
+    profile."""
     opts = options(ctx)
-    with open_session(opts, allow_model_mismatch) as session:
-        ident = session.driver.identity.as_dict()
-    ident["profile"] = session.profile.name
-    ident["target"] = session.url
+    with open_system(opts, allow_model_mismatch) as system:
+        blocks = [block_entry(m, identity=m.driver.identify()) for m in system.able("identify")]
+        unable = [m.name for m in system if not m.can("identify")]
+    result = {"profile": system.profile.name, "blocks": blocks}
     if opts.json:
-        emit_json(ident)
+        emit_json(result)
     else:
-        _identity_tables(ident)
-    finish(session)
+        for b in blocks:
+            identity_tables({"family": b["family"], "target": b["target"], **b["identity"]},
+                            b["name"])
+    finish(system, [f"{', '.join(unable)}: cannot identify"] if unable else None)
 
 
-def _identity_tables(ident: dict, title: str | None = None) -> None:
+def identity_tables(ident: dict, title: str | None = None) -> None:
     """Plain fields in one table; each list of parts (joints, servos) in a table of its own,
-    one row per part; nested groups (buses) recursively."""
+    one row per part; nested groups recursively."""
     flat = [[k, v] for k, v in ident.items() if not isinstance(v, dict)]
     if flat:
         table(title, ["field", "value"], flat)
@@ -112,84 +140,112 @@ def _identity_tables(ident: dict, title: str | None = None) -> None:
             columns = list(dict.fromkeys(c for r in rows for c in r))
             table(name, ["name", *columns],
                   [[part, *(r.get(c, "") for c in columns)] for part, r in value.items()])
+        elif rows and not any(isinstance(r, dict) for r in rows):
+            table(name, ["field", "value"], [[k, v] for k, v in value.items()])
         else:
-            _identity_tables(value, name)
+            identity_tables(value, name)
 
 
 def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
-    """What is on the device or bus (sensors, GPIO, servos, I2C devices), against the profile."""
+    """What is on each block's device or bus (sensors, GPIO, servos, I2C devices), against
+    the profile."""
     opts = options(ctx)
-    with open_session(opts, allow_model_mismatch, probe=True) as session:
-        result = session.driver.detect()
-    checks = result["checks"]
+    blocks = []
+    with open_system(opts, allow_model_mismatch, probe=True) as system:
+        for m in system.able("detect"):
+            found = m.driver.detect()
+            blocks.append(block_entry(m, summary=found.pop("summary"),
+                                      checks=found.pop("checks"), details=found))
     if opts.json:
-        emit_json({k: v for k, v in result.items() if k != "summary"})
+        emit_json({"profile": system.profile.name, "blocks": blocks})
     else:
-        say(result["summary"])
-        if "grid" in result:
-            typer.echo(result["grid"])
-        if checks:
-            table(None, ["check", "profile", "device", "match"],
-                  [[c["what"], c["profile"], c["device"], "yes" if c["match"] else "NO"]
-                   for c in checks])
-    mismatches = [c["what"] for c in checks if not c["match"]]
-    if mismatches:
-        info(f"warning: the device differs from the profile in: {', '.join(mismatches)}")
-        raise typer.Exit(WARNINGS)
-    finish(session)
+        for b in blocks:
+            say(b["summary"])
+            if "grid" in b["details"]:
+                typer.echo(b["details"]["grid"])
+            if b["checks"]:
+                table(b["name"], ["check", "profile", "device", "match"],
+                      [[c["what"], c["profile"], c["device"], "yes" if c["match"] else "NO"]
+                       for c in b["checks"]])
+    mismatches = [f"{b['name']}: {c['what']}" for b in blocks for c in b["checks"]
+                  if not c["match"]]
+    finish(system, [f"the device differs from the profile in: {', '.join(mismatches)}"]
+           if mismatches else None)
 
 
-def _gpio_names(profile: Any) -> list[str]:
-    return [n for _, c in profile.components() if c.kind == "gpio"
-            for n in c.interface_names("state")]
+def _gpio_names(system: Any) -> list[str]:
+    return [n for m in system for c in m.hw.gpios for n in c.interface_names("state")]
 
 
 def gpio_get(ctx: typer.Context) -> None:
-    """Read every GPIO state interface."""
+    """Read every GPIO state interface of every block."""
     opts = options(ctx)
-    with open_session(opts) as session:
-        values = session.driver.read()
-        names = [n for n in _gpio_names(session.profile) if n in values]
+    profile = opts.load_profile()
+    if not any(hw.gpios for hw in profile.hardware):
+        raise InvalidInput(f"{profile.name} has no GPIO")
+    with open_system(opts, profile=profile) as system:
+        values = system.read()
+        names = [n for n in _gpio_names(system) if n in values]
     if not names:
-        raise DeviceError("the device sends no GPIO values (no GPIO on this model, or IO is "
+        raise DeviceError("the devices send no GPIO values (no GPIO on this model, or IO is "
                           "false in the profile)")
     gpio = {n: values[n] for n in names}
     if opts.json:
         emit_json(gpio)
     else:
         table(None, ["interface", "value"], [[n, f"{v:g}"] for n, v in gpio.items()])
+    finish(system)
 
 
 _ON = {"on": 1.0, "true": 1.0, "off": 0.0, "false": 0.0}
 
 
+def _complete_gpio(ctx: typer.Context, incomplete: str) -> list[str]:
+    """The profile's GPIO command interfaces."""
+    from deltoctl.cli.profile_cmd import _completion_profile
+
+    prof = _completion_profile(ctx)
+    names = [] if prof is None else [n for hw in prof.hardware for c in hw.gpios
+                                     for n in c.interface_names("command")]
+    return [n for n in names if n.startswith(incomplete)]
+
+
 def gpio_set(
     ctx: typer.Context,
-    name: Annotated[str, typer.Argument(help="A GPIO command interface, e.g. output_2 or "
-                                        "gpio/output_2 (Delto: motor on, grasp, release), "
-                                        "flange_vacuum/vacuum.")],
+    name: Annotated[str, typer.Argument(
+        autocompletion=_complete_gpio,
+        help="A GPIO command interface, e.g. gpio/output_2 (Delto: motor on, grasp, release), "
+             "flange_vacuum/vacuum; output_2 alone when the profile has one GPIO 'gpio'.")],
     value: Annotated[str, typer.Argument(help="on, off or a number.")],
 ) -> None:
     """Set one GPIO output and read it back (a Delto's three outputs travel together)."""
+    import math
+
     opts = options(ctx)
     try:
         number = _ON[value.lower()] if value.lower() in _ON else float(value)
     except ValueError:
         raise InvalidInput(f"value must be on, off or a number, got {value!r}") from None
-    with open_session(opts) as session:
-        full = name if "/" in name else f"gpio/{name}"
-        session.driver.set_command(full, number)
-        after = dict(session.driver.read())
-        names = _gpio_names(session.profile)
+    if not math.isfinite(number):
+        raise InvalidInput(f"value must be finite, got {value!r}")
+    full = name if "/" in name else f"gpio/{name}"
+    with open_system(opts) as system:
+        m = system.member(full)
+        if not m.can("gpio"):
+            raise InvalidInput(f"{m.name} has no GPIO outputs to set")
+        m.driver.set_command(full, number)
+        after = dict(system.read())
+        names = _gpio_names(system)
     if full in after and after[full] != number:
         raise DeviceError(f"{full} reads back {after[full]:g} after setting it to {number:g}")
     if opts.json:
         emit_json({n: after[n] for n in names if n in after})
     elif not opts.quiet:
         say(f"{full} = {number:g}")
+    finish(system)
 
 
-def _select(names: list[str], patterns: list[str]) -> list[str]:
+def select(names: list[str], patterns: list[str]) -> list[str]:
     import fnmatch
 
     if not patterns:
@@ -201,10 +257,56 @@ def _select(names: list[str], patterns: list[str]) -> list[str]:
     return chosen
 
 
+def check_loop(rate: float, duration: float | None) -> None:
+    """--rate and --duration: finite and positive."""
+    import math
+
+    if not (math.isfinite(rate) and 0 < rate <= 100_000):
+        raise InvalidInput(f"--rate must be a positive number of Hz up to 100000, got {rate:g}")
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise InvalidInput(f"--duration must be a positive number of seconds, got {duration:g}")
+
+
 LIVE_PERIOD = 0.05  # s between redraws of the live table: people read at most 20 a second
 RateOpt = Annotated[float, typer.Option("--rate", "-r", help="Samples per second.")]
 DurationOpt = Annotated[float | None, typer.Option(
     "--duration", "-d", help="Stop after this many seconds (default: Ctrl-C or SIGTERM).")]
+
+
+class LinesSink(Sink):
+    """NDJSON frames on stdout: ``{"t": ns, "values": {...}}``."""
+
+    def __init__(self, names: list[str]) -> None:
+        self.names = names
+        self.samples = 0
+
+    def frame(self, t_ns: int, values: dict[str, float]) -> None:
+        self.samples += 1
+        emit_json_line({"t": t_ns, "values": {n: values.get(n) for n in self.names}})
+
+
+class LiveSink(LinesSink):
+    """The live table on a terminal, redrawn at most 20 times a second."""
+
+    def __init__(self, names: list[str], rate: float) -> None:
+        from rich.live import Live
+
+        super().__init__(names)
+        self.rate = rate
+        self.shown = 0.0
+        self.live = Live(auto_refresh=False)
+        self.live.start()
+
+    def frame(self, t_ns: int, values: dict[str, float]) -> None:
+        self.samples += 1
+        if time.monotonic() - self.shown >= LIVE_PERIOD:
+            sample = {n: values.get(n) for n in self.names}
+            self.live.update(live_tables(sample, f"{self.samples} samples at {self.rate:g} Hz"),
+                             refresh=True)
+            self.shown = time.monotonic()
+
+    def close(self, _: Any) -> None:
+        self.live.stop()
 
 
 def stream(
@@ -216,64 +318,74 @@ def stream(
         = None,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
-    """Stream state interfaces: a live table on a terminal, NDJSON with --json or when piped."""
-    import signal
-
-    from deltoctl.core.loop import CycleLoop
+    """Stream every block's state interfaces: a live table on a terminal, NDJSON with --json
+    or when piped. Exit 4 when a link is down at the end, 3 when one was lost and came back."""
+    from deltoctl.core.runner import run_cycles
 
     opts = options(ctx)
-    if rate <= 0:
-        raise InvalidInput("--rate must be positive")
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
-    as_lines = opts.json or not stdout_is_terminal()
-    with open_session(opts, allow_model_mismatch) as session:
-        driver = session.driver
-        extras = [f"{j.name}/{e}" for j in session.profile.joints()
-                  for e in driver.extra_states]  # e.g. a Bioscara joint's flags
-        names = _select([*session.profile.state_interfaces(), *extras,
-                         "system/connection_status"], list(interfaces or []))
-        live = None
-        if not as_lines:
-            from rich.live import Live
-
-            live = Live(auto_refresh=False)
-            live.start()
-        samples, shown = 0, 0.0
-        try:
-            for _ in CycleLoop(rate, duration):
-                values = driver.read()
-                sample = {n: values.get(n) for n in names}
-                samples += 1
-                if live is None:
-                    emit_json_line({"t": time.time_ns(), "values": sample})
-                elif time.monotonic() - shown >= LIVE_PERIOD:
-                    live.update(live_tables(sample, f"{samples} samples at {rate:g} Hz"),
-                                refresh=True)
-                    shown = time.monotonic()
-        except KeyboardInterrupt:
-            pass
-        finally:
-            if live is not None:
-                live.stop()
+    check_loop(rate, duration)
+    with open_system(opts, allow_model_mismatch) as system:
+        names = select(system.state_interfaces(), list(interfaces or []))
+        sink = (LinesSink(names) if opts.json or not stdout_is_terminal()
+                else LiveSink(names, rate))
+        links = LinkWatch(system)
+        run_cycles(system, rate, duration, [sink, links])
     if not opts.quiet:
-        info(f"{samples} samples of {len(names)} interfaces")
-    finish(session)
+        info(f"{sink.samples} samples of {len(names)} interfaces")
+    links.finish()
+    finish(system)
 
 
-def live_tables(sample: dict[str, Any], title: str):  # type: ignore[no-untyped-def]
+class LinkWatch(Sink):
+    """Counts link losses per block; at the end, a block whose link is still down is
+    unreachable (exit 4)."""
+
+    def __init__(self, system: Any) -> None:
+        self.system = system
+        self.keys = {m.status_key: m for m in system}
+        self.up = dict.fromkeys(self.keys, True)
+        self.losses: dict[str, int] = {}
+
+    def frame(self, t_ns: int, values: dict[str, float]) -> None:
+        if values.get("system/connection_status") == 1.0 and all(self.up.values()):
+            return
+        for key, m in self.keys.items():
+            up = values.get(key) == 1.0
+            if self.up[key] and not up:
+                self.losses[m.name] = self.losses.get(m.name, 0) + 1
+            self.up[key] = up
+
+    def finish(self) -> None:
+        from deltoctl.errors import Unreachable
+
+        down = [self.keys[k].name for k, up in self.up.items() if not up]
+        if down:
+            raise Unreachable(f"the link to {', '.join(down)} was lost and did not come back")
+        for name, n in self.losses.items():
+            self.system.notes.append(f"{name}: the link was lost {n} time(s) and came back")
+
+
+def live_tables(sample: dict[str, Any], title: str) -> Any:
     """One row per part and a column per interface: a table for each set of interfaces
-    (joints, F/T sensors, GPIO), so a hand of 20 joints fits on a screen."""
+    (joints, F/T sensors, GPIO), so a hand of 20 joints fits on a screen; the links' states in
+    the title."""
     from rich import box
     from rich.console import Group
     from rich.table import Table
 
     parts: dict[str, dict[str, Any]] = {}
+    links: dict[str, Any] = {}
     for name, value in sample.items():
         part, _, interface = name.rpartition("/")
-        parts.setdefault(part, {})[interface] = value
-    link = parts.pop("system", {}).get("connection_status")
-    if link is not None:
-        title += " · link up" if link else " · [bold red]link lost, reconnecting[/]"
+        if interface == "connection_status":
+            links[part] = value
+        else:
+            parts.setdefault(part, {})[interface] = value
+    overall = links.pop("system", None)
+    if overall is not None:
+        down = [p for p, v in links.items() if not v]
+        title += (" · links up" if overall else
+                  f" · [bold red]link lost: {', '.join(down) or 'reconnecting'}[/]")
     tables: dict[tuple[str, ...], Table] = {}
     for part, values in parts.items():
         columns = tuple(values)

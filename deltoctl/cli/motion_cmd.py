@@ -1,13 +1,14 @@
 """Motion verbs: home and jog. Confirmation on a terminal unless --yes; refused (exit 5)
 outside limits or without confirmation; duty 0 on the way out, Ctrl-C included."""
 
+import math
 import sys
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
 from deltoctl.cli.context import Options, options
-from deltoctl.cli.device_cmd import AllowMismatch, finish, open_session
+from deltoctl.cli.device_cmd import AllowMismatch, finish, open_system
 from deltoctl.cli.output import emit_json, info, progress, say
 from deltoctl.errors import DeviceError, InvalidInput, Refused
 from deltoctl.units import parse_quantity
@@ -33,9 +34,12 @@ def confirm_motion(opts: Options, what: str) -> None:
 
 def _quantity(text: str, what: str) -> float:
     try:
-        return parse_quantity(text)
+        value = parse_quantity(text)
     except ValueError as exc:
         raise InvalidInput(f"{what}: {exc}") from None
+    if not math.isfinite(value):
+        raise InvalidInput(f"{what} must be a finite number, got {text!r}")
+    return value
 
 
 def _speed(velocity: str | None) -> float | None:
@@ -51,36 +55,44 @@ def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
     return complete_part(ctx, incomplete)
 
 
-def _move(opts: Options, session, targets: dict[str, float], velocity, label: str):  # type: ignore[no-untyped-def]
-    import signal
+def _move(opts: Options, system: Any, targets: dict[str, float], velocity: float | None,
+          label: str) -> dict[str, Any]:
+    """Move on every block that holds a target (at the same time), stop them all on the way
+    out, and report per block."""
+    from deltoctl.core.runner import interrupted_by_signals
 
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
     bar = progress(opts)
     task = bar.add_task(label, total=1.0) if bar else None
     try:
-        result = session.driver.move(
-            targets, session.profile, velocity,
-            None if bar is None else lambda fraction: bar.update(task, completed=fraction))
+        with interrupted_by_signals():
+            result = system.move(
+                targets, velocity,
+                None if bar is None else lambda fraction: bar.update(task, completed=fraction))
     finally:
-        session.driver.stop()
+        system.stop()
         if bar is not None:
             bar.stop()
-    values = session.driver.read()
+    values = system.read()
+    groups = system.by_block(targets)
     report = {
         "settled": result.settled,
         "seconds": round(result.seconds, 3),
-        "targets": targets,
-        "positions": {j: values[f"{j}/position"] for j in targets},
+        "blocks": [{"name": name, "joints": {
+            j: {"target": targets[j], "position": values.get(f"{j}/position"),
+                "settled": j not in result.unsettled} for j in joints}}
+            for name, joints in groups.items()],
         "unsettled": result.unsettled,
     }
-    if opts.json:
-        emit_json(report)
-    elif not opts.quiet:
+    if not opts.json and not opts.quiet:
         say(f"{label}: {'settled' if result.settled else 'did not settle'} in "
-             f"{result.seconds:.2f} s")
-    if not result.settled:
-        raise DeviceError(f"{len(result.unsettled)} joint(s) did not settle: "
-                          f"{', '.join(result.unsettled)}")
+            f"{result.seconds:.2f} s")
+    return report
+
+
+def _fail_unsettled(report: dict[str, Any]) -> None:
+    if report["unsettled"]:
+        raise DeviceError(f"{len(report['unsettled'])} joint(s) did not settle: "
+                          f"{', '.join(report['unsettled'])}")
 
 
 def home(
@@ -93,33 +105,56 @@ def home(
         help="Home again joints that are homed already (homing joints only).")] = False,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
-    """Drive every joint home: to the profile's home pose, or by its homing routine.
+    """Drive every block's joints home: by their homing routine, or to the home pose.
 
     Joints with a `home` command interface (the Bioscara arm) run into their hard stops one at
     a time, in the profile's homing order; the others go to safety.home_pose (zero unless the
-    profile says otherwise)."""
+    profile says otherwise). Blocks that cannot home are named."""
     from deltoctl.core.motion import check_target
+    from deltoctl.core.system import select_blocks
 
     opts = options(ctx)
     profile = opts.load_profile()
-    homing = [j.name for j in profile.joints() if j.command("home")]
-    if homing:
-        _home_routine(opts, profile, homing, joint or [], force)
-        return
-    joints = [j for j in profile.joints() if j.command("effort") or j.command("position")]
-    if joint:
-        joints = [j for j in joints if j.name in _known(profile, joint)]
-    targets = {j.name: profile.safety.home_pose.get(j.name, 0.0) for j in joints}
-    for comp in joints:
+    blocks = select_blocks(profile, opts.hardware)
+    chosen = _known(profile, joint or [])
+    routine = [j.name for hw in blocks for j in hw.joints if j.command("home")
+               and (not chosen or j.name in chosen)]
+    posed = [j for hw in blocks for j in hw.joints if not j.command("home")
+             and (j.command("effort") or j.command("position")) and j.mimic is None
+             and (not chosen or j.name in chosen)]
+    targets = {j.name: profile.safety.home_pose.get(j.name, 0.0) for j in posed}
+    for comp in posed:
         check_target(profile, comp, targets[comp.name], None)
     speed = _speed(velocity)
-    confirm_motion(opts, f"home {len(targets)} joints of {profile.name}")
-    with open_session(opts, allow_model_mismatch, profile) as session:
-        _move(opts, session, targets, speed, "home")
-    finish(session)
+    what = []
+    if routine:
+        what.append(f"home {', '.join(routine)} one at a time, each running into its hard stop")
+    if targets:
+        what.append(f"move {len(targets)} joints to the home pose")
+    if not what:
+        raise InvalidInput(f"nothing to home in {profile.name}: no joint with a home, effort "
+                           "or position command interface")
+    confirm_motion(opts, f"{profile.name}: " + "; then ".join(what))
+    report: dict[str, Any] = {"blocks": []}
+    with open_system(opts, allow_model_mismatch, profile) as system:
+        unable = [m.name for m in system if not m.can("home")
+                  and any(j.name in targets or j.name in routine for j in m.hw.joints)]
+        targets = {j: t for j, t in targets.items() if system.member(j).can("home")}
+        if routine:
+            report["blocks"] += _home_routine(opts, system, routine, force)
+        if targets:
+            moved = _move(opts, system, targets, speed, "home")
+            report["blocks"] += moved["blocks"]
+            report["settled"], report["unsettled"] = moved["settled"], moved["unsettled"]
+    report["cannot_home"] = unable
+    if opts.json:
+        emit_json(report)
+    if targets:
+        _fail_unsettled(report)
+    finish(system, [f"{', '.join(unable)}: cannot home"] if unable else None)
 
 
-def _known(profile, names: list[str]) -> list[str]:  # type: ignore[no-untyped-def]
+def _known(profile: Any, names: list[str]) -> list[str]:
     joints = [j.name for j in profile.joints()]
     for name in names:
         if name not in joints:
@@ -127,18 +162,14 @@ def _known(profile, names: list[str]) -> list[str]:  # type: ignore[no-untyped-d
     return names
 
 
-def _home_routine(opts: Options, profile, homing: list[str], chosen: list[str],  # type: ignore[no-untyped-def]
-                  force: bool) -> None:
-    """Each joint runs into its hard stop, one at a time, in the profile's homing order."""
-    import signal
+def _home_routine(opts: Options, system: Any, homing: list[str],
+                  force: bool) -> list[dict[str, Any]]:
+    """Each joint runs into its hard stop, one at a time, in the profile's homing order,
+    block by block."""
+    from deltoctl.core.runner import interrupted_by_signals
 
-    order = [j for j in profile.safety.homing_order if j in homing]
+    order = [j for j in system.profile.safety.homing_order if j in homing]
     order += [j for j in homing if j not in order]
-    if chosen:
-        order = [j for j in order if j in _known(profile, chosen)]
-    confirm_motion(opts, f"home {', '.join(order)} of {profile.name} one at a time, each "
-                   "running into its hard stop")
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
     bar = progress(opts, transient=False)
     tasks = {j: bar.add_task(f"{j}: waiting", total=1.0) for j in order} if bar else {}
 
@@ -148,17 +179,20 @@ def _home_routine(opts: Options, profile, homing: list[str], chosen: list[str], 
         elif not (opts.json or opts.quiet):
             info(f"{name}: {status}")
 
-    with open_session(opts, profile=profile) as session:
-        try:
-            outcome = session.driver.home(order, force, show)
-        finally:
-            if bar is not None:
-                bar.stop()
-        values = session.driver.read()
-    report = {"homed": outcome, "positions": {j: values.get(f"{j}/position") for j in order}}
-    if opts.json:
-        emit_json(report)
-    finish(session)
+    blocks = []
+    try:
+        with interrupted_by_signals():
+            for name, joints in system.by_block(order).items():
+                m = system.member(joints[0])
+                outcome = m.driver.home(joints, force, show)
+                values = system.read()
+                blocks.append({"name": name, "joints": {
+                    j: {"outcome": outcome.get(j), "position": values.get(f"{j}/position")}
+                    for j in joints}})
+    finally:
+        if bar is not None:
+            bar.stop()
+    return blocks
 
 
 def jog(
@@ -172,8 +206,6 @@ def jog(
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Move one joint by DELTA (or --to POS), within its limits and the profile's jog step."""
-    import math
-
     from deltoctl.core.motion import check_target
 
     opts = options(ctx)
@@ -186,12 +218,20 @@ def jog(
     if (delta is None) == (to is None):
         raise InvalidInput("give either DELTA or --to POS")
     speed = _speed(velocity)
-    with open_session(opts, allow_model_mismatch, profile) as session:
-        session.driver.check_motion([joint])  # e.g. not homed: refused before asking
-        start = session.driver.read()[f"{joint}/position"]
+    with open_system(opts, allow_model_mismatch, profile) as system:
+        m = system.member(joint)
+        if not m.can("jog"):
+            raise InvalidInput(f"{m.name} cannot move its joints")
+        m.driver.check_motion([joint])  # e.g. not homed: refused before asking
+        start = system.read()[f"{joint}/position"]
         target = _quantity(to, "--to") if to is not None else start + _quantity(delta, "DELTA")
+        if not math.isfinite(target):
+            raise InvalidInput(f"the target of {joint} must be finite")
         check_target(profile, comp, target, start)
-        confirm_motion(opts, f"jog {joint} from {start:.4f} to {target:.4f} "
+        confirm_motion(opts, f"jog {joint} ({m.name}) from {start:.4f} to {target:.4f} "
                        f"({math.degrees(target - start):+.1f}°)")
-        _move(opts, session, {joint: target}, speed, f"jog {joint}")
-    finish(session)
+        report = _move(opts, system, {joint: target}, speed, f"jog {joint}")
+    if opts.json:
+        emit_json(report)
+    _fail_unsettled(report)
+    finish(system)

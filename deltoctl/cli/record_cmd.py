@@ -1,17 +1,26 @@
 """``deltoctl record OUT.mcap``: interface values to MCAP (ROS 2 encoding)."""
 
+import json
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
 from deltoctl.cli.context import options
-from deltoctl.cli.device_cmd import AllowMismatch, DurationOpt, RateOpt, finish, open_session
+from deltoctl.cli.device_cmd import (
+    AllowMismatch,
+    DurationOpt,
+    LinkWatch,
+    RateOpt,
+    check_loop,
+    finish,
+    open_system,
+)
 from deltoctl.cli.output import emit_json, info, progress
-from deltoctl.errors import WARNINGS, InvalidInput
+from deltoctl.core.runner import Sink
+from deltoctl.errors import InvalidInput
 
-STATS_PERIOD = 1.0  # s between loop-statistics diagnostics
 SHOW_PERIOD = 0.25  # s between updates of the status line people watch
 
 
@@ -29,6 +38,42 @@ def _create(path: Path) -> None:
         raise InvalidInput(f"cannot write {path}: {exc.strerror}") from None
 
 
+class RecordSink(Sink):
+    """Frames to the recorder process; the loop's and buses' statistics to /diagnostics once a
+    second; the status line people watch."""
+
+    def __init__(self, recorder: Any, output: Path, duration: float | None, bar: Any) -> None:
+        self.recorder, self.output, self.bar = recorder, output, bar
+        self.task = bar.add_task(f"recording {output.name}", total=duration) if bar else None
+        self.started = time.monotonic()
+        self.next_show = self.started
+        self.cycles = 0
+
+    def frame(self, t_ns: int, values: dict[str, float]) -> None:
+        self.recorder.write(values, t_ns)
+        self.cycles += 1
+        if self.bar is not None and time.monotonic() >= self.next_show:
+            now = time.monotonic()
+            self.next_show = now + SHOW_PERIOD
+            self.bar.update(self.task, completed=now - self.started, description=_status(
+                self.output, self.cycles, values.get("system/connection_status")))
+
+    def periodic(self, t_ns: int, stats: Any, comm_loops: list[Any]) -> None:
+        from deltoctl.record.mcap_recorder import OK, WARN
+
+        self.recorder.diagnostics(t_ns, [
+            (OK, "loop", "record loop", stats.summary()),
+            *((OK if not c.errors else WARN, c.name, "bus loop", c.report())
+              for c in comm_loops)])
+
+    def close(self, stats: Any) -> None:
+        try:
+            if self.bar is not None:
+                self.bar.stop()
+        finally:
+            self.recorder.close(stats.summary())
+
+
 def record(
     ctx: typer.Context,
     output: Annotated[Path, typer.Argument(help="The .mcap file to write.")],
@@ -36,62 +81,35 @@ def record(
     duration: DurationOpt = None,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
-    """Record every state interface; Ctrl-C, SIGTERM or --duration end with a valid file."""
-    import signal
+    """Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
+    valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back."""
+    import dataclasses
 
     from deltoctl import __version__
-    from deltoctl.core.loop import CycleLoop
+    from deltoctl.core.runner import run_cycles
     from deltoctl.profile.exporter import to_yaml
-    from deltoctl.record.mcap_recorder import OK, WARN
     from deltoctl.record.recorder_process import RecorderProcess
 
     opts = options(ctx)
-    if rate <= 0:
-        raise InvalidInput("--rate must be positive")
+    check_loop(rate, duration)
     if not output.parent.is_dir():
         raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
-    # the file is created once the device answers: an unreachable device leaves no empty file
-    with open_session(opts, allow_model_mismatch) as session:
+    # the file is created once the devices answer: an unreachable one leaves no empty file
+    with open_system(opts, allow_model_mismatch) as system:
         _create(output)
-        driver = session.driver
-        ident = {k: str(v) for k, v in driver.identity.as_dict().items()}
-        recorder = RecorderProcess(output, session.profile, {
-            "profile": {"name": session.profile.name, "yaml": to_yaml(session.profile)},
-            "identify": {**ident, "target": session.url},
+        recorded = dataclasses.replace(system.profile, hardware=[m.hw for m in system])
+        identities = {m.name: {"family": m.family.name, "target": m.url,
+                               **m.driver.identify()} for m in system.able("identify")}
+        recorder = RecorderProcess(output, recorded, {
+            "profile": {"name": recorded.name, "yaml": to_yaml(recorded)},
+            "identify": {name: json.dumps(ident, default=str)
+                         for name, ident in identities.items()},
             "deltoctl": {"version": __version__},
-        }, driver.extra_states)
-        loop = CycleLoop(rate, duration)
-        comm_loops = driver.comm_loops()  # a bus's own loops (Dynamixel)
-        bar = progress(opts, elapsed=True)
-        task = bar.add_task(f"recording {output.name}", total=duration) if bar else None
-        next_show = time.monotonic()
-        next_stats = next_show + STATS_PERIOD
-        try:
-            for _ in loop:
-                before = driver.stats["errors"]
-                values = driver.read()
-                loop.stats.packets += 1
-                loop.stats.errors += driver.stats["errors"] - before
-                recorder.write(values, time.time_ns())
-                now = time.monotonic()
-                if bar is not None and now >= next_show:
-                    next_show = now + SHOW_PERIOD
-                    bar.update(task, completed=now - loop.stats.started, description=_status(
-                        output, loop.stats.cycles, values.get("system/connection_status")))
-                if now >= next_stats:
-                    next_stats += STATS_PERIOD
-                    recorder.diagnostics(time.time_ns(), [
-                        (OK, "loop", "record loop", loop.stats.summary()),
-                        *((OK if not c.errors else WARN, c.name, "bus loop", c.report())
-                          for c in comm_loops)])
-        except KeyboardInterrupt:
-            pass
-        finally:
-            if bar is not None:
-                bar.stop()
-            summary = loop.stats.summary()
-            recorder.close(summary)
+        }, tuple(system.extra_states()))
+        links = LinkWatch(system)
+        stats = run_cycles(system, rate, duration, [
+            RecordSink(recorder, output, duration, progress(opts, elapsed=True)), links])
+    summary = stats.summary()
     result = {"output": str(output), "messages": recorder.counts,
               "link_losses": recorder.link_losses, "loop": summary}
     if opts.json:
@@ -101,11 +119,9 @@ def record(
              f"{len(recorder.counts)} topics, {summary['cycles']} cycles at "
              f"{summary['real_rate']} Hz")
     if recorder.link_losses:
-        info(f"warning: the link was lost {recorder.link_losses} time(s); the gaps are marked "
-             "on /diagnostics")
-    finish(session)  # exit 3 on the driver's warnings (a servo that never answered)
-    if recorder.link_losses:
-        raise typer.Exit(WARNINGS)
+        info("the gaps are marked on /diagnostics")
+    links.finish()
+    finish(system)  # exit 3 on warnings (a servo that never answered, a link lost)
 
 
 def register(root: typer.Typer) -> None:

@@ -6,7 +6,7 @@ from typing import Annotated, Any
 import typer
 
 from deltoctl.cli.context import options
-from deltoctl.cli.device_cmd import open_session
+from deltoctl.cli.device_cmd import finish, open_system
 from deltoctl.cli.output import emit_json, say, table
 from deltoctl.errors import DeviceError, InvalidInput
 
@@ -18,11 +18,16 @@ TargetArg = Annotated[str, typer.Argument(
          "or all.")]
 
 
-def select_joints(profile: Any, target: str) -> list[str]:
-    joints = [j for j in profile.joints() if profile.family_of(
-        next(h for h in profile.hardware if j in h.joints)) == "dynamixel"]
+def select_joints(profile: Any, target: str, capability: str) -> list[str]:
+    """The joints of the blocks that offer ``capability`` named by a joint, a group (the
+    joints' ``group`` param, and arms/legs) or ``all``."""
+    from deltoctl import registry
+
+    joints = [j for hw in profile.hardware
+              if capability in getattr(registry.get(profile.family_of(hw)), "capabilities", ())
+              for j in hw.joints]
     if not joints:
-        raise InvalidInput(f"{profile.name} has no servo joints")
+        raise InvalidInput(f"{profile.name} has no joints with {capability}")
     if target == "all":
         return [j.name for j in joints]
     groups = set(NESTED.get(target, (target,)))
@@ -44,25 +49,21 @@ def register(root: typer.Typer) -> None:
     root.add_typer(registers, name="register")
 
 
-def _item(name: str):  # type: ignore[no-untyped-def]
-    """A control table item by name (any case; spaces, - or _) or by address."""
-    from deltoctl.families.dynamixel.control_table import XL430
+def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
+    from deltoctl.cli.profile_cmd import complete_part
 
-    key = name.lower().replace("_", " ").replace("-", " ")
-    for item in XL430:
-        if item.name.lower() == key or (name.isdigit() and item.address == int(name)):
-            return item
-    raise InvalidInput(f"no control table item {name!r} (e.g. return_delay_time, "
-                       "present_temperature, goal_position, or an address)")
+    return complete_part(ctx, incomplete)
 
 
-def _servo(session: Any, joint: str):  # type: ignore[no-untyped-def]
-    if session.driver.family != "dynamixel":
-        raise InvalidInput("register is for servo buses (the dynamixel family)")
-    return session.driver.servo(joint)
+def _registers_of(system: Any, joint: str) -> Any:
+    m = system.member(joint)
+    if not m.can("registers"):
+        raise InvalidInput(f"{joint} is in {m.name}, which has no registers")
+    return m.driver
 
 
-JointArg = Annotated[str, typer.Argument(help="The servo's joint.")]
+JointArg = Annotated[str, typer.Argument(help="The servo's joint.",
+                                         autocompletion=_complete_joint)]
 
 
 def register_get(
@@ -72,25 +73,16 @@ def register_get(
         help="Items to read (default: the whole table, in one read).")] = None,
 ) -> None:
     """Read control table items of one servo."""
-    from deltoctl.families.dynamixel.control_table import XL430
-
     opts = options(ctx)
-    chosen = [_item(i) for i in items or []]
-    with open_session(opts) as session:
-        bus, device_id = _servo(session, joint)
-        if chosen:
-            values = {i.name: bus.read_register(device_id, i) for i in chosen}
-        else:
-            table_bytes = bus.read_table(device_id)
-            chosen = list(XL430)
-            values = {i.name: int.from_bytes(table_bytes[i.address:i.address + i.size],
-                                             "little", signed=i.signed) for i in chosen}
+    with open_system(opts) as system:
+        result = _registers_of(system, joint).read_registers(joint, list(items or []))
     if opts.json:
-        emit_json({"joint": joint, "id": device_id, "values": values})
+        emit_json({"joint": joint, "id": result["id"],
+                   "values": {i["item"]: i["value"] for i in result["items"]}})
     else:
-        table(f"{joint} (ID {device_id})", ["address", "item", "value", "access"],
-              [[i.address, i.name, values[i.name], ("EEPROM " if i.eeprom else "RAM ") +
-                i.access] for i in chosen])
+        table(f"{joint} (ID {result['id']})", ["address", "item", "value", "access"],
+              [[i["address"], i["item"], i["value"], i["access"]] for i in result["items"]])
+    finish(system)
 
 
 def register_set(
@@ -103,18 +95,20 @@ def register_set(
     from deltoctl.cli.motion_cmd import confirm_motion
 
     opts = options(ctx)
-    chosen = _item(item)
-    if chosen.access != "RW":
-        raise InvalidInput(f"{chosen.name} is read-only")
-    confirm_motion(opts, f"write {chosen.name} = {value} to {joint}")
-    with open_session(opts) as session:
-        bus, device_id = _servo(session, joint)
-        bus.write_register(device_id, chosen, value)
-        after = bus.read_register(device_id, chosen)
+    confirm_motion(opts, f"write {item} = {value} to {joint}")
+    with open_system(opts) as system:
+        after = _registers_of(system, joint).write_register(joint, item, value)
     if after != value:
-        raise DeviceError(f"{chosen.name} reads back {after} after writing {value}")
-    _report(opts, {"joint": joint, "id": device_id, "item": chosen.name, "value": after},
-            f"{joint}: {chosen.name} = {after}")
+        raise DeviceError(f"{item} reads back {after} after writing {value}")
+    _report(opts, {"joint": joint, "item": item, "value": after}, f"{joint}: {item} = {after}")
+    finish(system)
+
+
+def _per_block(system: Any, joints: list[str], capability: str) -> dict[Any, list[str]]:
+    """The driven blocks' drivers that offer ``capability``, each with its joints named."""
+    groups = {m.driver: [j.name for j in m.hw.joints if j.name in joints]
+              for m in system.able(capability)}
+    return {driver: js for driver, js in groups.items() if js}
 
 
 def torque(
@@ -129,29 +123,29 @@ def torque(
     if state not in ("on", "off"):
         raise InvalidInput(f"state must be on or off, got {state!r}")
     profile = opts.load_profile()
-    joints = select_joints(profile, target)
+    joints = select_joints(profile, target, "torque")
     if state == "on":
         confirm_motion(opts, f"torque on for {len(joints)} joint(s): they hold their position")
-    with open_session(opts, profile=profile) as session:
-        if session.driver.family != "dynamixel":
-            raise InvalidInput("torque is for servo buses (the dynamixel family)")
-        done = session.driver.set_torque(joints, state == "on")
+    with open_system(opts, profile=profile) as system:
+        done = [j for driver, js in _per_block(system, joints, "torque").items()
+                for j in driver.set_torque(js, state == "on")]
     _report(opts, {"torque": state, "joints": done}, f"torque {state}: {len(done)} joint(s)")
+    finish(system)
 
 
 def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
     """Reboot servos (clears a shutdown after a hardware error; torque comes back off)."""
     opts = options(ctx)
     profile = opts.load_profile()
-    joints = select_joints(profile, target)
-    with open_session(opts, profile=profile) as session:
-        if session.driver.family != "dynamixel":
-            raise InvalidInput("reboot is for servo buses (the dynamixel family)")
-        done = session.driver.reboot(joints)
+    joints = select_joints(profile, target, "reboot")
+    with open_system(opts, profile=profile) as system:
+        done = [j for driver, js in _per_block(system, joints, "reboot").items()
+                for j in driver.reboot(js)]
     _report(opts, {"rebooted": done}, f"rebooted {len(done)} of {len(joints)} joint(s)")
     missing = sorted(set(joints) - set(done))
     if missing:
         raise DeviceError(f"no reboot acknowledgement from {', '.join(missing)}")
+    finish(system)
 
 
 def _report(opts: Any, data: dict, text: str) -> None:

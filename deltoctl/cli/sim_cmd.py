@@ -44,10 +44,11 @@ def serve(
     orientation: Annotated[str, typer.Option(
         help="The IMU's roll,pitch in degrees (gravity follows).")] = "0,0",
 ) -> None:
-    """Serve a simulated device until Ctrl-C or SIGTERM, printing each bus's target.
+    """Serve every block's simulated device until Ctrl-C or SIGTERM, printing one target per
+    bus (BUS=URL, ready for --target).
 
-    A Delto gripper on loopback TCP, a Dynamixel bus on a pseudo-terminal, an I2C bus as
-    i2c+tcp://; with --json, one JSON line."""
+    A gripper on loopback TCP, a servo bus on a pseudo-terminal, an I2C bus as i2c+tcp://;
+    --hardware serves some blocks only; with --json, one JSON line."""
     import gc
     import json
     import signal
@@ -73,11 +74,11 @@ def serve(
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     gc.disable()  # a served device answers within microseconds; no collector pauses
     with contextlib.ExitStack() as stack:
-        info = serve_profile(stack, prof, serve_options)
+        info = serve_profile(stack, prof, serve_options, opts.hardware)
         if opts.json:
             typer.echo(json.dumps(info))
         else:
-            typer.echo("\n".join(f"{bus}: {url}" for bus, url in info["buses"].items()))
+            typer.echo("\n".join(f"--target {bus}={url}" for bus, url in info["buses"].items()))
         sys.stdout.flush()
         with contextlib.suppress(KeyboardInterrupt):
             stop.wait()

@@ -1,34 +1,179 @@
-"""What every driver offers the verbs, beyond ros2_control's configure / read / write / stop /
-cleanup: the optional parts, with the defaults a driver keeps unless it has better."""
+"""The driver contract: what every family's driver offers the System and the verbs.
+
+ros2_control's lifecycle (configure, activate, read, write, stop, deactivate, cleanup), then the
+capabilities a verb may ask for (identify, detect, home, jog, calibrate_ft, gpio, registers,
+torque, reboot) — declared in the family's descriptor, so a verb asks what a block can do, never
+which family it is. Every driver is built the same way: ``DriverClass(block)``.
+"""
 
 from __future__ import annotations
 
-from deltoctl.core.loop import CommLoop
-from deltoctl.errors import Unreachable
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from deltoctl.errors import InvalidInput, Unreachable
+
+if TYPE_CHECKING:
+    from deltoctl.core.loop import CommLoop
+    from deltoctl.profile.model import Hardware, Profile
+    from deltoctl.registry import Family
+
+Progress = Callable[[float], None]
+HomeProgress = Callable[[str, str, float], None]
+
+
+@dataclass
+class MoveResult:
+    settled: bool
+    seconds: float
+    errors: dict[str, float]  # final |error| per joint
+    unsettled: list[str]
+
+
+class Links:
+    """The transports of one System, opened once per URL and shared by the blocks on it (the
+    Bioscara joints and an IMU on one I2C bus); closed with the System."""
+
+    def __init__(self) -> None:
+        self.open: dict[str, Any] = {}
+        self._lock = threading.Lock()  # blocks are configured at the same time
+
+    def shared(self, url: str, opener: Callable[[], Any]) -> Any:
+        with self._lock:
+            link = self.open.get(url)
+            if link is None:
+                link = self.open[url] = opener()
+            return link
+
+    def close(self) -> None:
+        for link in self.open.values():
+            link.close()
+        self.open.clear()
+
+
+@dataclass
+class Block:
+    """What a driver is built from: one ``<ros2_control>`` block and where it is."""
+
+    profile: Profile
+    hw: Hardware
+    family: Family
+    url: str = ""  # "" for a family with no transport
+    probe: bool = False  # opened only to look at the bus (detect): silence is no error
+    allow_model_mismatch: bool = False
+    links: Links = field(default_factory=Links)
+
+
+class Unsupported(InvalidInput):
+    """A verb asked a block for something its family does not offer."""
 
 
 class Driver:
-    family = ""
     extra_states: tuple[str, ...] = ()  # per-joint values beyond the profile's interfaces
-    probe = False  # opened only to look at the bus (detect): nothing answering is no error
 
+    def __init__(self, block: Block) -> None:
+        self.block = block
+        self.profile, self.hw, self.url, self.probe = block.profile, block.hw, block.url, \
+            block.probe
+        self.values: dict[str, float] = {}
+        self.warnings: list[str] = []
+        self.connected = False
+        self.halted = threading.Event()  # set by the System: a move in progress ends now
+        self._stats = {"packets": 0, "errors": 0, "reconnects": 0}
+
+    @property
+    def stats(self) -> dict[str, int]:
+        """packets, errors, reconnects: the block's communication statistics."""
+        return self._stats
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    def configure(self) -> None:
+        """Open the link and find the device(s); Unreachable when nothing answers."""
+        raise NotImplementedError
+
+    def activate(self) -> None:
+        """Ready for commands (most devices need nothing more than configure)."""
+
+    def start_read(self) -> None:
+        """Send this cycle's read request, so that blocks on different links wait for their
+        replies at the same time; ``read`` then takes the reply. Optional."""
+
+    def read(self) -> dict[str, float]:
+        """The state interfaces (and extras) by name, after one exchange with the device."""
+        raise NotImplementedError
+
+    def write(self, commands: dict[str, float]) -> None:
+        """Command interfaces by name."""
+        for name, value in commands.items():
+            self.set_command(name, value)
+
+    def set_command(self, name: str, value: float) -> None:
+        raise Unsupported(f"{self.hw.name} takes no command {name}")
+
+    def stop(self) -> None:
+        """The safe state (duty 0, stop and disable, torque as found)."""
+
+    def deactivate(self) -> None:
+        self.stop()
+
+    def cleanup(self) -> None:
+        """Release the link."""
+
+    # -- what connect and the loops use --------------------------------------------------------
     def round_trip(self) -> None:
         """The smallest exchange with the device: what `connect` times."""
-        self.read()  # type: ignore[attr-defined]
+        self.read()
 
     def comm_loops(self) -> list[CommLoop]:
         """Bus loops that run at their own rates inside the verb's cycle."""
         return []
 
+    # -- capabilities (declared in the family's descriptor) ------------------------------------
+    def identify(self) -> dict[str, Any]:
+        raise Unsupported(f"{self.hw.name} cannot identify")
+
+    def detect(self) -> dict[str, Any]:
+        """``{"checks": [{what, profile, device, match}], "summary": str, ...}``."""
+        raise Unsupported(f"{self.hw.name} cannot detect")
+
     def check_motion(self, joints: list[str]) -> None:
         """Raise Refused when these joints may not move now (before anyone is asked)."""
 
+    def move(self, targets: dict[str, float], velocity: float | None = None,
+             progress: Progress | None = None) -> MoveResult:
+        raise Unsupported(f"{self.hw.name} cannot move its joints")
+
+    def home(self, joints: list[str], force: bool = False,
+             progress: HomeProgress | None = None) -> dict[str, str]:
+        """A homing routine (joints with a ``home`` command interface): joint → outcome."""
+        raise Unsupported(f"{self.hw.name} has no homing routine")
+
+    def tare_ft(self) -> None:
+        raise Unsupported(f"{self.hw.name} has no F/T sensors to tare")
+
+    def register_items(self) -> list[str]:
+        raise Unsupported(f"{self.hw.name} has no registers")
+
+    def read_registers(self, joint: str, items: list[str]) -> dict[str, Any]:
+        raise Unsupported(f"{self.hw.name} has no registers")
+
+    def write_register(self, joint: str, item: str, value: int) -> int:
+        raise Unsupported(f"{self.hw.name} has no registers")
+
+    def set_torque(self, joints: list[str], on: bool) -> list[str]:
+        raise Unsupported(f"{self.hw.name} has no torque switch")
+
+    def reboot(self, joints: list[str]) -> list[str]:
+        raise Unsupported(f"{self.hw.name} cannot reboot")
+
+    # -- shared by the bus drivers -------------------------------------------------------------
     def roll_call(self, missing: list[str], answered: bool, parts: str, hint: str) -> None:
         """After configure's pings of a bus: nothing answering is unreachable (exit 4) unless
         the verb only probes the bus (``detect``); parts missing are a warning."""
-        hw, url = self.hw, self.url  # type: ignore[attr-defined]
         if not answered and not self.probe:
-            raise Unreachable(f"no {parts} of {hw.name!r} answers on {url}", hint=hint)
+            raise Unreachable(f"no {parts} of {self.hw.name!r} answers on {self.url}",
+                              hint=hint)
         if missing:
-            self.warnings.append(  # type: ignore[attr-defined]
-                f"{hw.name}: no answer from {', '.join(missing)}")
+            self.warnings.append(f"{self.hw.name}: no answer from {', '.join(missing)}")

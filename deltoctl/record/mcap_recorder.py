@@ -38,7 +38,7 @@ def _imu_template(sensor: str, frame_id: str) -> CdrTemplate:
 class McapRecorder:
     def __init__(self, stream: BinaryIO, profile: Profile, metadata: dict[str, dict[str, str]],
                  extra_states: tuple[str, ...] = ()):
-        """``extra_states``: values a driver reads for every joint beyond the profile's state
+        """``extra_states``: values (``joint/name``) a driver reads beyond the profile's state
         interfaces (a Bioscara joint's flags), recorded in /dynamic_joint_states."""
         from mcap.writer import Writer
 
@@ -72,7 +72,8 @@ class McapRecorder:
         self._add("/joint_states", "sensor_msgs/msg/JointState", js.done())
         dyn = CdrTemplate().header().const_strings(names).const_u32(len(names))
         for j in joints:
-            itfs = [i.name for i in j.state_interfaces] + list(self.extra_states)
+            itfs = [i.name for i in j.state_interfaces] + [
+                e.partition("/")[2] for e in self.extra_states if e.startswith(j.name + "/")]
             dyn.const_strings(itfs).var_doubles([f"{j.name}/{i}" for i in itfs])
         self._add("/dynamic_joint_states", "control_msgs/msg/DynamicJointState", dyn.done())
         for _, sensor in self.profile.components():
@@ -87,6 +88,7 @@ class McapRecorder:
                           _imu_template(sensor.name, frame_id))
         groups = [(g.name, [i.name for i in g.state_interfaces])
                   for _, g in self.profile.components() if g.kind == "gpio"]
+        groups += [(hw.name, ["connection_status"]) for hw in self.profile.hardware]
         groups.append(("system", ["connection_status"]))
         gpio = CdrTemplate().header().const_strings([g for g, _ in groups]).const_u32(len(groups))
         for group, itfs in groups:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import errno
 import time
+from typing import Any
 from urllib.parse import urlsplit
 
 from smbus2 import i2c_msg
@@ -40,7 +41,7 @@ def open_smbus(url: str):  # type: ignore[no-untyped-def]
     """An SMBus-compatible object for the URL; Unreachable with what to do when it fails."""
     kind, where, port = parse_i2c_url(url)
     if kind == "tcp":
-        from deltoctl.sim.i2c_bus import SocketSMBus
+        from deltoctl.transport.i2c_socket import SocketSMBus
 
         try:
             return SocketSMBus(where, port)
@@ -120,6 +121,11 @@ class I2CBus:
 
     def close(self) -> None:
         self.smbus.close()
+
+
+def shared_bus(links: Any, url: str) -> I2CBus:
+    """The one ``I2CBus`` of a System for this URL (its devices share it)."""
+    return links.shared(url, lambda: I2CBus(open_smbus(url), url))
 
 
 def wire_bits(write: int, read: int) -> int:

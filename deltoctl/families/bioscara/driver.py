@@ -10,13 +10,12 @@ hardware interface does on deactivate.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 
-from deltoctl.core.driver import Driver
-from deltoctl.families.bioscara import codec
+from deltoctl.core.driver import Block, Driver, HomeProgress, MoveResult, Progress
 from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Refused
-from deltoctl.profile.model import Component, Hardware, Profile
-from deltoctl.transport.i2c import I2CBus, NoAnswer
+from deltoctl.families.bioscara import codec
+from deltoctl.profile.model import Component
+from deltoctl.transport.i2c import I2CBus, NoAnswer, shared_bus
 
 POLL_HOMING = 0.1  # s between flag polls while homing, as the Bioscara driver does
 POLL_MOVE = 0.02
@@ -163,20 +162,13 @@ class Joint:
 
 
 class BioscaraDriver(Driver):
-    family = "bioscara"
     extra_states = ("flags",)  # recorded beside each joint's state interfaces
 
-    def __init__(self, profile: Profile, hw: Hardware, url: str, smbus=None,  # type: ignore[no-untyped-def]
-                 probe: bool = False) -> None:
-        self.profile, self.hw, self.url, self.probe = profile, hw, url, probe
-        self._smbus = smbus  # an SMBus-compatible object (a simulator); else opened from url
+    def __init__(self, block: Block) -> None:
+        super().__init__(block)
         self.bus: I2CBus | None = None
         self.joints: dict[str, Joint] = {}
         self.present: list[Joint] = []
-        self.values: dict[str, float] = {}
-        self.warnings: list[str] = []
-        self.identity: _Identity | None = None
-        self.connected = False
         self.touched: set[str] = set()  # joints this session commanded, stopped at the end
 
     @property
@@ -184,10 +176,8 @@ class BioscaraDriver(Driver):
         bus = self.bus.stats if self.bus else {"packets": 0, "errors": 0}
         return {"packets": bus["packets"], "errors": bus["errors"], "reconnects": 0}
 
-    def configure(self) -> _Identity:
-        from deltoctl.transport.i2c import open_smbus
-
-        self.bus = I2CBus(self._smbus or open_smbus(self.url), self.url)
+    def configure(self) -> None:
+        self.bus = shared_bus(self.block.links, self.url)
         self.joints = {c.name: Joint(self.bus, c) for c in self.hw.joints}
         for joint in self.joints.values():
             try:
@@ -202,8 +192,16 @@ class BioscaraDriver(Driver):
                        "check the joints' power and the I2C wiring, then run deltoctl detect "
                        "to see what the bus holds")
         self.connected = True
-        self.identity = _Identity(self)
-        return self.identity
+
+    def identify(self) -> dict:
+        joints: dict[str, dict] = {}
+        for name, j in self.joints.items():
+            answers = j in self.present
+            joints[name] = {"address": f"{j.address:#04x}", "answers": answers}
+            if answers:
+                joints[name].update(flags=codec.describe_flags(j.flags), homed=j.homed,
+                                    home_offset=round(j.offset, 6) if j.homed else None)
+        return {"bus": self.url, "joints": joints}
 
     def read(self) -> dict[str, float]:
         values = self.values
@@ -219,7 +217,6 @@ class BioscaraDriver(Driver):
             values[name + "/home"] = 0.0 if joint.flags & codec.NOTHOMED else 1.0
             values[name + "/flags"] = float(joint.flags)
         self.connected = ok
-        values["system/connection_status"] = 1.0 if ok else 0.0
         return values
 
     def joint(self, name: str) -> Joint:
@@ -269,12 +266,11 @@ class BioscaraDriver(Driver):
                 raise Refused(f"{name} is not homed: it may not move",
                               hint="run `deltoctl home` first")
 
-    def move(self, targets: dict[str, float], profile: Profile, velocity: float | None = None,
-             progress: Callable[[float], None] | None = None):  # type: ignore[no-untyped-def]
+    def move(self, targets: dict[str, float], velocity: float | None = None,
+             progress: Progress | None = None) -> MoveResult:
         """Position moves (the joints run their own profiles); fails naming a stalled joint,
         which is left disabled."""
-        from deltoctl.core.motion import MoveResult
-
+        profile = self.profile
         self.check_motion(list(targets))
         tolerance = profile.safety.home_tolerance or TOLERANCE
         start = self.read()
@@ -300,7 +296,7 @@ class BioscaraDriver(Driver):
             if progress:
                 progress(max(0.0, 1.0 - worst / first))
             elapsed = time.monotonic() - began
-            if worst <= tolerance or elapsed > timeout:
+            if worst <= tolerance or elapsed > timeout or self.halted.is_set():
                 break
             time.sleep(POLL_MOVE)
         unsettled = [j for j, e in errors.items() if e > tolerance]
@@ -314,7 +310,7 @@ class BioscaraDriver(Driver):
                           hint="clear the obstruction, then jog again (enabling clears STALL)")
 
     def home(self, names: list[str], force: bool = False,
-             progress: Callable[[str, str, float], None] | None = None) -> dict[str, str]:
+             progress: HomeProgress | None = None) -> dict[str, str]:
         """Home each joint in turn (start, poll BUSY every 100 ms, store the offset);
         Ctrl-C or a timeout aborts the running one with STOP. Returns joint → outcome."""
         timeout = self.profile.safety.home_timeout or 120.0
@@ -333,6 +329,8 @@ class BioscaraDriver(Driver):
                 if progress:
                     progress(name, "homing", 0.0)
                 while joint.ping() & codec.BUSY:
+                    if self.halted.is_set():
+                        raise KeyboardInterrupt
                     if time.monotonic() - began > timeout:
                         raise DeviceError(f"{name} did not find its hard stop within "
                                           f"{timeout:g} s; homing aborted")
@@ -361,9 +359,7 @@ class BioscaraDriver(Driver):
         self.touched.clear()
 
     def cleanup(self) -> None:
-        if self.bus is not None:
-            self.bus.close()
-            self.bus = None
+        self.bus = None  # the System closes the shared bus
         self.connected = False
 
 
@@ -376,19 +372,3 @@ def i2cdetect_grid(found: list[int]) -> str:
             cells.append(f"{a:02x}" if a in found else "--" if a in SCAN else "  ")
         lines.append(f"{row:02x}: " + " ".join(cells))
     return "\n".join(lines)
-
-
-class _Identity:
-    def __init__(self, driver: BioscaraDriver) -> None:
-        self.driver = driver
-
-    def as_dict(self) -> dict:
-        d = self.driver
-        joints = {}
-        for name, j in d.joints.items():
-            answers = j in d.present
-            joints[name] = {"address": f"{j.address:#04x}", "answers": answers}
-            if answers:
-                joints[name].update(flags=codec.describe_flags(j.flags), homed=j.homed,
-                                    home_offset=round(j.offset, 6) if j.homed else None)
-        return {"family": "bioscara", "bus": d.url, "joints": joints}

@@ -12,8 +12,13 @@ from __future__ import annotations
 import math
 import random
 import time
+from typing import TYPE_CHECKING
 
 from deltoctl.families.bioscara import codec
+
+if TYPE_CHECKING:
+    from deltoctl.profile.model import Hardware
+    from deltoctl.sim.serve import ServeContext
 
 TICK = 0.01  # s, the firmware's loop period
 DEADMAN = 0.05  # s without an I2C request while a velocity is set
@@ -224,21 +229,31 @@ class JointFirmware:
         self.flags &= ~codec.BUSY
 
 
-def joints_for_profile(profile, park: float = 0.5) -> dict[int, JointFirmware]:  # type: ignore[no-untyped-def]
-    """A firmware per Bioscara joint of the profile, at its ``i2c_address``, each parked
-    ``park`` seconds of homing travel from the hard stop it homes against."""
+def joints_for_block(hw: Hardware, park: float = 0.5) -> dict[int, JointFirmware]:
+    """A firmware per joint of the block, at its ``i2c_address``, each parked ``park`` seconds
+    of homing travel from the hard stop it homes against."""
     joints = {}
-    for hw in profile.hardware:
-        if profile.family_of(hw) != "bioscara":
-            continue
-        for joint in hw.joints:
-            p = joint.params
-            low, high = float(p["min"]), float(p["max"])
-            home = joint.command("home")
-            speed = float(home.params.get("speed", 0.0)) if home else 0.0
-            stop = high if speed > 0 else low
-            start = min(max(stop - speed * park, low), high)
-            joints[int(str(p["i2c_address"]), 0)] = JointFirmware(
-                float(p["reduction"]), low, high, start)
+    for joint in hw.joints:
+        p = joint.params
+        low, high = float(p["min"]), float(p["max"])
+        home = joint.command("home")
+        speed = float(home.params.get("speed", 0.0)) if home else 0.0
+        stop = high if speed > 0 else low
+        start = min(max(stop - speed * park, low), high)
+        joints[int(str(p["i2c_address"]), 0)] = JointFirmware(
+            float(p["reduction"]), low, high, start)
     return joints
 
+
+def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
+    """The joints on their block's simulated I2C bus (shared with other I2C devices)."""
+    buses = {}
+    for hw in blocks:
+        bus, url = ctx.i2c_bus(hw.bus or "i2c")
+        joints = joints_for_block(hw)
+        missing = {int(str(j.params["i2c_address"]), 0) for j in ctx.named("missing", hw)}
+        for j in ctx.named("stall", hw):
+            joints[int(str(j.params["i2c_address"]), 0)].blocked = True
+        bus.devices.update({a: d for a, d in joints.items() if a not in missing})
+        buses[hw.bus or "i2c"] = url
+    return buses

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from itertools import chain
 
+from deltoctl.errors import ProtocolError
 from deltoctl.families.delto.models import (
     FT_TYPES,
     MODELS,
@@ -22,7 +23,6 @@ from deltoctl.families.delto.models import (
     TACTILE_S,
     DeltoModel,
 )
-from deltoctl.errors import ProtocolError
 
 GET_DATA = 0x01
 SET_DUTY = 0x05

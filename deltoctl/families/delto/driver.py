@@ -14,7 +14,8 @@ from dataclasses import dataclass
 from operator import itemgetter, mul
 from urllib.parse import urlsplit
 
-from deltoctl.core.driver import Driver
+from deltoctl.core.driver import Block, Driver, MoveResult, Progress
+from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Unreachable
 from deltoctl.families.delto import codec
 from deltoctl.families.delto.models import (
     DUTY_WIRE_LIMIT,
@@ -26,16 +27,12 @@ from deltoctl.families.delto.models import (
     effort_to_duty_percent,
     model_label,
 )
-from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Unreachable
-from deltoctl.profile.model import Hardware, Profile
 from deltoctl.transport.tcp import LinkLost, TcpLink
 
 VERSION_TIMEOUT = 3.0
 DATA_TIMEOUT = 0.5
 RECONNECT_PERIOD = 1.0
 RECONNECT_TRIES = 10
-
-STATUS = "system/connection_status"
 
 
 @dataclass
@@ -75,12 +72,10 @@ def parse_tcp_url(url: str) -> tuple[str, int]:
 
 
 class DeltoDriver(Driver):
-    family = "delto"
-
-    def __init__(self, profile: Profile, hw: Hardware, url: str,
-                 allow_model_mismatch: bool = False) -> None:
-        self.profile, self.hw, self.url = profile, hw, url
-        self.host, self.port = parse_tcp_url(url)
+    def __init__(self, block: Block) -> None:
+        super().__init__(block)
+        hw = block.hw
+        self.host, self.port = parse_tcp_url(block.url)
         try:
             self.configured_model = int(hw.params.get("delto_model", "0"), 0)
         except ValueError:
@@ -88,38 +83,39 @@ class DeltoDriver(Driver):
                                "is not a number") from None
         self.fingertip_sensor = hw.params.get("fingertip_sensor") == "true"
         self.io = hw.params.get("IO") == "true"
-        self.allow_model_mismatch = allow_model_mismatch
+        self.allow_model_mismatch = block.allow_model_mismatch
         self.link: TcpLink | None = None
         self.identity: Identity | None = None
         self.model = MODELS.get(self.configured_model)
         self.codes: tuple[int, ...] = ()
-        self.values: dict[str, float] = {STATUS: 0.0}
         self.limiters = [CurrentLimiter() for _ in hw.joints]
         self._duty_plan: tuple = (None, [])
         self._request = b""  # GET_DATA with this connection's data codes
         self._reply_plan: tuple = ()
-        self.warnings: list[str] = []
-        self.stats = {"packets": 0, "errors": 0, "reconnects": 0}
+        self._pending: TcpLink | None = None  # a GET_DATA sent by start_read, reply not yet read
         self._lock = threading.RLock()
         self._reconnecting = False
         self._closed = False
         self._last_read = 0.0
         joints = [j.name for j in hw.joints]
+        gpio = hw.gpios[0].name if hw.gpios else "gpio"
         self._keys = {  # interface names, built once: the cycle only zips values in
             **{k: [f"{j}/{k}" for j in joints]
                for k in ("position", "velocity", "effort", "temperature")},
             "ft": [[f"{s.name}/{axis}" for axis in ("force.x", "force.y", "force.z",
                                                     "torque.x", "torque.y", "torque.z")]
                    for s in hw.sensors],
-            "gpio": [f"gpio/{n}" for n in ("output_1", "output_2", "output_3", "input_1")],
+            "gpio": [f"{gpio}/{n}" for n in ("output_1", "output_2", "output_3", "input_1")],
         }
         self.timing: dict[str, float] | None = None  # seconds per stage, when benchmarking
 
     # -- lifecycle -----------------------------------------------------------------------------
-    def configure(self) -> Identity:
+    def configure(self) -> None:
         self._connect()
+
+    def identify(self) -> dict:
         assert self.identity is not None
-        return self.identity
+        return self.identity.as_dict()
 
     def _connect(self) -> None:
         link = TcpLink(self.host, self.port, connect_timeout=VERSION_TIMEOUT)
@@ -167,7 +163,7 @@ class DeltoDriver(Driver):
                 info.finger_mask if info.finger_mask is not None
                 else (1 << actual.fingers) - 1, short, direction,
                 "revised" if revised else "legacy")
-            self.values[STATUS] = 1.0
+            self.connected = True
 
     def detect(self) -> dict:
         """Sensors, finger mask and GPIO as the gripper reports them, against the profile."""
@@ -179,7 +175,8 @@ class DeltoDriver(Driver):
         checks = [
             {"what": "fingertip F/T sensors", "profile": len(self.hw.sensors),
              "device": model.fingers if reported_ft else 0},
-            {"what": "GPIO", "profile": bool(self.hw.gpios), "device": "gpio/input_1" in values},
+            {"what": "GPIO", "profile": bool(self.hw.gpios),
+             "device": self._keys["gpio"][3] in values},
         ]
         for c in checks:
             c["match"] = c["profile"] == c["device"]
@@ -187,7 +184,7 @@ class DeltoDriver(Driver):
         return {
             "sensor_type": sensor,
             "fingers_with_sensor": fingers,
-            "gpio": {k.split("/")[1]: v for k, v in values.items() if k.startswith("gpio/")},
+            "gpio": {k.split("/")[1]: values[k] for k in self._keys["gpio"] if k in values},
             "checks": checks,
             "summary": f"sensor type {sensor}, fingers with a sensor: "
                        f"{', '.join(map(str, fingers)) or 'none'}",
@@ -195,12 +192,12 @@ class DeltoDriver(Driver):
 
     def set_command(self, name: str, value: float) -> None:
         """GPIO outputs by interface name; the three always travel together."""
-        outputs = ("gpio/output_1", "gpio/output_2", "gpio/output_3")
+        outputs = tuple(self._keys["gpio"][:3])
         if name not in outputs:
-            raise InvalidInput(f"{name} is not a command interface of this gripper "
+            raise InvalidInput(f"{name} is not a command interface of {self.hw.name} "
                                f"(commands: {', '.join(outputs)})")
         values = self.read()
-        if "gpio/input_1" not in values:
+        if self._keys["gpio"][3] not in values:
             raise DeviceError("the gripper sends no GPIO block (no GPIO on this model, or IO "
                               "is false in the profile)")
         state = [values[o] == 1.0 for o in outputs]
@@ -215,10 +212,6 @@ class DeltoDriver(Driver):
                 self.link = None
 
     # -- cyclic I/O ------------------------------------------------------------------------------
-    @property
-    def connected(self) -> bool:
-        return self.values.get(STATUS) == 1.0
-
     def _plan_reply(self, model: DeltoModel, sensor_type: int) -> None:
         """Which raw value of a reply goes to which interface, with its scale: worked out once
         per connection, so a cycle is one unpack and one C-speed pass (``_store``)."""
@@ -235,10 +228,25 @@ class DeltoDriver(Driver):
                             [scale for _, (_, scale) in plan],
                             [i for i, _ in fields.get("gpio", ())])
 
+    def start_read(self) -> None:
+        """Send GET_DATA; ``read`` takes the reply (another gripper's request goes out
+        meanwhile)."""
+        link = self.link
+        if link is None or self._pending is not None:
+            return
+        try:
+            link.send(self._request)
+        except DeviceError as exc:
+            self.stats["errors"] += 1
+            self._lost(exc)
+            return
+        self._pending = link
+
     def read(self) -> dict[str, float]:
-        """One GET_DATA exchange; on a lost link, the last values with status 0."""
+        """One GET_DATA exchange; on a lost link, the last values (``connected`` false)."""
         with self._lock:
             link, identity = self.link, self.identity
+        pending, self._pending = self._pending, None
         if link is None or identity is None:
             self._start_reconnect()
             return self.values
@@ -247,7 +255,8 @@ class DeltoDriver(Driver):
         timing = self.timing
         try:
             t0 = time.perf_counter()
-            link.send(self._request)
+            if pending is not link:
+                link.send(self._request)
             reply = link.recv_frame(DATA_TIMEOUT)
             t1 = time.perf_counter()
             raw = codec.unpack_data_reply(reply, model, self.codes, sensor_type)
@@ -276,7 +285,18 @@ class DeltoDriver(Driver):
             for key, pos_key, previous in zip(self._keys["velocity"], self._keys["position"],
                                               before):
                 v[key] = (v[pos_key] - previous) / dt if previous is not None and dt > 0 else 0.0
-        v[STATUS] = 1.0
+
+    def write(self, commands: dict[str, float]) -> None:
+        """Effort commands (``joint/effort``) in one SET_DUTY; GPIO outputs by name."""
+        efforts = {}
+        for name, value in commands.items():
+            joint, _, interface = name.rpartition("/")
+            if interface == "effort":
+                efforts[joint] = value
+            else:
+                self.set_command(name, value)
+        if efforts:
+            self.write_efforts(efforts)
 
     def write_efforts(self, efforts: dict[str, float]) -> None:
         """Effort commands (N·m) → current limiter → duty → direction → SET_DUTY."""
@@ -304,12 +324,12 @@ class DeltoDriver(Driver):
         duties += [0] * (model.motors - len(duties))
         self._send(codec.encode_duty(duties))
 
-    def move(self, targets: dict[str, float], profile: Profile, velocity: float | None = None,
-             progress=None):  # type: ignore[no-untyped-def]
-        """A current-bounded position loop on the effort interface (core/motion.py)."""
-        from deltoctl.core.motion import move_to
+    def move(self, targets: dict[str, float], velocity: float | None = None,
+             progress: Progress | None = None) -> MoveResult:
+        """A current-bounded position loop on the effort interface (motion.py)."""
+        from deltoctl.families.delto.motion import move_to
 
-        return move_to(self, targets, profile, velocity=velocity, progress=progress)
+        return move_to(self, targets, velocity=velocity, progress=progress)
 
     def stop(self) -> None:
         """The safe state: duty 0 on every motor."""
@@ -342,7 +362,7 @@ class DeltoDriver(Driver):
             if self.link is not None:
                 self.link.close()
                 self.link = None
-            self.values[STATUS] = 0.0
+            self.connected = False
         self._start_reconnect()
 
     def _start_reconnect(self) -> None:

@@ -17,7 +17,9 @@ import threading
 import time
 from dataclasses import dataclass, field
 from operator import add, sub
+from typing import TYPE_CHECKING, Any
 
+from deltoctl.errors import InvalidInput, ProtocolError
 from deltoctl.families.delto import codec
 from deltoctl.families.delto.models import (
     FT_6AXIS,
@@ -31,7 +33,10 @@ from deltoctl.families.delto.models import (
     TACTILE_S,
     DeltoModel,
 )
-from deltoctl.errors import ProtocolError
+
+if TYPE_CHECKING:
+    from deltoctl.profile.model import Hardware, Profile
+    from deltoctl.sim.serve import ServeContext
 
 INERTIA = 0.01  # kg·m², seen at the joint
 DAMPING = 0.5  # N·m·s/rad
@@ -276,11 +281,10 @@ class DeltoServer(socketserver.ThreadingTCPServer):
         self.close()
 
 
-def firmware_for_profile(profile, model_id: int | None = None,  # type: ignore[no-untyped-def]
-                         **kwargs) -> DeltoFirmware:
-    """An emulated gripper for a Delto profile: its model (unless another is asked for, to
-    rehearse a mismatch) and its joint limits."""
-    hw = next(h for h in profile.hardware if profile.family_of(h) == "delto")
+def firmware_for_block(hw: Hardware, model_id: int | None = None,
+                       **kwargs: Any) -> DeltoFirmware:
+    """An emulated gripper for a block: its model (unless another is asked for, to rehearse
+    a mismatch) and its joint limits."""
     model = MODELS[model_id or int(hw.params.get("delto_model", "0"), 0)]
     limits = []
     for joint in hw.joints:
@@ -290,3 +294,34 @@ def firmware_for_profile(profile, model_id: int | None = None,  # type: ignore[n
         limits.append((lo, hi))
     limits += [(-math.pi, math.pi)] * (model.motors - len(limits))
     return DeltoFirmware(model, limits=limits[: model.motors], **kwargs)
+
+
+def firmware_for_profile(profile: Profile, model_id: int | None = None,
+                         **kwargs: Any) -> DeltoFirmware:
+    """The emulated gripper of a profile's first block."""
+    return firmware_for_block(profile.hardware[0], model_id, **kwargs)
+
+
+def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
+    """One gripper on loopback TCP per block (the first on ``--port`` when one is given)."""
+    o = ctx.options
+    try:
+        major, minor = (int(x) for x in o.firmware.split("."))
+    except ValueError:
+        raise InvalidInput(f"--firmware {o.firmware!r} is not MAJOR.MINOR (e.g. 2.8)") from None
+    if o.model_id is not None and o.model_id not in MODELS:
+        raise InvalidInput(f"--model-id {o.model_id:#06x} is not a Delto model "
+                           f"({', '.join(f'{m:#06x}' for m in MODELS)})")
+    buses = {}
+    for n, hw in enumerate(blocks):
+        device = firmware_for_block(hw, model_id=o.model_id, firmware=(major, minor),
+                                    short_version=o.short_version)
+        device.input_1 = o.input_1
+        device.faults.delay = o.delay
+        device.faults.stalled |= {hw.joints.index(j) for j in ctx.named("stall", hw)}
+        server = ctx.stack.enter_context(
+            DeltoServer(device, host=o.host, port=o.port if n == 0 else 0))
+        buses[hw.bus or hw.name] = server.endpoint
+        ctx.blocks[hw.name] = {"endpoint": server.endpoint, "model": device.model.name,
+                               "firmware": o.firmware}
+    return buses

@@ -87,3 +87,15 @@ BAUD_RATES = {0: 9600, 1: 57600, 2: 115200, 3: 1_000_000, 4: 2_000_000, 5: 3_000
 
 def item_at(address: int) -> Item | None:
     return next((i for i in XL430 if i.address <= address < i.address + i.size), None)
+
+
+def item_named(name: str) -> Item:
+    """A control table item by name (any case; spaces, - or _) or by address."""
+    from deltoctl.errors import InvalidInput
+
+    key = name.lower().replace("_", " ").replace("-", " ")
+    for item in XL430:
+        if item.name.lower() == key or (name.isdigit() and item.address == int(name)):
+            return item
+    raise InvalidInput(f"no control table item {name!r} (e.g. return_delay_time, "
+                       "present_temperature, goal_position, or an address)")

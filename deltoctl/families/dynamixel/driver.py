@@ -6,9 +6,11 @@ rate (the block's ``<loop>_rate`` params) with its own communication statistics.
 from __future__ import annotations
 
 import struct
+from typing import Any
 
-from deltoctl.core.driver import Driver
+from deltoctl.core.driver import Block, Driver, MoveResult, Progress
 from deltoctl.core.loop import CommLoop
+from deltoctl.errors import DeviceError, InvalidInput, ProtocolError, Refused
 from deltoctl.families.dynamixel import codec
 from deltoctl.families.dynamixel.control_table import (
     BAUD_RATES,
@@ -17,8 +19,6 @@ from deltoctl.families.dynamixel.control_table import (
     XL430_W250,
     Item,
 )
-from deltoctl.errors import DeviceError, InvalidInput, ProtocolError, Refused, Unreachable
-from deltoctl.profile.model import Hardware, Profile
 
 RAD_PER_RAW = 0.001533980787886  # 2π/4096
 CENTER = 2047
@@ -33,26 +33,21 @@ LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}
 
 
 class DynamixelDriver(Driver):
-    family = "dynamixel"
-
-    def __init__(self, profile: Profile, hw: Hardware, url: str, probe: bool = False) -> None:
-        self.profile, self.hw, self.url, self.probe = profile, hw, url, probe
+    def __init__(self, block: Block) -> None:
+        super().__init__(block)
+        hw = block.hw
         self.joints = {j.address: j for j in hw.joints if j.address is not None}
-        self.port = None
+        self.port: Any = None
         self.reader = codec.PacketReader()
-        self.values: dict[str, float] = {}
         self.present: dict[int, tuple[int, int]] = {}  # id → (model, firmware)
-        self.stats = {"packets": 0, "errors": 0, "reconnects": 0}
-        self.warnings: list[str] = []
-        self.identity = None
-        self.connected = False
         self.torque_enabled: set[int] = set()
         self._requests: dict[tuple, bytes] = {}  # sync read instructions, built once
         # Fast Sync Read (XL430 firmware 45 and later) for the reader loops, when the block
         # says fast_sync_read: true
         self.fast = str(hw.params.get("fast_sync_read", "false")).lower() in ("1", "true", "yes")
-        self._poll = None
+        self._poll: Any = None
         self._stale = False
+        self._inflight: tuple[int, list[int], Any] | None = None  # a sync read sent
         self.loops = {}
         for name, default in LOOPS.items():
             try:
@@ -66,15 +61,10 @@ class DynamixelDriver(Driver):
         return list(self.loops.values())
 
     # -- wire ------------------------------------------------------------------------------------
-    def _transact(self, packet: bytes, expected: int, timeout: float = 0.1,
-                  on_data=None) -> bytes:  # type: ignore[no-untyped-def]
-        """The hot path of the sync loops: write an instruction, then take reply bytes as
-        they come until ``expected`` are in or the timeout passes; ``on_data(buffer)`` sees
-        the bytes so far after each read, so replies are checked while later ones are still
-        on the wire. Bytes left over from an exchange that went wrong are dropped before the
-        next one."""
+    def _send(self, packet: bytes) -> None:
+        """Write an instruction; bytes left over from an exchange that went wrong are dropped
+        first."""
         import os
-        import time
 
         assert self.port is not None
         if self._stale:
@@ -82,12 +72,23 @@ class DynamixelDriver(Driver):
             self._stale = False
         if self._poll is None:  # no file descriptor (not POSIX): pyserial's own calls
             self.port.write(packet)
+            return
+        view = memoryview(packet)
+        while view:
+            view = view[os.write(self.port.fd, view):]
+
+    def _collect(self, expected: int, timeout: float = 0.1,
+                 on_data: Any = None) -> bytes:
+        """The hot path of the sync loops: take reply bytes as they come until ``expected``
+        are in or the timeout passes; ``on_data(buffer)`` sees the bytes so far after each
+        read, so replies are checked while later ones are still on the wire."""
+        import os
+        import time
+
+        if self._poll is None:
             data = self.port.read(expected)
         else:
             fd = self.port.fd
-            view = memoryview(packet)
-            while view:
-                view = view[os.write(fd, view):]
             data = b""
             deadline = time.perf_counter() + timeout
             while len(data) < expected:
@@ -160,7 +161,7 @@ class DynamixelDriver(Driver):
         data = self.read_table(device_id, item.address, item.size)
         return int.from_bytes(data, "little", signed=item.signed)
 
-    def write_register(self, device_id: int, item: Item, value: int) -> None:
+    def write_register_item(self, device_id: int, item: Item, value: int) -> None:
         try:
             data = value.to_bytes(item.size, "little", signed=item.signed)
         except OverflowError:
@@ -171,7 +172,7 @@ class DynamixelDriver(Driver):
                       f"write {item.name}{hint}")
 
     # -- lifecycle -------------------------------------------------------------------------------
-    def configure(self):  # type: ignore[no-untyped-def]
+    def configure(self) -> None:
         from deltoctl.transport.serial_port import open_serial
 
         self.port = open_serial(self.url)
@@ -189,21 +190,38 @@ class DynamixelDriver(Driver):
                        "check power, the baud rate and the IDs (deltoctl detect scans the "
                        "other baud rates)")
         self.connected = True
-        self.identity = _Identity(self)
-        return self.identity
+
+    def identify(self) -> dict:
+        return {"bus": self.url, "servos": {
+            self.joints[i].name: {"id": i, "model_number": m, "firmware": f,
+                                  "model_match": m == XL430_W250}
+            for i, (m, f) in sorted(self.present.items())}}
 
     def round_trip(self) -> None:
         """One ping of the first servo: what ``connect`` times."""
         self.ping(next(iter(self.present)))
 
-    def read(self) -> dict[str, float]:
+    def start_read(self) -> None:
+        """The slow loop's exchange when due, then the fast loop's sync read sent; ``read``
+        takes its replies (the other bus sends its own meanwhile)."""
+        if self._inflight is not None or self.port is None:
+            return
         ids = list(self.present)
         if self.loops["tv_reader"].due():
             self._read_voltage_temperature(ids)
-        if not self.loops["pvl_reader"].due():
+        if self.loops["pvl_reader"].due():
+            self._inflight = (10, ids, self.loops["pvl_reader"])
+            self._send(self._sync_request(126, 10, ids))
+
+    def read(self) -> dict[str, float]:
+        if self._inflight is None:
+            self.start_read()
+        if self._inflight is None:
             return self.values
+        length, ids, loop = self._inflight
+        self._inflight = None
         values = self.values
-        for device_id, _, data in self._sync_read(126, 10, ids, self.loops["pvl_reader"]):
+        for device_id, _, data in self._sync_replies(length, ids, loop):
             joint = self.joints[device_id]
             load, velocity, position = PVL.unpack(data)
             name = joint.name
@@ -212,22 +230,30 @@ class DynamixelDriver(Driver):
             values[name + "/effort"] = load * LOAD_SCALE
         return values
 
-    def _sync_read(self, address: int, length: int, ids: list[int],
-                   loop: CommLoop | None = None) -> list[tuple[int, int, bytes]]:
-        """One sync read (or Fast Sync Read): ``(id, error, data)`` per valid reply; a missing
-        or corrupted reply counts as an error, never raises."""
+    def _sync_request(self, address: int, length: int, ids: list[int]) -> bytes:
         key = (address, length, tuple(ids))
         packet = self._requests.get(key)
         if packet is None:
             packet = self._requests[key] = codec.sync_read(address, length, ids, self.fast)
+        return packet
+
+    def _sync_read(self, address: int, length: int, ids: list[int],
+                   loop: CommLoop | None = None) -> list[tuple[int, int, bytes]]:
+        """One sync read (or Fast Sync Read): ``(id, error, data)`` per valid reply; a missing
+        or corrupted reply counts as an error, never raises."""
+        self._send(self._sync_request(address, length, ids))
+        return self._sync_replies(length, ids, loop)
+
+    def _sync_replies(self, length: int, ids: list[int],
+                      loop: CommLoop | None) -> list[tuple[int, int, bytes]]:
         self.stats["packets"] += 1
         if self.fast:  # one status packet for all: 7 bytes less per servo on the wire
-            data = self._transact(packet, 8 + len(ids) * (length + 4))
+            data = self._collect(8 + len(ids) * (length + 4))
             replies = codec.split_fast_sync(data, length, ids)
         else:
             check = codec.SyncReplies(length, ids)
-            replies = check.result(self._transact(packet, len(ids) * (11 + length),
-                                                  on_data=check.feed))
+            replies = check.result(self._collect(len(ids) * (11 + length),
+                                                 on_data=check.feed))
         ok = len(replies) == len(ids)
         self.stats["errors"] += not ok
         if loop is not None:
@@ -358,6 +384,75 @@ class DynamixelDriver(Driver):
                     self.stats["errors"] += 1
         return done
 
+    def move(self, targets: dict[str, float], velocity: float | None = None,
+             progress: Progress | None = None) -> MoveResult:
+        """A time profile to each goal (the servos run their own position loop); returns once
+        all joints are within tolerance, the timeout passes or the System halts the move."""
+        import time
+
+        from deltoctl.core.motion import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
+
+        safety = self.profile.safety
+        tolerance = safety.home_tolerance or DEFAULT_TOLERANCE
+        timeout = safety.home_timeout or 5.0
+        values = self.read()
+        distance = max((abs(t - values.get(f"{j}/position", t)) for j, t in targets.items()),
+                       default=0.0)
+        seconds = max(0.1, distance / (velocity or DEFAULT_VELOCITY))
+        self.send_goals(targets, seconds)
+        start = time.monotonic()
+        errors: dict[str, float] = {}
+        while time.monotonic() - start < seconds + timeout and not self.halted.is_set():
+            values = self.read()
+            errors = {j: abs(t - values.get(f"{j}/position", float("inf")))
+                      for j, t in targets.items()}
+            worst = max(errors.values(), default=0.0)
+            if progress:
+                progress(max(0.0, 1.0 - worst / (distance or 1.0)))
+            if worst <= tolerance:
+                return MoveResult(True, time.monotonic() - start, errors, [])
+            time.sleep(0.02)
+        return MoveResult(False, time.monotonic() - start, errors,
+                          [j for j, e in errors.items() if e > tolerance])
+
+    # -- registers -------------------------------------------------------------------------------
+    def servo(self, joint: str) -> int:
+        """The ID of a joint's servo on this bus."""
+        for device_id, comp in self.joints.items():
+            if comp.name == joint:
+                if device_id not in self.present:
+                    raise DeviceError(f"{joint} (ID {device_id}) does not answer on {self.url}")
+                return device_id
+        raise InvalidInput(f"{joint!r} is not a servo joint of {self.hw.name}")
+
+    def read_registers(self, joint: str, items: list[str]) -> dict[str, Any]:
+        """Control table items by name (all of them, in one read, when none are named)."""
+        from deltoctl.families.dynamixel.control_table import XL430, item_named
+
+        device_id = self.servo(joint)
+        chosen = [item_named(i) for i in items]
+        if chosen:
+            values = {i.name: self.read_register(device_id, i) for i in chosen}
+        else:
+            table = self.read_table(device_id)
+            chosen = list(XL430)
+            values = {i.name: int.from_bytes(table[i.address:i.address + i.size], "little",
+                                             signed=i.signed) for i in chosen}
+        return {"joint": joint, "id": device_id, "items": [
+            {"address": i.address, "item": i.name, "value": values[i.name],
+             "access": ("EEPROM " if i.eeprom else "RAM ") + i.access} for i in chosen]}
+
+    def write_register(self, joint: str, item: str, value: int) -> int:
+        """Write one item and return what it reads back."""
+        from deltoctl.families.dynamixel.control_table import item_named
+
+        chosen = item_named(item)
+        if chosen.access != "RW":
+            raise InvalidInput(f"{chosen.name} is read-only")
+        device_id = self.servo(joint)
+        self.write_register_item(device_id, chosen, value)
+        return self.read_register(device_id, chosen)
+
     def stop(self) -> None:
         """Leave the torque as it was found: a humanoid must not drop when a verb ends."""
 
@@ -366,138 +461,3 @@ class DynamixelDriver(Driver):
             self.port.close()
             self.port = None
         self.connected = False
-
-
-class _Identity:
-    def __init__(self, driver: DynamixelDriver) -> None:
-        self.driver = driver
-
-    def as_dict(self) -> dict:
-        d = self.driver
-        return {"bus": d.url, "servos": {
-            d.joints[i].name: {"id": i, "model_number": m, "firmware": f,
-                               "model_match": m == XL430_W250}
-            for i, (m, f) in sorted(d.present.items())}}
-
-
-class BusesDriver(Driver):
-    """Every bus of one profile (the MH5: two Dynamixel buses and the I2C IMU) behind the one
-    driver interface. An I2C sensor whose bus cannot be reached is left out with a warning:
-    the servos do not depend on it."""
-
-    family = "dynamixel"
-
-    def __init__(self, drivers: list) -> None:
-        self.drivers = drivers
-        self.servo_buses = [d for d in drivers if isinstance(d, DynamixelDriver)]
-        self.values: dict[str, float] = {}
-        self.identity: _Buses | None = None
-        self.skipped: list[str] = []
-
-    @property
-    def stats(self) -> dict[str, int]:
-        return {k: sum(d.stats[k] for d in self.drivers) for k in ("packets", "errors",
-                                                                      "reconnects")}
-
-    @property
-    def warnings(self) -> list[str]:
-        return self.skipped + [w for d in self.drivers for w in d.warnings]
-
-    @property
-    def connected(self) -> bool:
-        return all(d.connected for d in self.drivers)
-
-    def configure(self) -> _Buses:
-        for d in list(self.drivers):
-            try:
-                d.configure()
-            except Unreachable as exc:
-                if d in self.servo_buses:
-                    raise
-                self.skipped.append(f"{d.hw.name} left out: {exc.message}")
-                self.drivers.remove(d)
-        self.identity = _Buses(self.drivers)
-        return self.identity
-
-    def comm_loops(self) -> list[CommLoop]:
-        return [loop for d in self.servo_buses for loop in d.comm_loops()]
-
-    def round_trip(self) -> None:
-        for d in self.servo_buses:
-            d.round_trip()
-
-    def read(self) -> dict[str, float]:
-        for d in self.drivers:
-            self.values.update(d.read())
-        self.values["system/connection_status"] = 1.0 if self.connected else 0.0
-        return self.values
-
-    def detect(self) -> dict:
-        results = [d.detect() for d in self.drivers]
-        return {"buses": {d.hw.name: {k: v for k, v in r.items() if k not in ("checks",
-                                                                             "summary")}
-                          for d, r in zip(self.drivers, results)},
-                "checks": [c for r in results for c in r["checks"]],
-                "summary": "; ".join(r["summary"] for r in results)}
-
-    def move(self, targets: dict[str, float], profile: Profile, velocity: float | None = None,
-             progress=None):  # type: ignore[no-untyped-def]
-        """Time-profiled moves on every bus (the servos run their own position loop); returns
-        once all joints are within tolerance."""
-        import time
-
-        from deltoctl.core.motion import DEFAULT_TOLERANCE, DEFAULT_VELOCITY, MoveResult
-
-        tolerance = profile.safety.home_tolerance or DEFAULT_TOLERANCE
-        timeout = profile.safety.home_timeout or 5.0
-
-        values = self.read()
-        distance = max((abs(t - values.get(f"{j}/position", t)) for j, t in targets.items()),
-                       default=0.0)
-        seconds = max(0.1, distance / (velocity or DEFAULT_VELOCITY))
-        for d in self.servo_buses:
-            d.send_goals(targets, seconds)
-        start = time.monotonic()
-        errors: dict[str, float] = {}
-        while time.monotonic() - start < seconds + timeout:
-            values = self.read()
-            errors = {j: abs(t - values.get(f"{j}/position", float("inf")))
-                      for j, t in targets.items()}
-            if max(errors.values(), default=0.0) <= tolerance:
-                return MoveResult(True, time.monotonic() - start, errors, [])
-            time.sleep(0.02)
-        return MoveResult(False, time.monotonic() - start, errors,
-                          [j for j, e in errors.items() if e > tolerance])
-
-    def servo(self, joint: str) -> tuple[DynamixelDriver, int]:
-        """The bus and ID of a joint's servo."""
-        for d in self.servo_buses:
-            for device_id, comp in d.joints.items():
-                if comp.name == joint:
-                    if device_id not in d.present:
-                        raise DeviceError(f"{joint} (ID {device_id}) does not answer on {d.url}")
-                    return d, device_id
-        raise InvalidInput(f"{joint!r} is not a servo joint of this profile")
-
-    def set_torque(self, joints: list[str], on: bool) -> list[str]:
-        return [j for d in self.servo_buses for j in d.set_torque(joints, on)]
-
-    def reboot(self, joints: list[str]) -> list[str]:
-        return [j for d in self.servo_buses for j in d.reboot(joints)]
-
-    def stop(self) -> None:
-        for d in self.drivers:
-            d.stop()
-
-    def cleanup(self) -> None:
-        for d in self.drivers:
-            d.cleanup()
-
-
-class _Buses:
-    def __init__(self, drivers: list) -> None:
-        self.drivers = drivers
-
-    def as_dict(self) -> dict:
-        return {"family": "dynamixel", "buses": {d.hw.name: d.identity.as_dict()
-                                                 for d in self.drivers if d.identity}}

@@ -19,7 +19,9 @@ import threading
 import time
 import tty
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
+from deltoctl.errors import ProtocolError
 from deltoctl.families.dynamixel import codec
 from deltoctl.families.dynamixel.control_table import (
     BAUD_RATES,
@@ -28,7 +30,10 @@ from deltoctl.families.dynamixel.control_table import (
     XL430,
     item_at,
 )
-from deltoctl.errors import ProtocolError
+
+if TYPE_CHECKING:
+    from deltoctl.profile.model import Hardware
+    from deltoctl.sim.serve import ServeContext
 
 _SPEEDS = {getattr(termios, f"B{b}"): b for b in BAUD_RATES.values() if hasattr(termios, f"B{b}")}
 ACCESS_ERROR, DATA_LENGTH_ERROR, INSTRUCTION_ERROR, RESULT_FAIL = 7, 5, 2, 1
@@ -381,3 +386,25 @@ class DynamixelPtyServer:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
+    """One pseudo-terminal per bus block, its servos at the joints' IDs, listening at the bus
+    URL's baud rate."""
+    from deltoctl.transport.serial_port import parse_serial_url
+
+    o = ctx.options
+    buses = {}
+    for hw in blocks:
+        url = ctx.profile.buses.get(hw.bus or "", "serial:///dev/ttyUSB0?baud=1000000")
+        _, baud, _ = parse_serial_url(url)
+        bus = DynamixelBus([Servo(j.address) for j in hw.joints if j.address is not None],
+                           baud=baud)
+        bus.faults.missing |= {j.address for j in ctx.named("missing", hw)}
+        for joint in ctx.named("wrong_baud", hw):
+            if joint.address in bus.servos:  # 57600 (or 115200 on a 57600 bus)
+                bus.servos[joint.address].memory[8] = 1 if baud != 57600 else 2
+        server = ctx.stack.enter_context(DynamixelPtyServer(bus, pace=o.pace))
+        query = url.split("?", 1)[1] if "?" in url else f"baud={baud}"
+        buses[hw.bus or hw.name] = f"serial://{server.port}?{query}"
+    return buses

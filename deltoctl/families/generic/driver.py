@@ -12,62 +12,43 @@ velocity commands.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
-from deltoctl.core.driver import Driver
+from deltoctl.core.driver import Block, Driver, MoveResult, Progress
 from deltoctl.errors import InvalidInput
-from deltoctl.profile.model import Hardware, Profile
-
-STATUS = "system/connection_status"
+from deltoctl.profile.model import Hardware
 
 
 def _flag(hw: Hardware, name: str) -> bool:
     return hw.params.get(name, "false").lower() == "true"
 
 
-@dataclass
-class GenericIdentity:
-    blocks: list[dict]
-
-    def as_dict(self) -> dict:
-        return {"family": "generic", "plugin": "mock_components/GenericSystem",
-                "blocks": self.blocks}
-
-
 class GenericDriver(Driver):
-    family = "generic"
-
-    def __init__(self, profile: Profile, blocks: list[Hardware]) -> None:
-        self.profile = profile
-        self.blocks = blocks
-        self.values: dict[str, float] = {STATUS: 1.0}
+    def __init__(self, block: Block) -> None:
+        super().__init__(block)
         self.commands: dict[str, Hardware] = {}  # command interface → its block
-        self.stats = {"packets": 0, "errors": 0, "reconnects": 0}
-        self.warnings: list[str] = []
-        self.identity: GenericIdentity | None = None
-        self.connected = True
         self._last_write: dict[str, float] = {}
 
-    def configure(self) -> GenericIdentity:
-        for hw in self.blocks:
-            gpio_cmds, sensor_cmds = _flag(hw, "mock_gpio_commands"), _flag(hw,
-                                                                           "mock_sensor_commands")
-            for comp in hw.components():
-                for itf in comp.state_interfaces:
-                    initial = itf.initial_value
-                    try:
-                        value = float(initial) if initial is not None else 0.0
-                    except ValueError:
-                        value = 1.0 if initial.lower() == "true" else 0.0
-                    self.values[f"{comp.name}/{itf.name}"] = value
-                    if (comp.kind == "gpio" and gpio_cmds) or (comp.kind == "sensor"
-                                                               and sensor_cmds):
-                        self.commands[f"{comp.name}/{itf.name}"] = hw
-                for itf in comp.command_interfaces:
+    def configure(self) -> None:
+        hw = self.hw
+        gpio_cmds, sensor_cmds = _flag(hw, "mock_gpio_commands"), _flag(hw,
+                                                                       "mock_sensor_commands")
+        for comp in hw.components():
+            for itf in comp.state_interfaces:
+                initial = itf.initial_value
+                try:
+                    value = float(initial) if initial is not None else 0.0
+                except ValueError:
+                    value = 1.0 if initial.lower() == "true" else 0.0
+                self.values[f"{comp.name}/{itf.name}"] = value
+                if (comp.kind == "gpio" and gpio_cmds) or (comp.kind == "sensor"
+                                                           and sensor_cmds):
                     self.commands[f"{comp.name}/{itf.name}"] = hw
-        self.identity = GenericIdentity([
-            {"name": hw.name, "type": hw.type, "params": dict(hw.params)} for hw in self.blocks])
-        return self.identity
+            for itf in comp.command_interfaces:
+                self.commands[f"{comp.name}/{itf.name}"] = hw
+        self.connected = True
+
+    def identify(self) -> dict:
+        return {"plugin": self.hw.plugin, "type": self.hw.type, "params": dict(self.hw.params)}
 
     def read(self) -> dict[str, float]:
         self.stats["packets"] += 1
@@ -76,7 +57,7 @@ class GenericDriver(Driver):
     def set_command(self, name: str, value: float) -> None:
         hw = self.commands.get(name)
         if hw is None:
-            raise InvalidInput(f"{name} is not a command interface of {self.profile.name} "
+            raise InvalidInput(f"{name} is not a command interface of {self.hw.name} "
                                f"(commands: {', '.join(sorted(self.commands))})")
         if _flag(hw, "disable_commands"):
             return
@@ -100,11 +81,9 @@ class GenericDriver(Driver):
         if f"{comp_name}/{target}" in self.values:
             self.values[f"{comp_name}/{target}"] = value + offset
 
-    def move(self, targets: dict[str, float], profile: Profile, velocity: float | None = None,
-             progress=None):  # type: ignore[no-untyped-def]
+    def move(self, targets: dict[str, float], velocity: float | None = None,
+             progress: Progress | None = None) -> MoveResult:
         """Position commands, mirrored to the states at once."""
-        from deltoctl.core.motion import MoveResult
-
         for joint, value in targets.items():
             self.set_command(f"{joint}/position", value)
         return MoveResult(True, 0.0, {j: 0.0 for j in targets}, [])
@@ -112,7 +91,7 @@ class GenericDriver(Driver):
     def detect(self) -> dict:
         parts = [{"name": c.name, "kind": c.kind,
                   "states": [i.name for i in c.state_interfaces]}
-                 for hw in self.blocks for c in hw.components()]
+                 for c in self.hw.components()]
         return {"parts": parts, "checks": [], "summary": f"{len(parts)} simulated parts"}
 
     def stop(self) -> None:

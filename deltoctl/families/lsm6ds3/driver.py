@@ -3,11 +3,10 @@ accelerometer and temperature into a sensor's interfaces (``imu/angular_velocity
 
 from __future__ import annotations
 
-from deltoctl.core.driver import Driver
-from deltoctl.families.lsm6ds3 import codec
+from deltoctl.core.driver import Block, Driver
 from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, ProtocolError
-from deltoctl.profile.model import Hardware, Profile
-from deltoctl.transport.i2c import I2CBus
+from deltoctl.families.lsm6ds3 import codec
+from deltoctl.transport.i2c import I2CBus, shared_bus
 
 AXES = ("x", "y", "z")
 # no orientation estimate: the MH5 reports a fixed quaternion
@@ -16,12 +15,11 @@ ORIENTATION = {"orientation.x": 0.0, "orientation.y": 0.0, "orientation.z": 0.0,
 
 
 class Lsm6ds3Driver(Driver):
-    family = "lsm6ds3"
-
-    def __init__(self, profile: Profile, hw: Hardware, url: str, smbus=None) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, block: Block) -> None:
+        super().__init__(block)
+        hw = block.hw
         if not hw.sensors or hw.sensors[0].address is None:
-            raise InvalidInput(f"{hw.name}: an lsm6ds3 block needs a sensor with an address")
-        self.profile, self.hw, self.url = profile, hw, url
+            raise InvalidInput(f"{hw.name}: an IMU block needs a sensor with an address")
         self.sensor = hw.sensors[0]
         self.address = self.sensor.address
         p = {**hw.params, **self.sensor.params}
@@ -36,13 +34,8 @@ class Lsm6ds3Driver(Driver):
                          codec.ctrl2_g(self.odr, self.range_dps))
         self.accel = codec.accel_scale(self.range_g)
         self.gyro = codec.gyro_scale(self.range_dps)
-        self._smbus = smbus
         self.bus: I2CBus | None = None
         self.chip = ""
-        self.values: dict[str, float] = {}
-        self.warnings: list[str] = []
-        self.connected = False
-        self.identity = self
         self._request = bytes([codec.OUT_TEMP_L])
 
     @property
@@ -54,10 +47,8 @@ class Lsm6ds3Driver(Driver):
         assert self.bus is not None
         return self.bus.transfer(self.address, bytes([register]), 1)[0]
 
-    def configure(self) -> Lsm6ds3Driver:
-        from deltoctl.transport.i2c import open_smbus
-
-        self.bus = I2CBus(self._smbus or open_smbus(self.url), self.url)
+    def configure(self) -> None:
+        self.bus = shared_bus(self.block.links, self.url)
         who = self._register(codec.WHO_AM_I)
         try:
             self.chip = codec.chip_name(who)
@@ -71,7 +62,6 @@ class Lsm6ds3Driver(Driver):
         self.bus.write(self.address, bytes([codec.CTRL4_C, ctrl4 | codec.BW_SCAL_ODR]))
         self.bus.write(self.address, bytes([codec.ORIENT_CFG_G, 0]))  # remap in software
         self.connected = True
-        return self
 
     def read(self) -> dict[str, float]:
         assert self.bus is not None
@@ -99,16 +89,11 @@ class Lsm6ds3Driver(Driver):
         return {"bus": self.url, "chip": self.chip, "checks": [check],
                 "summary": f"{self.sensor.name}: {self.chip} at {self.address:#04x}"}
 
-    def as_dict(self) -> dict:
+    def identify(self) -> dict:
         return {"bus": self.url, "address": f"{self.address:#04x}", "chip": self.chip,
                 "output_rate_hz": self.odr, "accel_range_g": self.range_g,
                 "gyro_range_dps": self.range_dps}
 
-    def stop(self) -> None:
-        pass
-
     def cleanup(self) -> None:
-        if self.bus is not None:
-            self.bus.close()
-            self.bus = None
+        self.bus = None  # the System closes the shared bus
         self.connected = False

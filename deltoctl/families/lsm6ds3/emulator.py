@@ -6,8 +6,13 @@ from __future__ import annotations
 
 import math
 import random
+from typing import TYPE_CHECKING
 
 from deltoctl.families.lsm6ds3 import codec
+
+if TYPE_CHECKING:
+    from deltoctl.profile.model import Hardware
+    from deltoctl.sim.serve import ServeContext
 
 ACCEL_NOISE = 0.02  # m/s², one sigma
 GYRO_NOISE = 0.002  # rad/s
@@ -56,3 +61,20 @@ class Lsm6ds3Chip:
         start = self.pointer
         self.pointer = (start + length) % len(self.registers)
         return bytes(self.registers[start:start + length])
+
+
+def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
+    """Each IMU on its block's simulated I2C bus, with the WHO_AM_I and tilt asked for."""
+    o = ctx.options
+    buses = {}
+    for hw in blocks:
+        bus, url = ctx.i2c_bus(hw.bus or "i2c")
+        for sensor in hw.sensors:
+            if sensor.address is None:
+                continue
+            chip = Lsm6ds3Chip()
+            chip.registers[codec.WHO_AM_I] = o.who_am_i
+            chip.set_orientation(*(math.radians(a) for a in o.orientation[:3]))
+            bus.devices[sensor.address] = chip
+        buses[hw.bus or "i2c"] = url
+    return buses

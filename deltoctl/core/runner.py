@@ -1,0 +1,85 @@
+"""The one fixed-rate cycle runner: every cycle reads the System once and hands the frame to
+the sinks (live table, NDJSON, MCAP recorder, progress); once a second the sinks see the loop's
+timing and the buses' communication statistics. Ctrl-C, SIGTERM and SIGHUP end it cleanly."""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+from deltoctl.core.loop import CommLoop, CycleLoop, LoopStats
+
+STATS_PERIOD = 1.0  # s between the sinks' statistics
+
+
+class Sink:
+    """What the runner feeds; every method is optional."""
+
+    def frame(self, t_ns: int, values: dict[str, float]) -> None:
+        """One cycle's values (the dict is reused: copy what you keep)."""
+
+    def periodic(self, t_ns: int, stats: LoopStats, comm_loops: list[CommLoop]) -> None:
+        """Once a second: the loop's statistics and the buses' own loops."""
+
+    def close(self, stats: LoopStats) -> None:
+        """The loop has ended (also on Ctrl-C or an error)."""
+
+
+@contextlib.contextmanager
+def interrupted_by_signals() -> Iterator[None]:
+    """SIGTERM (a supervisor) and SIGHUP (a closed terminal or SSH session) interrupt like
+    Ctrl-C, so every way out runs the same clean-up; the old handlers come back after."""
+    previous = {}
+    for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+        if sig is not None:
+            with contextlib.suppress(ValueError):  # not the main thread
+                previous[sig] = signal.signal(sig, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def run_cycles(system: Any, rate: float, duration: float | None, sinks: list[Sink],
+               write: Callable[[dict[str, float]], None] | None = None) -> LoopStats:
+    """Run until ``duration`` passes or an interrupt; returns the loop's statistics. ``write``
+    sends each cycle's commands after the read. Sinks are closed whatever happens."""
+    loop = CycleLoop(rate, duration)
+    comm_loops = system.comm_loops()
+    members = [m.driver for m in system.members]
+    stats = loop.stats
+    next_stats = time.monotonic() + STATS_PERIOD
+    try:
+        with interrupted_by_signals():
+            for _ in loop:
+                before = sum(d.stats["errors"] for d in members)
+                values = system.read()
+                if write is not None:
+                    write(values)
+                stats.packets += 1
+                stats.errors += sum(d.stats["errors"] for d in members) - before
+                t_ns = time.time_ns()
+                for sink in sinks:
+                    sink.frame(t_ns, values)
+                if time.monotonic() >= next_stats:
+                    next_stats += STATS_PERIOD
+                    for sink in sinks:
+                        sink.periodic(t_ns, stats, comm_loops)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if stats.ended is None:
+            stats.ended = time.monotonic()
+        failed: BaseException | None = None
+        for sink in sinks:  # each one closes, even when another fails
+            try:
+                sink.close(stats)
+            except BaseException as exc:
+                failed = failed or exc
+        if failed is not None:
+            raise failed
+    return stats

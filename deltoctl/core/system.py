@@ -1,0 +1,328 @@
+"""The System: every hardware block of a profile, as ros2_control's resource manager holds them.
+
+One driver per ``<ros2_control>`` block, built from its family's descriptor; each block with
+its own lifecycle state, warnings and statistics; every interface routed to its block by name.
+A cycle sends every block's read request first, then takes the replies, so blocks on different
+links wait for their devices at the same time. Blocks on one link (I2C devices on one bus) share
+its transport. Whatever happens, closing leaves every block safe (duty 0, stop, torque as found)
+and releases its link.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+from deltoctl import registry
+from deltoctl.core.driver import Block, Driver, Links, MoveResult, Progress
+from deltoctl.core.lifecycle import Lifecycle
+from deltoctl.errors import DeltoctlError, InvalidInput, Unreachable
+from deltoctl.profile.model import Component, Hardware, Profile
+from deltoctl.registry import Family
+
+STATUS = "system/connection_status"  # 1 while every block's link is up
+
+
+class Member:
+    """One block of the System: its driver, lifecycle and where it is."""
+
+    def __init__(self, hw: Hardware, family: Family, driver: Driver) -> None:
+        self.hw, self.family, self.driver = hw, family, driver
+        self.name = hw.name
+        self.lifecycle = Lifecycle()
+        self.status_key = f"{hw.name}/connection_status"
+
+    @property
+    def url(self) -> str:
+        return self.driver.url
+
+    def can(self, capability: str) -> bool:
+        return capability in self.family.capabilities
+
+
+def select_blocks(profile: Profile, names: list[str] | tuple[str, ...] = ()) -> list[Hardware]:
+    """The blocks ``--hardware`` names (all when none are named)."""
+    if not names:
+        return list(profile.hardware)
+    known = {hw.name: hw for hw in profile.hardware}
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise InvalidInput(f"--hardware {', '.join(unknown)}: {profile.name} has no such block "
+                           f"(its blocks: {', '.join(known)})")
+    return [hw for hw in profile.hardware if hw.name in names]
+
+
+def parse_targets(profile: Profile, targets: list[str] | tuple[str, ...]) -> tuple[dict, list]:
+    """``--target`` values: ``BUS=URL`` by bus name, and bare URLs."""
+    named: dict[str, str] = {}
+    bare: list[str] = []
+    for item in targets:
+        name, found, url = item.partition("=")
+        if found and "://" not in name:
+            if name not in profile.buses:
+                raise InvalidInput(f"--target names unknown bus {name!r} "
+                                   f"(the profile's buses: {', '.join(profile.buses)})")
+            named[name] = url
+        else:
+            bare.append(item)
+    return named, bare
+
+
+class System:
+    """``with System(profile, targets) as system: system.read()``."""
+
+    def __init__(self, profile: Profile, targets: list[str] | tuple[str, ...] = (),
+                 hardware: list[str] | tuple[str, ...] = (), *, probe: bool = False,
+                 allow_model_mismatch: bool = False) -> None:
+        """``probe``: a bus where nothing answers is still opened (for ``detect``)."""
+        self.profile = profile
+        self.links = Links()
+        self.members: list[Member] = []
+        self.notes: list[str] = []  # the System's own warnings (blocks left out)
+        self.values: dict[str, float] = {STATUS: 0.0}
+        blocks = select_blocks(profile, hardware)
+        named, bare = parse_targets(profile, targets)
+        buses = {hw.bus for hw in blocks if hw.bus}
+        if len(bare) > 1 or (bare and len(buses) > 1):
+            raise InvalidInput(f"{profile.name} has several buses ({', '.join(sorted(buses))}): "
+                               "name each target, --target BUS=URL")
+        for hw in blocks:
+            family = registry.get(profile.family_of(hw))
+            if family is None:
+                self.notes.append(f"{hw.name} left out: no driver family for plugin "
+                                  f"{hw.plugin!r} (families: {', '.join(registry.families())})")
+                continue
+            url = self._url(hw, family, named, bare)
+            block = Block(profile, hw, family, url, probe, allow_model_mismatch, self.links)
+            self.members.append(Member(hw, family, family.driver_class()(block)))
+        if not self.members:
+            raise InvalidInput(f"{profile.name}: no block deltoctl can drive "
+                               f"({'; '.join(self.notes) or 'the profile has no blocks'})")
+        self._owner: dict[str, Member] = {c.name: m for m in self.members
+                                          for c in m.hw.components()}
+
+    def _url(self, hw: Hardware, family: Family, named: dict, bare: list) -> str:
+        if not family.schemes:
+            return ""  # no transport (a mock)
+        if hw.bus in named:
+            return str(named[hw.bus])
+        if bare:
+            return str(bare[0])
+        if hw.bus is None or hw.bus not in self.profile.buses:
+            raise InvalidInput(f"{hw.name!r} has no bus URL: pass --target URL")
+        return self.profile.buses[hw.bus]
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    def __enter__(self) -> System:
+        try:
+            self.configure()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def configure(self) -> None:
+        """Configure and activate every block (at the same time: an unreachable one costs its
+        timeout once, not once per block). A sensor block that cannot be reached is left out
+        with a warning; any other unreachable block is an error naming it."""
+        errors: dict[str, BaseException] = {}
+
+        def bring_up(m: Member) -> None:
+            try:
+                m.lifecycle.transition("configure", m.driver.configure)
+                m.lifecycle.transition("activate", m.driver.activate)
+            except BaseException as exc:
+                errors[m.name] = exc
+
+        threads = [threading.Thread(target=bring_up, args=(m,), daemon=True)
+                   for m in self.members[1:]]
+        for t in threads:
+            t.start()
+        bring_up(self.members[0])
+        for t in threads:
+            t.join()
+        for m in list(self.members):
+            exc = errors.get(m.name)
+            if isinstance(exc, Unreachable) and m.hw.type == "sensor" and len(self.members) > 1:
+                self.notes.append(f"{m.name} left out: {exc.message}")
+                self.members.remove(m)
+                del errors[m.name]
+        for exc in errors.values():
+            if not isinstance(exc, Exception):
+                raise exc  # Ctrl-C
+        unreachable = {n: e for n, e in errors.items() if isinstance(e, Unreachable)}
+        if unreachable:
+            others = [m.name for m in self.members if m.name not in errors]
+            hint = next(iter(unreachable.values())).hint
+            if others:
+                hint = f"--hardware {' --hardware '.join(others)} works on the others"
+            raise Unreachable("; ".join(f"{n}: {e.message}" if n not in e.message else e.message
+                                        for n, e in unreachable.items()), hint=hint)
+        if errors:
+            raise next(iter(errors.values()))
+        self._owner = {c.name: m for m in self.members for c in m.hw.components()}
+
+    def close(self) -> None:
+        """Leave every block safe, then release it (runs on errors and Ctrl-C too)."""
+        try:
+            for m in self.members:
+                m.driver.halted.set()
+            for m in self.members:
+                try:
+                    if m.lifecycle.state == "active":
+                        m.lifecycle.transition("deactivate", m.driver.deactivate)
+                    if m.lifecycle.state == "inactive":
+                        m.lifecycle.transition("cleanup", m.driver.cleanup)
+                    else:
+                        m.driver.cleanup()
+                    m.lifecycle.transition("shutdown")
+                except DeltoctlError as exc:
+                    self.notes.append(f"{m.name}: {exc.message} while closing")
+        finally:
+            self.links.close()
+
+    # -- lookups ---------------------------------------------------------------------------
+    def __iter__(self) -> Iterator[Member]:
+        return iter(self.members)
+
+    def member(self, part: str) -> Member:
+        """The block a joint, sensor or GPIO (or one of its interfaces) belongs to."""
+        name = part.rpartition("/")[0] if "/" in part else part
+        m = self._owner.get(name)
+        if m is None:
+            where = [hw.name for hw in self.profile.hardware
+                     if any(c.name == name for c in hw.components())]
+            if where:
+                raise InvalidInput(f"{name} is in block {where[0]}, which this command does "
+                                   "not drive (see --hardware)")
+            raise InvalidInput(f"{self.profile.name} has no joint, sensor or GPIO {name!r}")
+        return m
+
+    def component(self, name: str) -> Component:
+        return next(c for c in self.member(name).hw.components() if c.name == name)
+
+    def able(self, capability: str) -> list[Member]:
+        return [m for m in self.members if m.can(capability)]
+
+    def state_interfaces(self) -> list[str]:
+        """Every state interface of the driven blocks, the drivers' extras, and the links'."""
+        names = [n for m in self.members for c in m.hw.components()
+                 for n in c.interface_names("state")]
+        names += [f"{j.name}/{e}" for m in self.members for j in m.hw.joints
+                  for e in m.driver.extra_states]
+        return [*names, *(m.status_key for m in self.members), STATUS]
+
+    def extra_states(self) -> list[str]:
+        return [f"{j.name}/{e}" for m in self.members for j in m.hw.joints
+                for e in m.driver.extra_states]
+
+    @property
+    def url(self) -> str:
+        return ", ".join(m.url for m in self.members if m.url) or "in-process"
+
+    @property
+    def connected(self) -> bool:
+        return all(m.driver.connected for m in self.members)
+
+    @property
+    def stats(self) -> dict[str, int]:
+        return {k: sum(m.driver.stats[k] for m in self.members)
+                for k in ("packets", "errors", "reconnects")}
+
+    def warnings(self) -> list[str]:
+        found = list(self.notes)
+        for m in self.members:
+            found += m.driver.warnings
+            if m.driver.stats.get("reconnects"):
+                found.append(f"{m.name}: the link was lost and re-established "
+                             f"{m.driver.stats['reconnects']} time(s)")
+        return found
+
+    def comm_loops(self) -> list[Any]:
+        return [loop for m in self.members for loop in m.driver.comm_loops()]
+
+    # -- the cycle ---------------------------------------------------------------------------
+    def read(self) -> dict[str, float]:
+        """One cycle's state of every block: requests out on every link, then the replies."""
+        members = self.members
+        for m in members:
+            m.driver.start_read()
+        values = self.values
+        up = 1.0
+        for m in members:
+            values.update(m.driver.read())
+            ok = 1.0 if m.driver.connected else 0.0
+            values[m.status_key] = ok
+            up = min(up, ok)
+        values[STATUS] = up
+        return values
+
+    def set_command(self, name: str, value: float) -> None:
+        self.member(name).driver.set_command(name, value)
+
+    def stop(self) -> None:
+        for m in self.members:
+            m.driver.stop()
+
+    # -- motion ----------------------------------------------------------------------------
+    def by_block(self, joints: list[str] | dict[str, float]) -> dict[str, list[str]]:
+        """Joint names grouped by their block, in the profile's order of blocks."""
+        groups: dict[str, list[str]] = {}
+        for j in joints:
+            groups.setdefault(self.member(j).name, []).append(j)
+        return {m.name: groups[m.name] for m in self.members if m.name in groups}
+
+    def move(self, targets: dict[str, float], velocity: float | None = None,
+             progress: Progress | None = None) -> MoveResult:
+        """Each block moves its joints; blocks on different links move at the same time.
+        Ctrl-C or an error in one block halts them all."""
+        groups = self.by_block(targets)
+        members = {m.name: m for m in self.members}
+        for m in self.members:
+            m.driver.halted.clear()
+        if len(groups) == 1:
+            name, joints = next(iter(groups.items()))
+            return members[name].driver.move({j: targets[j] for j in joints}, velocity,
+                                            progress)
+        fractions = dict.fromkeys(groups, 0.0)
+        results: dict[str, MoveResult] = {}
+        errors: list[BaseException] = []
+
+        def run(name: str, joints: list[str]) -> None:
+            def report(fraction: float) -> None:
+                fractions[name] = fraction
+                if progress:
+                    progress(min(fractions.values()))
+
+            try:
+                results[name] = members[name].driver.move({j: targets[j] for j in joints},
+                                                          velocity, report)
+            except BaseException as exc:
+                errors.append(exc)
+                for m in members.values():
+                    m.driver.halted.set()
+
+        threads = [threading.Thread(target=run, args=item, daemon=True)
+                   for item in groups.items()]
+        try:
+            for t in threads:
+                t.start()
+            for t in threads:
+                while t.is_alive():
+                    t.join(0.05)  # short waits: Ctrl-C reaches this thread
+        except BaseException:
+            for m in members.values():
+                m.driver.halted.set()
+            for t in threads:
+                t.join()
+            raise
+        if errors:
+            raise errors[0]
+        return MoveResult(all(r.settled for r in results.values()),
+                          max(r.seconds for r in results.values()),
+                          {j: e for r in results.values() for j, e in r.errors.items()},
+                          [j for r in results.values() for j in r.unsettled])

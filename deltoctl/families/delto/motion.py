@@ -1,0 +1,72 @@
+"""Current-bounded position moves on the effort interface.
+
+A PD loop turns position error into an effort command, clamped to the profile's current cap;
+the setpoint ramps at the requested velocity. The move settles when every joint stays within
+tolerance, or fails naming the joints that did not. The caller's System sets duty 0 after.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+from deltoctl.core.driver import MoveResult, Progress
+from deltoctl.core.loop import CycleLoop
+from deltoctl.core.motion import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
+from deltoctl.errors import DeviceError
+from deltoctl.families.delto.models import KT
+
+if TYPE_CHECKING:
+    from deltoctl.families.delto.driver import DeltoDriver
+
+DEFAULT_CURRENT_CAP = 150.0  # mA
+SETTLE_CYCLES = 10
+SETTLE_SPEED = 0.05  # rad/s: slower than this counts as still
+RATE = 200.0  # Hz
+
+
+def move_to(driver: DeltoDriver, targets: dict[str, float], velocity: float | None = None,
+            timeout: float | None = None, progress: Progress | None = None) -> MoveResult:
+    cap = driver.profile.safety.current_cap or DEFAULT_CURRENT_CAP
+    max_effort = cap / 1000.0 * KT  # N·m the current cap allows
+    tolerance = driver.profile.safety.home_tolerance or DEFAULT_TOLERANCE
+    speed = velocity or DEFAULT_VELOCITY
+    kp = max_effort / tolerance  # full effort at one tolerance of error
+    kd = kp * 0.02
+    values = driver.read()
+    if not driver.connected:
+        raise DeviceError("the device is not answering")
+    setpoints = {j: values[f"{j}/position"] for j in targets}
+    first_error = max((abs(targets[j] - setpoints[j]) for j in targets), default=0.0) or 1.0
+    if timeout is None:
+        timeout = driver.profile.safety.home_timeout or (first_error / speed + 5.0)
+    settled_for = 0
+    errors: dict[str, float] = {}
+    loop = CycleLoop(RATE)
+    step = speed / RATE
+    for _ in loop:
+        values = driver.read()
+        efforts = {}
+        moving = False
+        for joint, target in targets.items():
+            sp = setpoints[joint]
+            setpoints[joint] = sp + max(-step, min(step, target - sp))
+            pos = values[f"{joint}/position"]
+            vel = values.get(f"{joint}/velocity", 0.0)
+            effort = kp * (setpoints[joint] - pos) - kd * vel
+            efforts[joint] = max(-max_effort, min(max_effort, effort))
+            errors[joint] = abs(target - pos)
+            moving = moving or abs(vel) > SETTLE_SPEED
+        driver.write_efforts(efforts)
+        worst = max(errors.values(), default=0.0)
+        if progress:
+            progress(max(0.0, 1.0 - worst / first_error))
+        settled_for = settled_for + 1 if worst <= tolerance and not moving else 0
+        elapsed = time.monotonic() - loop.stats.started
+        if settled_for >= SETTLE_CYCLES or elapsed > timeout:
+            break
+    driver.stop()
+    if settled_for >= SETTLE_CYCLES:
+        return MoveResult(True, elapsed, errors, [])
+    unsettled = [j for j, e in errors.items() if e > tolerance] or list(targets)
+    return MoveResult(False, elapsed, errors, unsettled)
