@@ -186,7 +186,7 @@ class DeltoDriver(Driver):
             "fingers_with_sensor": fingers,
             "gpio": {k.split("/")[1]: values[k] for k in self._keys["gpio"] if k in values},
             "checks": checks,
-            "summary": f"sensor type {sensor}, fingers with a sensor: "
+            "summary": f"{self.hw.name}: sensor type {sensor}, fingers with a sensor: "
                        f"{', '.join(map(str, fingers)) or 'none'}",
         }
 

@@ -41,15 +41,17 @@ def _crc_table() -> list[int]:
 
 
 _TABLE = _crc_table()
-_TABLE16: list[int] = []  # two bytes a step; built on first use (about 10 ms)
+_TABLE16: list[int] | None = None  # two bytes a step; built on first use (about 10 ms)
 
 
 def _table16() -> list[int]:
     # the register is 16 bits wide, so after two bytes it is the table entry of
-    # (register ^ the two bytes): T16[w] = T8-step of the high byte, then of the low byte
+    # (register ^ the two bytes): T16[w] = T8-step of the high byte, then of the low byte.
+    # Built whole, then published: buses configured in parallel threads never see it half-made.
+    global _TABLE16
     t = _TABLE
-    _TABLE16.extend(((t[hi] << 8) & 0xFFFF) ^ t[(t[hi] >> 8) ^ lo]
-                    for hi in range(256) for lo in range(256))
+    _TABLE16 = [((t[hi] << 8) & 0xFFFF) ^ t[(t[hi] >> 8) ^ lo]
+                for hi in range(256) for lo in range(256)]
     return _TABLE16
 
 
