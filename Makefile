@@ -18,6 +18,7 @@ demo: $(BIN)/deltoctl
 
 test: $(BIN)/deltoctl
 	$(BIN)/ruff check deltoctl tests bench
+	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -q
 
 bench: $(BIN)/deltoctl

@@ -103,3 +103,8 @@ def get(name: str | None) -> Family | None:
 
 def for_plugin(plugin: str) -> str | None:
     return next((f.name for f in families().values() if plugin in f.plugins), None)
+
+
+def of_block(family_name: str | None, plugin: str) -> Family | None:
+    """A block's family: the one it names (or its profile names), else its plugin's."""
+    return get(family_name or for_plugin(plugin))

@@ -23,9 +23,11 @@ def select_joints(profile: Any, target: str, capability: str) -> list[str]:
     joints' ``group`` param, and arms/legs) or ``all``."""
     from deltoctl import registry
 
-    joints = [j for hw in profile.hardware
-              if capability in getattr(registry.get(profile.family_of(hw)), "capabilities", ())
-              for j in hw.joints]
+    def offers(hw: Any) -> bool:
+        family = registry.of_block(profile.family_of(hw), hw.plugin)
+        return family is not None and capability in family.capabilities
+
+    joints = [j for hw in profile.hardware if offers(hw) for j in hw.joints]
     if not joints:
         raise InvalidInput(f"{profile.name} has no joints with {capability}")
     if target == "all":

@@ -88,7 +88,7 @@ class System:
             raise InvalidInput(f"{profile.name} has several buses ({', '.join(sorted(buses))}): "
                                "name each target, --target BUS=URL")
         for hw in blocks:
-            family = registry.get(profile.family_of(hw))
+            family = registry.of_block(profile.family_of(hw), hw.plugin)
             if family is None:
                 self.notes.append(f"{hw.name} left out: no driver family for plugin "
                                   f"{hw.plugin!r} (families: {', '.join(registry.families())})")

@@ -73,9 +73,12 @@ def serve_profile(stack: contextlib.ExitStack, prof: Profile, options: ServeOpti
 
     blocks = select_blocks(prof, hardware)
     by_family: dict[str, list[Hardware]] = {}
+    families: dict[str, registry.Family | None] = {}
     for hw in blocks:
-        by_family.setdefault(prof.family_of(hw) or "", []).append(hw)
-    families = {name: registry.get(name) for name in by_family}
+        family = registry.of_block(prof.family_of(hw), hw.plugin)
+        name = family.name if family else prof.family_of(hw) or hw.plugin
+        by_family.setdefault(name, []).append(hw)
+        families[name] = family
     _check_options(prof, blocks, options, [f for f in families.values() if f])
     ctx = ServeContext(stack, prof, options)
     buses: dict[str, str] = {}
