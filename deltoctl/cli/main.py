@@ -19,8 +19,8 @@ from deltoctl.errors import DeltoctlError
 # option spellings → whether they take a value
 GLOBAL_OPTIONS: dict[str, bool] = {
     "--profile": True, "-p": True, "--target": True, "-t": True, "--arg": True,
-    "--package-path": True, "--hardware": True, "--xacro": False, "--sim": False, "--json": False, "--yes": False, "-y": False,
-    "--verbose": False, "--quiet": False, "-q": False,
+    "--package-path": True, "--hardware": True, "--xacro": False, "--sim": False,
+    "--json": False, "--yes": False, "-y": False, "--verbose": False, "--quiet": False, "-q": False,
 }
 _VERBOSE = re.compile(r"^-v+$")
 
