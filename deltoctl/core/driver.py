@@ -64,6 +64,9 @@ class Block:
     probe: bool = False  # opened only to look at the bus (detect): silence is no error
     allow_model_mismatch: bool = False
     links: Links = field(default_factory=Links)
+    # where the driver keeps its values: the System's one dict, shared by every block (their
+    # interface names never collide), so a cycle merges nothing
+    values: dict[str, float] = field(default_factory=dict)
 
 
 class Unsupported(InvalidInput):
@@ -77,7 +80,7 @@ class Driver:
         self.block = block
         self.profile, self.hw, self.url, self.probe = block.profile, block.hw, block.url, \
             block.probe
-        self.values: dict[str, float] = {}
+        self.values = block.values
         self.warnings: list[str] = []
         self.connected = False
         self.halted = threading.Event()  # set by the System: a move in progress ends now

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 from deltoctl.errors import DeltoctlError
 
 UNCONFIGURED, INACTIVE, ACTIVE, FINALIZED = "unconfigured", "inactive", "active", "finalized"
@@ -23,7 +26,7 @@ class Lifecycle:
         self.state = UNCONFIGURED
         self.history: list[str] = [UNCONFIGURED]
 
-    def transition(self, name: str, action=None):  # type: ignore[no-untyped-def]
+    def transition(self, name: str, action: Callable[[], Any] | None = None) -> Any:
         start, end = _TRANSITIONS[name]
         if start is not None and self.state != start:
             raise DeltoctlError(f"cannot {name} from {self.state}")

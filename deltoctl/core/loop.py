@@ -6,6 +6,7 @@ from __future__ import annotations
 import gc
 import math
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 
@@ -90,7 +91,7 @@ class CycleLoop:
         self.duration = duration
         self.stats = LoopStats(rate)
 
-    def __iter__(self):  # type: ignore[no-untyped-def]
+    def __iter__(self) -> Iterator[float]:
         # The garbage collector's pauses land at random in a cycle; the loop allocates little
         # that lives, so it is paused for the run and catches up afterwards.
         gc_was_enabled = gc.isenabled()
@@ -103,7 +104,7 @@ class CycleLoop:
             if gc_was_enabled:
                 gc.enable()
 
-    def _cycles(self):  # type: ignore[no-untyped-def]
+    def _cycles(self) -> Iterator[float]:
         period = 1.0 / self.rate if self.rate > 0 else 0.0
         start = time.monotonic()
         self.stats.started = start

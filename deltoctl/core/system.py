@@ -94,7 +94,8 @@ class System:
                                   f"{hw.plugin!r} (families: {', '.join(registry.families())})")
                 continue
             url = self._url(hw, family, named, bare)
-            block = Block(profile, hw, family, url, probe, allow_model_mismatch, self.links)
+            block = Block(profile, hw, family, url, probe, allow_model_mismatch, self.links,
+                          self.values)
             self.members.append(Member(hw, family, family.driver_class()(block)))
         if not self.members:
             raise InvalidInput(f"{profile.name}: no block deltoctl can drive "
@@ -251,10 +252,10 @@ class System:
         members = self.members
         for m in members:
             m.driver.start_read()
-        values = self.values
+        values = self.values  # the drivers' own dict: they store into it
         up = 1.0
         for m in members:
-            values.update(m.driver.read())
+            m.driver.read()
             ok = 1.0 if m.driver.connected else 0.0
             values[m.status_key] = ok
             up = min(up, ok)

@@ -37,7 +37,7 @@ def parse_i2c_url(url: str) -> tuple[str, str, int]:
                        "i2c+tcp://HOST:PORT from `deltoctl sim serve`)")
 
 
-def open_smbus(url: str):  # type: ignore[no-untyped-def]
+def open_smbus(url: str) -> Any:
     """An SMBus-compatible object for the URL; Unreachable with what to do when it fails."""
     kind, where, port = parse_i2c_url(url)
     if kind == "tcp":
@@ -66,14 +66,14 @@ def open_smbus(url: str):  # type: ignore[no-untyped-def]
 class I2CBus:
     """Transactions on one bus, with retries and counters (``stats``)."""
 
-    def __init__(self, smbus, url: str) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, smbus: Any, url: str) -> None:
         self.smbus = smbus
         self.url = url
         self.stats = {"packets": 0, "errors": 0, "bytes": 0}
         self._writes: dict[tuple[int, bytes], object] = {}  # reused messages for fixed requests
         self._reads: dict[tuple[int, int], object] = {}
 
-    def _message(self, address: int, data: bytes):  # type: ignore[no-untyped-def]
+    def _message(self, address: int, data: bytes) -> Any:
         key = (address, data)
         msg = self._writes.get(key)
         if msg is None:
@@ -82,7 +82,7 @@ class I2CBus:
                 self._writes[key] = msg
         return msg
 
-    def _run(self, address: int, *msgs) -> None:  # type: ignore[no-untyped-def]
+    def _run(self, address: int, *msgs: Any) -> None:
         self.stats["packets"] += 1
         self.stats["bytes"] += sum(len(m) + 1 for m in msgs)  # payload + address byte
         for attempt in range(TRIES):

@@ -12,6 +12,7 @@ import errno
 import os
 import socket
 import struct
+from typing import Any
 
 I2C_M_RD = 0x0001
 # one wire operation: (address, bytes to write, or None for a read of ``length`` bytes)
@@ -24,7 +25,7 @@ class SMBusMethods:
     def transact(self, ops: list[Op]) -> list[bytes]:
         raise NotImplementedError
 
-    def i2c_rdwr(self, *msgs) -> None:  # type: ignore[no-untyped-def]
+    def i2c_rdwr(self, *msgs: Any) -> None:
         ops = [(m.addr, None, m.len) if m.flags & I2C_M_RD else (m.addr, bytes(m), 0)
                for m in msgs]
         replies = iter(self.transact(ops))
@@ -71,7 +72,7 @@ class SMBusMethods:
     def close(self) -> None:
         pass
 
-    def __enter__(self):  # type: ignore[no-untyped-def]
+    def __enter__(self) -> SMBusMethods:
         return self
 
     def __exit__(self, *exc: object) -> None:

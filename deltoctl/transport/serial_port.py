@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from deltoctl.errors import InvalidInput, Unreachable
@@ -21,7 +22,7 @@ def parse_serial_url(url: str) -> tuple[str, int, bool]:
     return parts.path, baud, rs485
 
 
-def open_serial(url: str, timeout: float = 0.05):  # type: ignore[no-untyped-def]
+def open_serial(url: str, timeout: float = 0.05) -> Any:
     """An open pyserial port; RS-485 mode through the kernel where the port supports it."""
     import serial
 

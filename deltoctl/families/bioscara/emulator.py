@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import random
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from deltoctl.families.bioscara import codec
@@ -38,7 +39,7 @@ class JointFirmware:
     """One joint: flags, currents, motion in motor degrees, stall detection and homing."""
 
     def __init__(self, reduction: float, low: float, high: float, position: float,
-                 clock=time.monotonic) -> None:  # type: ignore[no-untyped-def]
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.clock = clock
         stops = sorted((math.degrees(reduction * low), math.degrees(reduction * high)))
         self.stops = stops  # motor degrees of the hard stops

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from operator import itemgetter, mul
 from urllib.parse import urlsplit
@@ -98,6 +99,7 @@ class DeltoDriver(Driver):
         self._closed = False
         self._last_read = 0.0
         joints = [j.name for j in hw.joints]
+        self._effort_keys = frozenset(f"{j}/effort" for j in joints)
         gpio = hw.gpios[0].name if hw.gpios else "gpio"
         self._keys = {  # interface names, built once: the cycle only zips values in
             **{k: [f"{j}/{k}" for j in joints]
@@ -288,18 +290,25 @@ class DeltoDriver(Driver):
 
     def write(self, commands: dict[str, float]) -> None:
         """Effort commands (``joint/effort``) in one SET_DUTY; GPIO outputs by name."""
+        if commands.keys() <= self._effort_keys:  # the cycle's case: efforts only
+            self._write_duties(commands.get, 1)
+            return
         efforts = {}
         for name, value in commands.items():
-            joint, _, interface = name.rpartition("/")
-            if interface == "effort":
-                efforts[joint] = value
+            if name in self._effort_keys:
+                efforts[name] = value
             else:
                 self.set_command(name, value)
         if efforts:
-            self.write_efforts(efforts)
+            self._write_duties(efforts.get, 1)
 
     def write_efforts(self, efforts: dict[str, float]) -> None:
-        """Effort commands (N·m) → current limiter → duty → direction → SET_DUTY."""
+        """Effort commands (N·m) by joint name → current limiter → duty → direction →
+        SET_DUTY."""
+        self._write_duties(efforts.get, 0)
+
+    def _write_duties(self, get: Callable[[str], float | None], by: int) -> None:
+        """``get`` gives each joint's effort by its name (``by`` 0) or its interface (1)."""
         identity, model = self.identity, self.model
         if identity is None or model is None:
             return
@@ -308,13 +317,14 @@ class DeltoDriver(Driver):
             self._duty_plan = (identity, [(j.name, f"{j.name}/effort", self.limiters[i],
                                            identity.direction[i])
                                           for i, j in enumerate(joints)])
-        get, values = efforts.get, self.values
+        values = self.values
         duties = []
-        for name, effort_key, limiter, direction in self._duty_plan[1]:
-            target = get(name)
+        for plan in self._duty_plan[1]:
+            target = get(plan[by])
             if not target:
                 duties.append(0)
                 continue
+            _, effort_key, limiter, direction = plan
             limited = limiter(target, values.get(effort_key, 0.0))
             if (limited > 0) != (target > 0):
                 duties.append(0)  # the limiter shrinks a command, never reverses it
