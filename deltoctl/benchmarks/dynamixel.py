@@ -1,11 +1,13 @@
 """``bench dynamixel``: sync reads of an emulated bus in another process — deltoctl's driver
-against dynamixel-sdk's GroupSyncRead, then deltoctl against the wire's limit, paced."""
+against dynamixel-sdk's GroupSyncRead, then deltoctl against the wire's limit, paced; then the
+MH5's two buses in one System cycle against the slower bus's wire time."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
 import time
+from typing import Any
 
 _SERVE_BUS = """
 import sys
@@ -19,14 +21,14 @@ sys.stdin.read()
 """
 
 
-def _bus_process(servos: int, pace: bool):  # type: ignore[no-untyped-def]
+def _bus_process(servos: int, pace: bool) -> tuple[subprocess.Popen, str]:
     """An emulated bus of N servos in another process; returns (process, pty path)."""
     proc = subprocess.Popen([sys.executable, "-c", _SERVE_BUS.format(n=servos, pace=pace)],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     return proc, proc.stdout.readline().strip() if proc.stdout else ""
 
 
-def _stop(proc) -> None:  # type: ignore[no-untyped-def]
+def _stop(proc: subprocess.Popen) -> None:
     if proc.stdin:
         proc.stdin.close()
     proc.wait(timeout=5)
@@ -117,4 +119,61 @@ def measure(servos: int, duration: float) -> dict:
                             "fraction": round(rate / limit, 3),
                             "goal_ge_0_9": rate >= 0.9 * limit}
     results["paced"] = paced
+    results["two_buses"] = measure_two_buses(duration)
     return results
+
+
+def _cycle_ms(read: Any, duration: float) -> float:
+    """Mean milliseconds per call of ``read`` over ``duration`` seconds (after a warm-up)."""
+    for _ in range(20):
+        read()
+    cycles, start = 0, time.perf_counter()
+    while time.perf_counter() - start < duration:
+        read()
+        cycles += 1
+    return (time.perf_counter() - start) / cycles * 1e3
+
+
+def measure_two_buses(duration: float, servos: tuple[int, int] = (10, 12),
+                      baud: int = 1_000_000) -> dict:
+    """The MH5's two buses (10 and 12 servos), each paced at ``baud`` in a process of its own:
+    one System cycle of sync reads on both, against the slower bus's wire time, beside the
+    two read one after the other (how buses ran before the System overlapped them)."""
+    from deltoctl import registry
+    from deltoctl.core.system import System
+    from deltoctl.profile.model import Component, Hardware, Profile
+
+    family = registry.get("dynamixel")
+    assert family is not None
+    procs = []
+    try:
+        blocks, targets, wire = [], [], {}
+        for n, count in enumerate(servos):
+            proc, pty = _bus_process(count, pace=True)
+            procs.append(proc)
+            name = f"bus{n + 1}"
+            blocks.append(Hardware(name, family=family.name, bus=name, params={
+                "pvl_reader_rate": "0", "tv_reader_rate": "0.0001"}, joints=[
+                    Component("joint", f"{name}_j{i}", address=i) for i in range(1, count + 1)]))
+            targets.append(f"{name}=serial://{pty}?baud={baud}")
+            wire[name] = 1e3 / _wire_limit(count, baud)
+        robot = Profile("two-buses", buses={b.name: "" for b in blocks}, hardware=blocks)
+        alone = {}
+        for hw in blocks:
+            with System(robot, targets, [hw.name]) as system:
+                alone[hw.name] = _cycle_ms(system.read, duration)
+        with System(robot, targets) as system:
+            both = _cycle_ms(system.read, duration)
+            drivers = [m.driver for m in system]
+            series = _cycle_ms(lambda: [d.read() for d in drivers], duration)
+    finally:
+        for proc in procs:
+            _stop(proc)
+    slower = max(wire.values())
+    return {"baud": baud, "servos": list(servos),
+            "wire_ms": {k: round(v, 4) for k, v in wire.items()},
+            "alone_ms": {k: round(v, 4) for k, v in alone.items()},
+            "both_ms": round(both, 4), "in_series_ms": round(series, 4),
+            "both_over_slower_wire": round(both / slower, 3),
+            "in_series_over_slower_wire": round(series / slower, 3),
+            "goal_both_le_1_15_of_slower_wire": both <= 1.15 * slower}

@@ -107,6 +107,12 @@ def bench_dynamixel(
         say(f"  paced at {int(baud) // 1000} kbps: {p['deltoctl_hz']:.1f} cycles/s of a "
              f"{p['wire_limit_hz']:.1f} wire limit = {100 * p['fraction']:.1f} % "
              f"({p['errors']} errors)")
+    two = results["two_buses"]
+    say(f"  two buses ({' + '.join(map(str, two['servos']))} servos) paced at "
+        f"{two['baud'] // 1000} kbps, one System cycle: {two['both_ms']:.3f} ms = "
+        f"{two['both_over_slower_wire']:.3f} × the slower bus's wire time "
+        f"({max(two['wire_ms'].values()):.3f} ms); one after the other: "
+        f"{two['in_series_ms']:.3f} ms = {two['in_series_over_slower_wire']:.3f} ×")
 
 
 @app.command("i2c")

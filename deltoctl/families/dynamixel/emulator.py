@@ -282,13 +282,16 @@ class DynamixelBus:
 
 
 def wait_until(deadline: float) -> None:
-    """Sleep, then spin for the last fraction of a millisecond: byte-time precision."""
+    """Sleep, then spin for the last fraction of a millisecond: byte-time precision. The spin
+    yields the CPU at each turn, so a host on a small machine is not starved by its devices."""
     while True:
         left = deadline - time.perf_counter()
         if left <= 0:
             return
         if left > 0.0003:
             time.sleep(left - 0.0002)
+        else:
+            os.sched_yield()
 
 
 def split_packets(data: bytes) -> list[bytes]:
@@ -360,6 +363,7 @@ class DynamixelPtyServer:
             try:
                 return os.read(self.master, 4096)
             except BlockingIOError:
+                os.sched_yield()
                 continue
             except OSError:
                 break
