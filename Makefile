@@ -15,6 +15,7 @@ demo: $(BIN)/deltoctl
 	DELTOCTL=$(BIN)/deltoctl examples/bringup.sh
 	DELTOCTL=$(BIN)/deltoctl examples/bringup-bioscara.sh
 	DELTOCTL=$(BIN)/deltoctl examples/bringup-mh5.sh
+	DELTOCTL=$(BIN)/deltoctl examples/bringup-cell.sh
 
 test: $(BIN)/deltoctl
 	$(BIN)/ruff check deltoctl tests bench

@@ -169,3 +169,21 @@ def test_serve_options_are_checked_against_the_profiles_families(cli):
 def test_loop_options_must_be_finite_and_positive(cli, option, value):
     result = cli("-p", BIMANUAL, "--sim", "stream", option, value)
     assert result.exit_code == 2, result.stdout
+
+
+def test_the_cell_bringup_script_runs_every_verb(tmp_path):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from tests.conftest import REPO
+
+    deltoctl = Path(sys.executable).parent / "deltoctl"
+    if not deltoctl.exists():
+        pytest.skip("the deltoctl script is not installed")
+    env = {**os.environ, "DELTOCTL": str(deltoctl), "OUT": str(tmp_path)}
+    result = subprocess.run(["bash", str(REPO / "examples" / "bringup-cell.sh")], env=env,
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert (tmp_path / "cell.mcap").stat().st_size > 0
