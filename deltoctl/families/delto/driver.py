@@ -31,6 +31,7 @@ from deltoctl.families.delto.models import (
 from deltoctl.transport.tcp import LinkLost, TcpLink
 
 VERSION_TIMEOUT = 3.0
+STOP_TIMEOUT = 0.3  # s: the one quick reconnection a stop tries on a lost link
 DATA_TIMEOUT = 0.5
 RECONNECT_PERIOD = 1.0
 RECONNECT_TRIES = 10
@@ -96,6 +97,7 @@ class DeltoDriver(Driver):
         self._pending: TcpLink | None = None  # a GET_DATA sent by start_read, reply not yet read
         self._lock = threading.RLock()
         self._reconnecting = False
+        self._connecting = threading.Lock()  # one connection attempt at a time
         self._closed = False
         self._last_read = 0.0
         joints = [j.name for j in hw.joints]
@@ -119,11 +121,11 @@ class DeltoDriver(Driver):
         assert self.identity is not None
         return self.identity.as_dict()
 
-    def _connect(self) -> None:
-        link = TcpLink(self.host, self.port, connect_timeout=VERSION_TIMEOUT)
+    def _connect(self, timeout: float = VERSION_TIMEOUT) -> None:
+        link = TcpLink(self.host, self.port, connect_timeout=timeout)
         try:
             link.send(codec.encode_version_request())
-            info = codec.decode_version_reply(link.recv_frame(VERSION_TIMEOUT))
+            info = codec.decode_version_reply(link.recv_frame(timeout))
         except LinkLost as exc:  # something listens there, but it is not a gripper answering
             link.close()
             raise Unreachable(f"no version reply: {exc}", hint="check that the gripper is in "
@@ -342,9 +344,20 @@ class DeltoDriver(Driver):
         return move_to(self, targets, velocity=velocity, progress=progress)
 
     def stop(self) -> None:
-        """The safe state: duty 0 on every motor."""
-        if self.model is not None:
-            self._send(codec.encode_duty([0] * self.model.motors))
+        """The safe state: duty 0 on every motor. With the link down (a gripper keeps its
+        last duty), one immediate reconnection is tried first: a stop must reach it."""
+        if self.model is None:
+            return
+        if self.link is None and not self._closed and self._connecting.acquire(timeout=1.0):
+            try:
+                if self.link is None:
+                    self._connect(STOP_TIMEOUT)
+            except DeltoctlError:
+                self.warnings.append(f"{self.hw.name}: unreachable to stop; check that it "
+                                     "stopped")
+            finally:
+                self._connecting.release()
+        self._send(codec.encode_duty([0] * self.model.motors))
 
     def set_gpio(self, outputs: tuple[bool, bool, bool]) -> None:
         if self.model is None or not self.model.gpio:
@@ -389,10 +402,13 @@ class DeltoDriver(Driver):
                     time.sleep(RECONNECT_PERIOD)
                     if self._closed:
                         return
-                    try:
-                        self._connect()
-                    except DeltoctlError:
-                        continue
+                    with self._connecting:
+                        try:
+                            if self.link is None:
+                                self._connect()
+                        except DeltoctlError:
+                            continue
+                    self.stop()  # duty 0 first: motion never resumes by itself after a loss
                     self.stats["reconnects"] += 1
                     return
         finally:

@@ -35,7 +35,8 @@ def move_to(driver: DeltoDriver, targets: dict[str, float], velocity: float | No
     kd = kp * 0.02
     values = driver.read()
     if not driver.connected:
-        raise DeviceError("the device is not answering")
+        raise DeviceError(f"{driver.hw.name} is not answering")
+    reconnects = driver.stats["reconnects"]
     setpoints = {j: values[f"{j}/position"] for j in targets}
     first_error = max((abs(targets[j] - setpoints[j]) for j in targets), default=0.0) or 1.0
     if timeout is None:
@@ -46,6 +47,14 @@ def move_to(driver: DeltoDriver, targets: dict[str, float], velocity: float | No
     step = speed / RATE
     for _ in loop:
         values = driver.read()
+        if not driver.connected or driver.stats["reconnects"] != reconnects:
+            # a move never resumes by itself after a lost link: a person decides
+            driver.stop()
+            raise DeviceError(f"the link to {driver.hw.name} was lost during the move; the "
+                              "motion was stopped and does not resume by itself",
+                              hint="check the link, then move again")
+        if driver.halted.is_set():
+            break
         efforts = {}
         moving = False
         for joint, target in targets.items():

@@ -41,6 +41,7 @@ class DynamixelDriver(Driver):
         self.reader = codec.PacketReader()
         self.present: dict[int, tuple[int, int]] = {}  # id → (model, firmware)
         self.torque_enabled: set[int] = set()
+        self.moving: set[int] = set()  # servos sent a goal they may not have reached
         self._requests: dict[tuple, bytes] = {}  # sync read instructions, built once
         # Fast Sync Read (XL430 firmware 45 and later) for the reader loops, when the block
         # says fast_sync_read: true
@@ -345,6 +346,7 @@ class DynamixelDriver(Driver):
                 profile = max(1, round(abs(rad - now) / seconds / RAD_S_PER_RAW))
             raw = round((rad - joint.offset) / RAD_PER_RAW + CENTER)
             data[i] = struct.pack("<IIi", 0, profile, raw)
+        self.moving.update(ids)
         self.port.write(codec.sync_write(108, 12, data))
         self.port.flush()
         self.loops["pv_writer"].count(True)
@@ -410,6 +412,7 @@ class DynamixelDriver(Driver):
             if progress:
                 progress(max(0.0, 1.0 - worst / (distance or 1.0)))
             if worst <= tolerance:
+                self.moving.clear()
                 return MoveResult(True, time.monotonic() - start, errors, [])
             time.sleep(0.02)
         return MoveResult(False, time.monotonic() - start, errors,
@@ -454,7 +457,22 @@ class DynamixelDriver(Driver):
         return self.read_register(device_id, chosen)
 
     def stop(self) -> None:
-        """Leave the torque as it was found: a humanoid must not drop when a verb ends."""
+        """A move still under way stops where it is (goal = present position); the torque
+        stays as it was found: a humanoid must not drop when a verb ends."""
+        if not self.moving or self.port is None:
+            return
+        ids = sorted(self.moving)
+        self.moving.clear()
+        for _ in range(RETRIES):  # the stop must get through a noisy bus
+            here = {i: data for i, _, data in self._sync_read(132, 4, ids)}
+            if here:
+                self.port.write(codec.sync_write(116, 4, here))
+                self.port.flush()
+            ids = [i for i in ids if i not in here]
+            if not ids:
+                return
+        self.warnings.append(f"{self.hw.name}: no present position from "
+                             f"{', '.join(self.joints[i].name for i in ids)} to stop them at")
 
     def cleanup(self) -> None:
         if self.port is not None:
