@@ -187,3 +187,26 @@ def test_the_cell_bringup_script_runs_every_verb(tmp_path):
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr[-2000:]
     assert (tmp_path / "cell.mcap").stat().st_size > 0
+
+
+def test_calibrate_tares_every_hand_and_writes_a_report_each(cli, tmp_path):
+    result = cli("-p", BIMANUAL, "--sim", "--json", "calibrate", "ft", "-n", "5",
+                 "-o", str(tmp_path))
+    assert result.exit_code == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["pass"] and [r["block"] for r in report["blocks"]] == [LEFT, RIGHT]
+    assert len(list(tmp_path.glob("calibration-*.json"))) == 2
+    assert all(len(r["sensors"]) == 5 for r in report["blocks"])
+
+
+def test_mh5_torque_reboot_register_reach_both_buses(cli, deltoctl_sim):
+    t = _targets(deltoctl_sim.buses("mh5"))
+    result = cli("-p", "mh5", *t, "--yes", "--json", "torque", "on", "all")
+    assert result.exit_code == 0, result.stderr
+    assert len(json.loads(result.stdout)["joints"]) == 22
+    result = cli("-p", "mh5", *t, "--json", "reboot", "legs")
+    assert result.exit_code == 0, result.stderr
+    assert len(json.loads(result.stdout)["rebooted"]) == 12
+    result = cli("-p", "mh5", *t, "--json", "register", "get", "r_ank_r", "present_temperature")
+    assert result.exit_code == 0, result.stderr
+    assert json.loads(result.stdout)["values"] == {"Present Temperature": 30}

@@ -1,21 +1,27 @@
 """Load the ``<ros2_control>`` blocks of a URDF or xacro file into the model.
 
-Follows ros2_control's component_parser: ``<robot>`` root, at least one ``<ros2_control>``,
-only known tags, a ``<plugin>`` in every ``<hardware>``, every joint present in the URDF and
-not fixed, no command interfaces on mimic joints; the URDF ``<limit>`` and
-``<safety_controller>`` merged in with the stricter value winning. deltoctl's own fields travel
-as ``<param name="deltoctl.…">`` entries, so an exported profile loads back unchanged.
+Follows ros2_control's component_parser and the URDF model it builds with urdfdom: a ``<robot>``
+root (or ``<sdf><model>``), at least one ``<ros2_control>``, only known tags under it, a
+``<plugin>`` in every ``<hardware>``, valid ``rw_rate``/``is_async``/``thread_priority``,
+transmissions whose joints are the block's, every joint present in the URDF and not fixed, mimic
+joints without command interfaces mimicking a joint of the same block, revolute and prismatic
+joints with a ``<limit>``, links that form one tree. Joint limits are merged as ros2_control does
+(the stricter of the URDF ``<limit>`` and the interfaces' ``min``/``max``); a
+``<safety_controller>`` becomes soft limits, kept apart. What ros2_control lets through but
+deltoctl finds doubtful becomes a warning on the profile. deltoctl's own fields travel as
+``<param name="deltoctl.…">`` entries, so an exported profile loads back unchanged.
 """
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from deltoctl.errors import ProfileError
 from deltoctl import registry
+from deltoctl.errors import ProfileError
 from deltoctl.profile.model import (
     Component,
     Hardware,
@@ -23,8 +29,17 @@ from deltoctl.profile.model import (
     Limits,
     Mimic,
     Profile,
+    ProfileWarning,
     Safety,
+    SoftLimits,
+    Transmission,
+    TransmissionEnd,
+    clamp_soft_limits,
+    merge_interface_limits,
+    parse_bool,
+    parse_number,
 )
+from deltoctl.profile.validate import async_property_problems, block_attribute_problems
 from deltoctl.profile.xmltree import Node, XMLSyntaxError, parse_xml
 
 PREFIX = "deltoctl."
@@ -33,23 +48,30 @@ PROFILE_PREFIX = "deltoctl.profile."
 _ROS2_CONTROL_CHILDREN = {"hardware", "properties", "joint", "sensor", "gpio", "transmission"}
 _HARDWARE_CHILDREN = {"plugin", "param", "group"}
 _COMPONENT_CHILDREN = {"command_interface", "state_interface", "param", "limits"}
-_INTERFACE_SPECIAL = {"min", "max", "initial_value", "data_type", "size"}
+_INTERFACE_CHILDREN = {"param", "limits"}
+_URDF_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+_LIMIT_KINDS = ("position", "velocity", "effort", "acceleration", "jerk")
+_SIZE = re.compile(r"[1-9][0-9]*")
 
 
 @dataclass
 class UrdfJoint:
+    """A joint of the robot model, read as urdfdom and ``getJointLimits`` read it."""
+
     name: str
     type: str
-    limits: Limits | None
+    limits: Limits | None  # None: no <limit> (ros2_control's has_*_limits all false)
     mimic: Mimic | None
+    soft_limits: SoftLimits | None = None  # the <safety_controller>, not yet clamped
 
 
 class _Locator:
-    """Maps an element to the best ``file:line`` a person can open."""
+    """Maps an element to the best ``file:line`` a person can open, and collects warnings."""
 
     def __init__(self, source: str, expanded: bool, files: list[str]) -> None:
         self.source = source
         self.expanded = expanded
+        self.warnings: list[ProfileWarning] = []
         self.texts: list[tuple[str, list[str]]] = []
         if expanded:
             for f in [source, *files]:
@@ -58,19 +80,28 @@ class _Locator:
                 except (OSError, UnicodeDecodeError):
                     continue
 
-    def error(self, message: str, node: Node | None) -> ProfileError:
+    def where(self, node: Node | None) -> tuple[str, int | None, str]:
+        """(file, line, suffix for the message) of ``node``."""
         if node is None:
-            return ProfileError(message, self.source)
+            return self.source, None, ""
         if not self.expanded:
-            return ProfileError(message, self.source, node.line)
+            return self.source, node.line, ""
         name = node.attrib.get("name")
         if name:
             needle = f'name="{name}"'
             for f, lines in self.texts:
                 for number, text in enumerate(lines, 1):
                     if f"<{node.tag}" in text and needle in text:
-                        return ProfileError(message, f, number)
-        return ProfileError(f"{message} (line {node.line} of the xacro output)", self.source)
+                        return f, number, ""
+        return self.source, None, f" (line {node.line} of the xacro output)"
+
+    def error(self, message: str, node: Node | None) -> ProfileError:
+        source, line, suffix = self.where(node)
+        return ProfileError(message + suffix, source, line)
+
+    def warn(self, message: str, node: Node | None) -> None:
+        source, line, suffix = self.where(node)
+        self.warnings.append(ProfileWarning(message + suffix, source, line))
 
 
 def load_urdf_profile(
@@ -98,28 +129,50 @@ def load_urdf_profile(
             raise ProfileError(f"not well-formed XML: {exc}", source, exc.line) from None
         text = run_xacro(path, xacro_args or {}, packages)
         files = included_files()
+    if not text.strip():
+        raise ProfileError("empty URDF: the file holds no XML (expected a <robot> with a "
+                           "<ros2_control> block)", source, 1)
     try:
-        root = parse_xml(text)
+        root = parse_xml(_blank_declaration(text))
     except XMLSyntaxError as exc:
-        raise ProfileError(f"not well-formed XML: {exc}", source, exc.line) from None
+        raise ProfileError(f"invalid URDF, not well-formed XML: {exc}", source, exc.line) from None
     return profile_from_urdf(root, _Locator(source, expanded, files), path)
 
 
+def _blank_declaration(text: str) -> str:
+    """The text with its ``<?xml …?>`` declaration turned into spaces. tinyxml2 (ros2_control's
+    parser) accepts whitespace before the declaration, as launch files and the test assets
+    write it; expat does not. Blanking it in place keeps every line number."""
+    start = len(text) - len(text.lstrip())
+    if not text.startswith("<?xml", start):
+        return text
+    end = text.find("?>", start)
+    if end < 0:
+        return text
+    end += 2
+    blank = "".join(c if c == "\n" else " " for c in text[start:end])
+    return text[:start] + blank + text[end:]
+
+
 def profile_from_urdf(root: Node, loc: _Locator, path: Path) -> Profile:
-    if root.tag != "robot":
-        raise loc.error(f"the root element must be <robot>, not <{root.tag}>", root)
-    urdf_joints = _urdf_joints(root, loc)
-    blocks = root.find_all("ros2_control")
+    model = _model_root(root, loc)
+    blocks = model.find_all("ros2_control")
     if not blocks:
         raise loc.error(
-            f"no <ros2_control> block in this URDF ({len(urdf_joints)} joints found); "
-            "deltoctl needs the block that names the hardware plugin and interfaces", None)
-    hardware = [_hardware(b, urdf_joints, loc) for b in blocks]
+            f"no <ros2_control> block in this URDF (no 'ros2_control' tag found; "
+            f"{len(model.find_all('joint'))} joints found); deltoctl needs the block that names "
+            "the hardware plugin and interfaces", root)
+    hardware = [_hardware(b, loc) for b in blocks]
+    urdf_joints = _sdf_joints(model, loc) if root.tag == "sdf" else _urdf_joints(model, loc)
+    for hw, block in zip(hardware, blocks):
+        joint_nodes = block.find_all("joint")
+        for comp, node in zip(hw.joints, joint_nodes):
+            _join_urdf(hw, comp, node, urdf_joints, loc)
 
     first = hardware[0].params
     profile_params = {k[len(PROFILE_PREFIX):]: first.pop(k)
                       for k in list(first) if k.startswith(PROFILE_PREFIX)}
-    name = profile_params.pop("name", None) or root.attrib.get("name") or hardware[0].name
+    name = profile_params.pop("name", None) or model.attrib.get("name") or hardware[0].name
     profile = Profile(
         name=_slug(name),
         description=profile_params.pop("description", ""),
@@ -139,14 +192,27 @@ def profile_from_urdf(root: Node, loc: _Locator, path: Path) -> Profile:
         if hw.family is None and profile.family is None:
             hw.family = registry.for_plugin(hw.plugin)
         _import_endpoint(profile, hw)
+    profile.warnings = loc.warnings
     return profile
+
+
+def _model_root(root: Node, loc: _Locator) -> Node:
+    """``<robot>``, or the ``<model>`` of an ``<sdf>`` (which ros2_control also reads)."""
+    if root.tag == "robot":
+        return root
+    model = root.find("model") if root.tag == "sdf" else None
+    if model is None:
+        raise loc.error(f"the root element must be <robot> (or <sdf> holding a <model>), not "
+                        f"<{root.tag}>: the robot tag is not the root element", root)
+    return model
 
 
 def _slug(name: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-") or "profile"
 
 
-def _float(value: str | None, what: str, node: Node, loc: _Locator) -> float | None:
+def _float(value: str | None, what: str, node: Node | None, loc: _Locator) -> float | None:
+    """A deltoctl param's number (validation then checks its range)."""
     if value is None or value.strip() == "":
         return None
     try:
@@ -155,117 +221,293 @@ def _float(value: str | None, what: str, node: Node, loc: _Locator) -> float | N
         raise loc.error(f"{what} must be a number, got {value!r}", node) from None
 
 
-def _stricter(a: float | None, b: float | None, pick) -> float | None:  # type: ignore[no-untyped-def]
-    if a is None:
-        return b
-    if b is None:
-        return a
-    return pick(a, b)
+def _required(node: Node, attribute: str, loc: _Locator, context: str = "") -> str:
+    """An attribute ros2_control requires: "no attribute 'name' in the <joint> tag"."""
+    value = node.attrib.get(attribute)
+    if value is None:
+        raise loc.error(f"no attribute '{attribute}' in the <{node.tag}> tag{context}", node)
+    return value.strip()
 
 
-def _urdf_joints(root: Node, loc: _Locator) -> dict[str, UrdfJoint]:
+def _bool_attr(node: Node, attribute: str, loc: _Locator, context: str = "") -> bool:
+    try:
+        return parse_bool(_required(node, attribute, loc, context))
+    except ValueError as exc:
+        raise loc.error(f"{attribute} of <{node.tag}>{context}: {exc}", node) from None
+
+
+# -- the robot model (what urdfdom checks before ros2_control looks at a joint) -----------------
+
+def _urdf_number(node: Node, attribute: str, owner: str, loc: _Locator) -> float | None:
+    """A number of the robot model, read as urdfdom reads it; ``None`` when absent."""
+    text = node.attrib.get(attribute)
+    if text is None:
+        return None
+    value = parse_number(text)
+    if value is None:
+        raise loc.error(f"{attribute} of joint {owner!r} must be a number, got {text!r} "
+                        f"(urdfdom: {attribute} value is not a valid float)", node)
+    return value
+
+
+def _urdf_float(node: Node, attribute: str, owner: str, loc: _Locator, default: float) -> float:
+    value = _urdf_number(node, attribute, owner, loc)
+    return default if value is None else value
+
+
+def _urdf_joints(robot: Node, loc: _Locator) -> dict[str, UrdfJoint]:
+    links = _links(robot, loc)
     joints: dict[str, UrdfJoint] = {}
-    for node in root.find_all("joint"):
-        name = node.attrib.get("name", "")
-        jtype = node.attrib.get("type", "")
-        limits = None
-        limit = node.find("limit")
-        if limit is not None and jtype != "fixed":
-            limits = Limits(
-                lower=_float(limit.attrib.get("lower"), f"lower limit of {name}", limit, loc),
-                upper=_float(limit.attrib.get("upper"), f"upper limit of {name}", limit, loc),
-                velocity=_float(limit.attrib.get("velocity"), f"velocity limit of {name}",
-                                limit, loc),
-                effort=_float(limit.attrib.get("effort"), f"effort limit of {name}", limit, loc),
-            )
-            if jtype == "continuous":
-                limits.lower = limits.upper = None
-        safety = node.find("safety_controller")
-        if safety is not None and limits is not None and jtype != "continuous":
-            soft_lo = _float(safety.attrib.get("soft_lower_limit"), "soft_lower_limit",
-                             safety, loc)
-            soft_hi = _float(safety.attrib.get("soft_upper_limit"), "soft_upper_limit",
-                             safety, loc)
-            limits.lower = _stricter(limits.lower, soft_lo, max)
-            limits.upper = _stricter(limits.upper, soft_hi, min)
-        mimic = None
-        mnode = node.find("mimic")
-        if mnode is not None:
-            mimic = Mimic(
-                joint=mnode.attrib.get("joint", ""),
-                multiplier=_float(mnode.attrib.get("multiplier"), "mimic multiplier",
-                                  mnode, loc) or 1.0,
-                offset=_float(mnode.attrib.get("offset"), "mimic offset", mnode, loc) or 0.0,
-            )
-        joints[name] = UrdfJoint(name, jtype, limits, mimic)
+    children: set[str] = set()
+    for node in robot.find_all("joint"):
+        name = _required(node, "name", loc)
+        if name in joints:
+            raise loc.error(f"joint {name!r} is not unique in the URDF", node)
+        jtype = _required(node, "type", loc, f" of joint {name!r}")
+        if jtype not in _URDF_JOINT_TYPES:
+            raise loc.error(f"joint {name!r} has no known type {jtype!r} (expected one of "
+                            f"{', '.join(_URDF_JOINT_TYPES)})", node)
+        for end in ("parent", "child"):
+            link = _joint_link(node, end, name, links, loc)
+            if end == "child":
+                children.add(link)
+        joints[name] = UrdfJoint(name, jtype, _urdf_limit(node, name, jtype, loc),
+                                 _urdf_mimic(node, name, loc), _urdf_safety(node, name, loc))
+    _check_tree(robot, links, children, loc)
     return joints
 
 
-def _params(node: Node, loc: _Locator) -> dict[str, str]:
+def _links(robot: Node, loc: _Locator) -> set[str]:
+    links: set[str] = set()
+    for node in robot.find_all("link"):
+        name = _required(node, "name", loc)
+        if name in links:
+            raise loc.error(f"link {name!r} is not unique in the URDF", node)
+        links.add(name)
+    if not links:
+        raise loc.error("no <link> elements found in the URDF: ros2_control cannot build the "
+                        "robot model (failed to parse URDF)", robot)
+    return links
+
+
+def _joint_link(node: Node, end: str, joint: str, links: set[str], loc: _Locator) -> str:
+    element = node.find(end)
+    link = element.attrib.get("link") if element is not None else None
+    if not link:
+        raise loc.error(f"joint {joint!r} has no <{end} link=…>", node)
+    if link not in links:
+        raise loc.error(f"{end} link {link!r} of joint {joint!r} not found in the URDF", node)
+    return link
+
+
+def _check_tree(robot: Node, links: set[str], children: set[str], loc: _Locator) -> None:
+    roots = sorted(links - children)
+    if not roots:
+        raise loc.error("no root link found: the links of the URDF do not form a tree", robot)
+    if len(roots) > 1:
+        raise loc.error(f"two root links found: [{roots[0]}] and [{roots[1]}]; the links of the "
+                        "URDF must form one tree", robot)
+
+
+def _urdf_limit(node: Node, name: str, jtype: str, loc: _Locator) -> Limits | None:
+    """``<limit>`` as urdfdom reads it (lower/upper default to 0; effort and velocity it
+    requires, deltoctl only warns: its own exporter leaves out what a profile does not know) and
+    ``getJointLimits`` turns it into limits (positions only for revolute and prismatic joints,
+    |velocity| and |effort|)."""
+    limit = node.find("limit")
+    if limit is None:
+        if jtype in ("revolute", "prismatic"):
+            raise loc.error(f"joint {name!r} is {jtype} but has no <limit> (urdfdom: joint of type "
+                            f"{jtype.upper()} does not specify limits)", node)
+        return None
+    for attribute in ("effort", "velocity"):
+        if attribute not in limit.attrib:
+            loc.warn(f"the <limit> of joint {name!r} has no {attribute} attribute: urdfdom, "
+                     "and so ros2_control, rejects such a URDF", limit)
+    lower = _urdf_float(limit, "lower", name, loc, 0.0)
+    upper = _urdf_float(limit, "upper", name, loc, 0.0)
+    velocity = _urdf_number(limit, "velocity", name, loc)
+    effort = _urdf_number(limit, "effort", name, loc)
+    for attribute, value in (("velocity", velocity), ("effort", effort)):
+        if value is not None and value < 0:
+            loc.warn(f"the {attribute} limit of joint {name!r} is negative ({value:g}): "
+                     "ros2_control takes its size", limit)
+    positional = jtype in ("revolute", "prismatic")
+    return Limits(
+        lower=lower if positional else None,
+        upper=upper if positional else None,
+        velocity=None if velocity is None else abs(velocity),
+        effort=None if effort is None else abs(effort),
+    )
+
+
+def _urdf_safety(node: Node, name: str, loc: _Locator) -> SoftLimits | None:
+    safety = node.find("safety_controller")
+    if safety is None:
+        return None
+    if "k_velocity" not in safety.attrib:
+        raise loc.error(f"the <safety_controller> of joint {name!r} has no k_velocity "
+                        "(urdfdom: joint safety: no k_velocity)", safety)
+    return SoftLimits(  # urdfdom's defaults: 0
+        lower=_urdf_float(safety, "soft_lower_limit", name, loc, 0.0),
+        upper=_urdf_float(safety, "soft_upper_limit", name, loc, 0.0),
+        k_position=_urdf_float(safety, "k_position", name, loc, 0.0),
+        k_velocity=_urdf_float(safety, "k_velocity", name, loc, 0.0),
+    )
+
+
+def _urdf_mimic(node: Node, name: str, loc: _Locator) -> Mimic | None:
+    mimic = node.find("mimic")
+    if mimic is None:
+        return None
+    target = mimic.attrib.get("joint", "").strip()
+    if not target:
+        raise loc.error(f"the <mimic> of joint {name!r} names no joint", mimic)
+    return Mimic(
+        joint=target,
+        multiplier=_urdf_float(mimic, "multiplier", name, loc, 1.0),
+        offset=_urdf_float(mimic, "offset", name, loc, 0.0),
+    )
+
+
+def _sdf_joints(model: Node, loc: _Locator) -> dict[str, UrdfJoint]:
+    """The joints of an SDF ``<model>``, as sdformat_urdf hands them to ros2_control."""
+    if not model.find_all("link"):
+        raise loc.error("no <link> elements found in the SDF model", model)
+    joints: dict[str, UrdfJoint] = {}
+    for node in model.find_all("joint"):
+        name = _required(node, "name", loc)
+        jtype = _required(node, "type", loc, f" of joint {name!r}")
+        limits = None
+        axis = node.find("axis")
+        axis_limit = axis.find("limit") if axis is not None else None
+        if jtype in ("revolute", "prismatic") and axis_limit is not None:
+            limits = Limits(
+                lower=_sdf_value(axis_limit, "lower", name, loc),
+                upper=_sdf_value(axis_limit, "upper", name, loc),
+                velocity=_sdf_value(axis_limit, "velocity", name, loc, magnitude=True),
+                effort=_sdf_value(axis_limit, "effort", name, loc, magnitude=True),
+            )
+        joints[name] = UrdfJoint(name, jtype, limits, None)
+    return joints
+
+
+def _sdf_value(limit: Node, tag: str, joint: str, loc: _Locator,
+               magnitude: bool = False) -> float | None:
+    """An SDF limit; infinite (and, for velocity and effort, negative) means none."""
+    element = limit.find(tag)
+    if element is None or not element.text.strip():
+        return None
+    text = element.text.strip()
+    try:
+        value = float(text)
+    except ValueError:
+        raise loc.error(f"<{tag}> of joint {joint!r} must be a number, got {text!r}",
+                        element) from None
+    if math.isnan(value):
+        raise loc.error(f"<{tag}> of joint {joint!r} must be a number, got {text!r}", element)
+    if math.isinf(value) or abs(value) >= 1e16 or (magnitude and value < 0):
+        return None
+    return value
+
+
+# -- the <ros2_control> blocks -----------------------------------------------------------------
+
+def _params(node: Node, loc: _Locator, owner: str) -> dict[str, str]:
     params: dict[str, str] = {}
     for p in node.find_all("param"):
         name = p.attrib.get("name")
-        if not name:
-            raise loc.error("a <param> has no name attribute", p)
-        params[name] = p.text.strip()
+        if name is None:
+            raise loc.error(f"no parameter name attribute set in a <param> tag for {owner!r}", p)
+        params[name.strip()] = p.text.strip()
     return params
 
 
-def _hardware(block: Node, urdf_joints: dict[str, UrdfJoint], loc: _Locator) -> Hardware:
-    name = block.attrib.get("name")
-    if not name:
-        raise loc.error("<ros2_control> needs a name attribute", block)
+def _warn_unknown(node: Node, known: set[str], what: str, loc: _Locator) -> None:
+    for child in node.children:
+        if child.tag not in known:
+            loc.warn(f"ros2_control ignores <{child.tag}> in {what} (expected one of: "
+                     f"{', '.join(sorted(known))})", child)
+
+
+def _hardware(block: Node, loc: _Locator) -> Hardware:
+    name = _required(block, "name", loc)
     if "type" not in block.attrib:
         raise loc.error(f"<ros2_control name={name!r}> needs a type attribute "
-                        "(system, actuator or sensor)", block)
+                        "(system, actuator or sensor): no attribute 'type' in the tag", block)
+    hw = Hardware(name=name, type=block.attrib["type"].strip(), line=block.line,
+                  attributes={k: v for k, v in block.attrib.items() if k not in ("name", "type")})
+    errors, warnings = block_attribute_problems(hw.attributes)
+    if errors:
+        raise loc.error(f"<ros2_control name={name!r}>: {errors[0]}", block)
+    for message in warnings:
+        loc.warn(f"<ros2_control name={name!r}>: {message}", block)
+    params: dict[str, str] = {}
+    has_hardware = False
     for child in block.children:
-        if child.tag not in _ROS2_CONTROL_CHILDREN:
+        if child.tag == "hardware":
+            has_hardware = True
+            params.update(_hardware_tag(hw, child, loc))
+        elif child.tag == "properties":
+            _properties(hw, child, loc)
+        elif child.tag in ("joint", "sensor", "gpio"):
+            getattr(hw, child.tag + "s").append(_component(child, loc))
+        elif child.tag == "transmission":
+            hw.transmissions.append(_transmission(child, loc))
+        else:
             raise loc.error(f"invalid tag name <{child.tag}> in <ros2_control name={name!r}> "
                             f"(expected one of: {', '.join(sorted(_ROS2_CONTROL_CHILDREN))})",
                             child)
-    hw_node = block.find("hardware")
-    if hw_node is None:
-        raise loc.error(f"<ros2_control name={name!r}> has no <hardware> element", block)
-    for child in hw_node.children:
-        if child.tag not in _HARDWARE_CHILDREN:
-            raise loc.error(f"invalid tag name <{child.tag}> in <hardware> of {name!r} "
-                            f"(expected one of: {', '.join(sorted(_HARDWARE_CHILDREN))})", child)
-    plugin = hw_node.find("plugin")
-    if plugin is None or not plugin.text.strip():
-        raise loc.error(f"missing <plugin> tag of <hardware> element for {name!r}", hw_node)
-    params = _params(hw_node, loc)
-    hw = Hardware(
-        name=name,
-        type=block.attrib["type"],
-        plugin=plugin.text.strip(),
-        attributes={k: v for k, v in block.attrib.items() if k not in ("name", "type")},
-        line=block.line,
-    )
-    group = hw_node.find("group")
-    hw.group = group.text.strip() if group is not None else None
+    if not has_hardware:
+        loc.warn(f"<ros2_control name={name!r}> has no <hardware>: ros2_control reads the "
+                 "block, but no plugin can be loaded for it", block)
     hw.family = params.pop(PREFIX + "family", None)
     hw.bus = params.pop(PREFIX + "bus", None)
     hw.params = params
-    for child in block.children:
-        if child.tag in ("joint", "sensor", "gpio"):
-            comp = _component(child, loc)
-            getattr(hw, child.tag + "s").append(comp)
-            if child.tag == "joint":
-                _join_urdf(comp, child, urdf_joints, loc)
+    _fill_transmissions(hw, block, loc)
     hw.line = None if loc.expanded else block.line
     return hw
 
 
+def _hardware_tag(hw: Hardware, node: Node, loc: _Locator) -> dict[str, str]:
+    _warn_unknown(node, _HARDWARE_CHILDREN, f"the <hardware> of {hw.name!r}", loc)
+    plugin = node.find("plugin")
+    if plugin is None:
+        raise loc.error(f"missing <plugin> tag of <hardware> element for {hw.name!r}", node)
+    hw.plugin = plugin.text.strip()
+    if not hw.plugin:
+        loc.warn(f"the <plugin> of the <hardware> of {hw.name!r} is empty: no plugin can be "
+                 "loaded for it", plugin)
+    group = node.find("group")
+    if group is not None:
+        hw.group = group.text.strip()
+    return _params(node, loc, hw.name)
+
+
+def _properties(hw: Hardware, node: Node, loc: _Locator) -> None:
+    async_node = node.find("async")
+    if async_node is None:
+        return
+    hw.async_properties = {k: v.strip() for k, v in async_node.attrib.items()}
+    problems = async_property_problems(hw.async_properties)
+    if problems:
+        raise loc.error(f"error parsing the <async> tag of {hw.name!r}: {problems[0]}",
+                        async_node)
+
+
 def _component(node: Node, loc: _Locator) -> Component:
-    name = node.attrib.get("name")
-    if not name:
-        raise loc.error(f"<{node.tag}> needs a name attribute", node)
-    for child in node.children:
-        if child.tag not in _COMPONENT_CHILDREN:
-            raise loc.error(f"invalid tag name <{child.tag}> in <{node.tag} name={name!r}> "
-                            f"(expected one of: {', '.join(sorted(_COMPONENT_CHILDREN))})", child)
-    comp = Component(kind=node.tag, name=name, line=None if loc.expanded else node.line)
-    params = _params(node, loc)
+    kind = node.tag
+    name = _required(node, "name", loc)
+    comp = Component(kind=kind, name=name, line=None if loc.expanded else node.line)
+    _warn_unknown(node, _COMPONENT_CHILDREN, f"<{kind} name={name!r}>", loc)
+    limits = node.find("limits")
+    if limits is not None and kind != "gpio":
+        comp.enable_limits = _bool_attr(limits, "enable", loc, f" of {kind} {name!r}")
+    for tag, attr in (("command_interface", "command_interfaces"),
+                      ("state_interface", "state_interfaces")):
+        for inode in node.find_all(tag):
+            getattr(comp, attr).append(_interface(inode, kind, name, loc))
+    params = _params(node, loc, name)
     comp.bus = params.pop(PREFIX + "bus", None)
     address = params.pop(PREFIX + "address", None)
     if address is not None:
@@ -277,57 +519,162 @@ def _component(node: Node, loc: _Locator) -> Component:
     comp.inverse = params.pop(PREFIX + "inverse", "false").lower() == "true"
     comp.offset = _float(params.pop(PREFIX + "offset", None), "deltoctl.offset", node, loc) or 0.0
     comp.params = params
-    for tag, attr in (("command_interface", "command_interfaces"),
-                      ("state_interface", "state_interfaces")):
-        for inode in node.find_all(tag):
-            getattr(comp, attr).append(_interface(inode, name, loc))
     return comp
 
 
-def _interface(node: Node, owner: str, loc: _Locator) -> Interface:
-    name = node.attrib.get("name", "")
-    if not name:
-        raise loc.error(f"an interface of {owner!r} has no name attribute", node)
-    for child in node.children:
-        if child.tag != "param":
-            raise loc.error(f"invalid tag name <{child.tag}> in interface {owner}/{name} "
-                            "(expected <param>)", child)
-    params = _params(node, loc)
+def _interface(node: Node, kind: str, owner: str, loc: _Locator) -> Interface:
+    name = node.attrib.get("name")
+    if name is None:
+        raise loc.error(f"no attribute 'name' in the <{node.tag}> of {kind} {owner!r}", node)
+    name = name.strip()
     what = f"{owner}/{name}"
-    size = params.pop("size", None) or node.attrib.get("size")
-    data_type = params.pop("data_type", None) or node.attrib.get("data_type")
+    _warn_unknown(node, _INTERFACE_CHILDREN, f"interface {what}", loc)
+    params = _params(node, loc, owner)
+    itf = Interface(name=name, line=None if loc.expanded else node.line)
+    itf.min, itf.max = _min_max(params, what, node, loc)
+    itf.initial_value = params.pop("initial_value", None)
+    limits = node.find("limits")
+    if limits is not None:
+        itf.enable_limits = _bool_attr(limits, "enable", loc, f" of interface {what}")
+    data_type = node.attrib.get("data_type")
+    itf.data_type = None if data_type is None else data_type.strip()
+    size = node.attrib.get("size")
+    if size is not None:
+        if not _SIZE.fullmatch(size.strip()):
+            raise loc.error(f"could not parse the size of {what}: got {size.strip()!r}, but "
+                            "expected a non-zero positive integer", node)
+        itf.size = int(size.strip())
+    itf.params = params
+    return itf
+
+
+def _min_max(params: dict[str, str], what: str, node: Node,
+             loc: _Locator) -> tuple[float | None, float | None]:
+    """The interface's ``min`` and ``max``. ros2_control skips a pair it cannot read (with a
+    message) and so does deltoctl, keeping the text as params; ``inf`` and ``nan`` are refused
+    outright, since they would switch a limit off."""
+    texts = {key: params.get(key, "") for key in ("min", "max")}
+    values = {key: parse_number(text) for key, text in texts.items()}
+    for key, text in texts.items():
+        if text and values[key] is None and _is_non_finite(text):
+            raise loc.error(f"{key} of {what} must be a finite number, got {text!r}", node)
+    if any(text and values[key] is None for key, text in texts.items()):
+        loc.warn(f"min/max of {what} ({texts['min']!r}, {texts['max']!r}) is not a pair of "
+                 "numbers: ros2_control skips it, and so no limit comes from it", node)
+        return None, None
+    for key in texts:
+        params.pop(key, None)
+    return values["min"], values["max"]
+
+
+def _is_non_finite(text: str) -> bool:
     try:
-        size_value = int(size) if size is not None else None
+        return not math.isfinite(float(text))
     except ValueError:
-        raise loc.error(f"size of {what} must be a whole number, got {size!r}", node) from None
-    return Interface(
-        name=name,
-        min=_float(params.pop("min", None), f"min of {what}", node, loc),
-        max=_float(params.pop("max", None), f"max of {what}", node, loc),
-        initial_value=params.pop("initial_value", None),
-        data_type=data_type,
-        size=size_value,
-        params=params,
-        line=None if loc.expanded else node.line,
-    )
+        return False
 
 
-def _join_urdf(comp: Component, node: Node, urdf_joints: dict[str, UrdfJoint],
+# -- transmissions ------------------------------------------------------------------------------
+
+def _transmission(node: Node, loc: _Locator) -> Transmission:
+    name = _required(node, "name", loc)
+    plugin = node.find("plugin")
+    if plugin is None:
+        raise loc.error(f"missing <plugin> tag of <transmission> element for {name!r}", node)
+    transmission = Transmission(name=name, type=plugin.text.strip(),
+                                params=_params(node, loc, name),
+                                line=None if loc.expanded else node.line)
+    transmission.joints = [_transmission_end(n, name, loc) for n in node.find_all("joint")]
+    transmission.actuators = [_transmission_end(n, name, loc) for n in node.find_all("actuator")]
+    return transmission
+
+
+def _transmission_end(node: Node, transmission: str, loc: _Locator) -> TransmissionEnd:
+    context = f" of transmission {transmission!r}"
+    end = TransmissionEnd(name=_required(node, "name", loc, context),
+                          role=_required(node, "role", loc, context))
+    if "read_only" in node.attrib:
+        end.read_only = _bool_attr(node, "read_only", loc, context)
+    for tag in ("mechanical_reduction", "offset"):
+        element = node.find(tag)
+        if element is None:
+            continue
+        value = parse_number(element.text)
+        if value is None:  # ros2_control would fall back to the default: a wrong ratio
+            raise loc.error(f"{tag} of {node.tag} {end.name!r}{context} must be a finite "
+                            f"number, got {element.text.strip()!r}", element)
+        setattr(end, tag, value)
+    return end
+
+
+def _fill_transmissions(hw: Hardware, block: Node, loc: _Locator) -> None:
+    """What ros2_control fills in: each transmission joint's interfaces from the block's
+    joint, and for an actuator block the one joint's "actuator1"."""
+    nodes = block.find_all("transmission")
+    for transmission, node in zip(hw.transmissions, nodes):
+        for end in transmission.joints:
+            joint = next((j for j in hw.joints if j.name == end.name), None)
+            if joint is None:
+                raise loc.error(f"transmission {transmission.name!r} declared joint "
+                                f"{end.name!r} is not available in component {hw.name!r}", node)
+            end.command_interfaces = [i.name for i in joint.command_interfaces]
+            end.state_interfaces = [i.name for i in joint.state_interfaces]
+        if hw.type != "actuator":
+            continue
+        if len(transmission.joints) != 1:
+            raise loc.error(f"transmission {transmission.name!r} of actuator {hw.name!r}: there "
+                            "should be exactly one joint defined in this component but found "
+                            f"{len(transmission.joints)}", node)
+        joint_end = transmission.joints[0]
+        transmission.actuators.append(TransmissionEnd(
+            "actuator1", "actuator1", command_interfaces=list(joint_end.command_interfaces),
+            state_interfaces=list(joint_end.state_interfaces), implicit=True))
+
+
+# -- a block's joint against the robot model ----------------------------------------------------
+
+def _join_urdf(hw: Hardware, comp: Component, node: Node, urdf_joints: dict[str, UrdfJoint],
                loc: _Locator) -> None:
     urdf = urdf_joints.get(comp.name)
     if urdf is None:
         raise loc.error(f"joint {comp.name!r} not found in the URDF (a <ros2_control> joint "
                         "must name a URDF <joint>)", node)
     comp.joint_type = urdf.type
-    if urdf.type == "fixed" and (comp.command_interfaces or comp.state_interfaces):
-        raise loc.error(f"joint {comp.name!r} is fixed in the URDF and cannot have "
-                        "interfaces", node)
-    mimic_attr = node.attrib.get("mimic")
-    if mimic_attr == "true" and urdf.mimic is None:
-        raise loc.error(f"joint {comp.name!r} has mimic=\"true\" but no <mimic> in the URDF", node)
-    if mimic_attr != "false" and urdf.mimic is not None:
+    mimic_attr = None
+    if "mimic" in node.attrib:
+        mimic_attr = _bool_attr(node, "mimic", loc, f" {comp.name!r}")
+    if mimic_attr is True and urdf.mimic is None:
+        raise loc.error(f"joint {comp.name!r} has mimic=\"true\" but no mimic information in "
+                        "the URDF (no <mimic> in its <joint>)", node)
+    if urdf.mimic is not None and mimic_attr is not False:
+        if comp.command_interfaces:
+            raise loc.error(f"joint {comp.name!r} mimics {urdf.mimic.joint!r} and so cannot "
+                            "have command interfaces (activated mimic joints cannot have command "
+                            "interfaces; mimic=\"false\" turns mimicking off)", node)
+        if all(j.name != urdf.mimic.joint for j in hw.joints):
+            raise loc.error(f"mimic joint {urdf.mimic.joint!r} (mimicked by {comp.name!r}) not "
+                            f"found in <ros2_control name={hw.name!r}> tag", node)
         comp.mimic = urdf.mimic
-    comp.limits = urdf.limits
+    if urdf.type == "fixed":
+        raise loc.error(f"joint {comp.name!r} is fixed in the URDF (type 'fixed'): fixed joints "
+                        "do not make sense in ros2_control", node)
+    _warn_unread_limits(comp, node, loc)
+    comp.limits = merge_interface_limits(urdf.limits, comp)
+    if urdf.soft_limits is not None:
+        comp.soft_limits = clamp_soft_limits(urdf.soft_limits, comp.limits)
+
+
+def _warn_unread_limits(comp: Component, node: Node, loc: _Locator) -> None:
+    if not comp.enable_limits:
+        return  # ros2_control reads none of them
+    for itf in comp.command_interfaces:
+        if itf.min is None and itf.max is None:
+            continue
+        if itf.name not in _LIMIT_KINDS:
+            loc.warn(f"ros2_control reads no joint limit from the min/max of {comp.name}/"
+                     f"{itf.name} (only from {', '.join(_LIMIT_KINDS)})", node)
+        elif itf.name == "jerk" and itf.min is not None:
+            loc.warn(f"the min of {comp.name}/jerk is ignored: jerk takes only a max", node)
 
 
 def _safety(params: dict[str, str], loc: _Locator) -> Safety:
