@@ -590,19 +590,7 @@ def _load(case: Case, tmp_path: Path) -> Path:
     return path
 
 
-# catalog.merge_interface_limits applies every interface min/max again after the URDF loader,
-# <limits enable="false"/> or not: these cases agree only as the loader reads them.
-CATALOG_REMERGES = {"system_and_disabled_interfaces", "system_and_unavailable_interfaces"}
-
-
-def _via_catalog(case: Case) -> Any:
-    if case.id not in CATALOG_REMERGES:
-        return case
-    return pytest.param(case, marks=pytest.mark.xfail(
-        strict=True, reason="catalog.merge_interface_limits ignores enable=\"false\""))
-
-
-@pytest.mark.parametrize("case", [_via_catalog(c) for c in VALID], ids=[c.id for c in VALID])
+@pytest.mark.parametrize("case", VALID, ids=[c.id for c in VALID])
 def test_valid_case_loads_as_ros2_control_reads_it(case: Case, tmp_path: Path) -> None:
     """Through the catalog, as every verb loads a profile."""
     _check_valid(case, load_profile(_load(case, tmp_path)))

@@ -43,21 +43,53 @@ def list_profiles(ctx: typer.Context) -> None:
             s["status"]] for s in summaries])
 
 
+def _range_text(lower: float | None, upper: float | None) -> str:
+    low = "-inf" if lower is None else f"{lower:.4g}"
+    high = "inf" if upper is None else f"{upper:.4g}"
+    return f"[{low}, {high}]"
+
+
 def _limits_text(joint: Any) -> str:
-    lim = joint.limits
-    if lim is None or (lim.lower is None and lim.upper is None):
-        return ""
-    unit = "m" if joint.joint_type == "prismatic" else "rad"
-    return f"[{lim.lower:.4g}, {lim.upper:.4g}] {unit}"
+    """The hard position limits, and the soft ones (a <safety_controller>) beside them."""
+    lim, soft = joint.limits, joint.soft_limits
+    parts = []
+    if lim is not None and (lim.lower is not None or lim.upper is not None):
+        unit = "m" if joint.joint_type == "prismatic" else "rad"
+        parts.append(f"{_range_text(lim.lower, lim.upper)} {unit}")
+    if soft is not None:
+        parts.append(f"soft {_range_text(soft.lower, soft.upper)}")
+    return ", ".join(parts)
+
+
+def _soft_limits_data(prof: Any) -> dict[str, dict[str, Any]]:
+    """{block: {joint: soft limits}} for the joints that have them."""
+    data: dict[str, dict[str, Any]] = {}
+    for hw in prof.hardware:
+        for joint in hw.joints:
+            if joint.soft_limits is not None:
+                data.setdefault(hw.name, {})[joint.name] = dict(vars(joint.soft_limits))
+    return data
+
+
+def _warn(prof: Any) -> None:
+    for warning in prof.warnings:
+        info(f"warning: {warning}")
 
 
 def _completion_profile(ctx: typer.Context):  # type: ignore[no-untyped-def]
-    """The profile named on the command line being completed, or None."""
-    spec = ctx.params.get("profile") or (ctx.find_root().params or {}).get("profile")
+    """The profile named on the command line being completed, or None.
+
+    Completion runs while a command line is typed, on a file nobody chose to load yet: it
+    reads YAML and plain URDF only, and never runs xacro (a ``.xacro`` file, or ``--xacro``
+    on the line, completes nothing)."""
+    from deltoctl.profile.catalog import load_profile
+
+    root_params = ctx.find_root().params or {}
+    spec = ctx.params.get("profile") or root_params.get("profile")
     if not spec:
         return None
     try:
-        return options(ctx).load_profile(spec)
+        return load_profile(spec, xacro=bool(root_params.get("xacro")), expand=False)
     except DeltoctlError:
         return None
 
@@ -100,13 +132,15 @@ def show(
     if part is None and profile is not None and opts.profile and not _looks_like_profile(profile):
         profile, part = None, profile  # `-p dg-5f-right profile show rj_dg_1_1`
     prof = opts.load_profile(profile)
+    _warn(prof)
     if part is not None:
         _show_part(prof, part, opts.json)
         return
     if opts.json:
         emit_json({**_summary(prof), "state_interfaces": prof.state_interfaces(),
                    "command_interfaces": prof.command_interfaces(),
-                   "profile": profile_data(prof)})
+                   "profile": profile_data(prof), "soft_limits": _soft_limits_data(prof),
+                   "warnings": [str(w) for w in prof.warnings]})
         return
     say(f"{prof.name}: {prof.description}" + (" (discontinued)"
                                                   if prof.status == "discontinued" else ""))
@@ -140,10 +174,18 @@ def _show_part(prof: Any, name: str, as_json: bool) -> None:
     if comp is None:
         raise InvalidInput(f"{prof.name} has no joint, sensor or GPIO named {name!r}")
     data = {"kind": comp.kind, **component_data(comp)}
+    soft = comp.soft_limits if comp.kind == "joint" else None
+    if soft is not None:
+        data["soft_limits"] = dict(vars(soft))
     if as_json:
         emit_json(data)
         return
-    say(f"{comp.kind} {comp.name}" + (f"  limits {_limits_text(comp)}" if comp.limits else ""))
+    hard = comp.limits
+    hard_text = "" if hard is None else _range_text(hard.lower, hard.upper)
+    say(f"{comp.kind} {comp.name}" + (f"  limits {hard_text}" if hard_text else ""))
+    if soft is not None:
+        say(f"  soft limits {_range_text(soft.lower, soft.upper)} "
+            f"(k_position {soft.k_position:g}, k_velocity {soft.k_velocity:g})")
     rows = [["command", i.name, i.min, i.max, i.initial_value, i.data_type]
             for i in comp.command_interfaces]
     rows += [["state", i.name, i.min, i.max, i.initial_value, i.data_type]

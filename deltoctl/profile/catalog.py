@@ -14,6 +14,7 @@ if TYPE_CHECKING:
 
 YAML_SUFFIXES = (".yaml", ".yml")
 URDF_SUFFIXES = (".urdf", ".xacro", ".xml")
+MAX_PROFILE_BYTES = 16 << 20  # checked before a profile file is read
 
 
 def catalog_dir() -> Path:
@@ -32,7 +33,8 @@ def resolve(spec: str) -> Path:
     path = Path(spec).expanduser()
     if path.suffix.lower() in YAML_SUFFIXES + URDF_SUFFIXES or "/" in spec or path.exists():
         if not path.is_file():
-            raise InvalidInput(f"profile file {spec!r} does not exist")
+            problem = "is not a regular file" if path.exists() else "does not exist"
+            raise InvalidInput(f"profile file {spec!r} {problem}")
         return path
     candidate = catalog_dir() / f"{spec}.yaml"
     if candidate.is_file():
@@ -46,28 +48,33 @@ def resolve(spec: str) -> Path:
 
 
 def merge_interface_limits(profile: Profile) -> Profile:
-    """Command interface min/max tighten the joint limits, as ros2_control merges them."""
-    from deltoctl.profile.model import Limits
+    """Command interface min/max tighten the joint limits, as ros2_control merges them (a YAML
+    profile's too; idempotent on what the URDF loader merged already)."""
+    from deltoctl.profile.model import merge_interface_limits as merge
 
     for joint in profile.joints():
-        for itf in joint.command_interfaces:
-            if itf.min is None and itf.max is None:
-                continue
-            if itf.min is not None and itf.max is not None and itf.min > itf.max:
-                continue  # validation reports it
-            lim = joint.limits or Limits()
-            if itf.name == "position":
-                if itf.min is not None:
-                    lim.lower = itf.min if lim.lower is None else max(lim.lower, itf.min)
-                if itf.max is not None:
-                    lim.upper = itf.max if lim.upper is None else min(lim.upper, itf.max)
-            elif itf.name in ("velocity", "effort") and itf.max is not None:
-                current = getattr(lim, itf.name)
-                setattr(lim, itf.name, itf.max if current is None else min(current, itf.max))
-            else:
-                continue
-            joint.limits = lim
+        joint.limits = merge(joint.limits, joint)
     return profile
+
+
+def runs_xacro(path: Path, xacro: bool = False) -> bool:
+    """Whether loading ``path`` runs xacro: a ``.xacro`` file, or ``--xacro`` on a URDF."""
+    return path.suffix.lower() in URDF_SUFFIXES and (path.name.endswith(".xacro") or xacro)
+
+
+def check_profile_file(path: Path) -> None:
+    """Refuse what is not a regular file of at most MAX_PROFILE_BYTES, before reading it."""
+    import stat
+
+    try:
+        info = path.stat()
+    except OSError as exc:
+        raise ProfileError(f"cannot read the file: {exc.strerror}", str(path)) from None
+    if not stat.S_ISREG(info.st_mode):
+        raise ProfileError("not a regular file", str(path))
+    if info.st_size > MAX_PROFILE_BYTES:
+        raise ProfileError(f"{info.st_size} bytes: larger than {MAX_PROFILE_BYTES >> 20} MiB, "
+                           "the limit for a profile", str(path))
 
 
 def load_profile(
@@ -75,24 +82,29 @@ def load_profile(
     xacro_args: Mapping[str, str] | None = None,
     packages: Mapping[str, str] | None = None,
     xacro: bool = False,
+    expand: bool = True,
 ) -> Profile:
     """Load and validate a profile from a catalog name or a YAML/URDF/xacro path; xacro runs
-    on a ``.xacro`` file, or on another URDF file when ``xacro`` is true."""
+    on a ``.xacro`` file, or on another URDF file when ``xacro`` is true — unless ``expand``
+    is false (shell completion), which refuses such a file instead of evaluating anything."""
     from deltoctl.profile.validate import validate
 
     path = spec if isinstance(spec, Path) else resolve(spec)
     suffix = path.suffix.lower()
+    if suffix not in YAML_SUFFIXES + URDF_SUFFIXES:
+        raise ProfileError(
+            "unknown profile format (expected .yaml/.yml, or .urdf/.xacro/.xml)", str(path))
+    if not expand and runs_xacro(path, xacro):
+        raise ProfileError("not expanded here: xacro runs only in a verb", str(path))
+    check_profile_file(path)
     if suffix in YAML_SUFFIXES:
         from deltoctl.profile.yaml_loader import load_yaml_profile
 
         profile = load_yaml_profile(path)
-    elif suffix in URDF_SUFFIXES:
+    else:
         from deltoctl.profile.urdf_loader import load_urdf_profile
 
         profile = load_urdf_profile(path, xacro_args, packages, xacro=xacro)
-    else:
-        raise ProfileError(
-            "unknown profile format (expected .yaml/.yml, or .urdf/.xacro/.xml)", str(path))
     return validate(merge_interface_limits(profile))
 
 

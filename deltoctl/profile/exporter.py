@@ -2,10 +2,14 @@
 
 deltoctl's own fields become ``<param name="deltoctl.…">`` entries that ros2_control plugins
 ignore, so the exported file both loads in ros2_control and reads back into an equal profile.
+In a xacro macro every text is escaped, so that xacro gives it back as it was and evaluates
+none of it: a param ``${…}`` or ``$(…)`` stays text.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import re
 from typing import Any
 from xml.sax.saxutils import escape, quoteattr
 
@@ -130,16 +134,56 @@ def _kinematics_xml(profile: Profile, indent: str) -> list[str]:
     return lines
 
 
+_DOLLARS = re.compile(r"\$+")
+
+
+def xacro_literal(text: str) -> str:
+    """``text`` spelled so that xacro reads it back unchanged and evaluates none of it."""
+
+    def respell(match: re.Match[str]) -> str:
+        run = match.group()
+        following = text[match.end():match.end() + 1]
+        if following and following in "{(":
+            return "$" + run  # xacro reads '$${' as the text '${' (one '$' fewer)
+        if len(run) == 1:
+            return run  # a lone '$' before anything else is text already
+        # xacro's lexer has no spelling for '$$' before other text: a constant expression
+        return f"${{'$'*{len(run)}}}"
+
+    return _DOLLARS.sub(respell, text)
+
+
+def _escaped(value: Any) -> Any:
+    """A copy of a profile (or any part of it) with every text escaped for xacro."""
+    if type(value) is str:
+        return xacro_literal(value)
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        changes = {f.name: _escaped(getattr(value, f.name))
+                   for f in dataclasses.fields(value) if f.init}
+        return dataclasses.replace(value, **changes)
+    if type(value) is dict:
+        return {_escaped(k): _escaped(v) for k, v in value.items()}
+    if type(value) in (list, tuple):
+        return type(value)(_escaped(v) for v in value)
+    return value
+
+
+def _comment(text: str) -> str:
+    return re.sub("-(?=-)", "- ", text)  # '--' may not appear in an XML comment
+
+
 def to_urdf(profile: Profile, macro: bool = False) -> str:
     header = ['<?xml version="1.0"?>',
-              f"<!-- {profile.name}: exported by deltoctl; "
+              f"<!-- {_comment(profile.name)}: exported by deltoctl; "
               "'deltoctl.*' params are deltoctl's own and ignored by ros2_control -->"]
+    macro_name = profile.name.replace("-", "_") + "_ros2_control"
+    if macro:
+        profile = _escaped(profile)
     blocks: list[str] = []
     for index, hw in enumerate(profile.hardware):
         extra = _profile_params(profile) if index == 0 else {}
         blocks += _block_xml(hw, extra, "    " if macro else "  ")
     if macro:
-        macro_name = profile.name.replace("-", "_") + "_ros2_control"
         body = ['<robot xmlns:xacro="http://www.ros.org/wiki/xacro">',
                 f"  <xacro:macro name={quoteattr(macro_name)} params=\"\">",
                 *blocks, "  </xacro:macro>", "</robot>"]

@@ -1,8 +1,14 @@
-"""Load a YAML profile into the model, naming ``file:line`` for every problem."""
+"""Load a YAML profile into the model, naming ``file:line`` for every problem.
+
+A profile is untrusted: only plain YAML types are built (a safe loader), and before anything
+is built a pass over the parser's events bounds the nesting depth and the number of nodes with
+every alias expanded, so an alias bomb or a deeply nested file is refused at once.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +34,9 @@ def param_text(value: Any) -> str:
     return str(value)
 
 _BaseLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+MAX_YAML_DEPTH = 64
+MAX_YAML_NODES = 100_000  # counting each alias as the nodes it stands for
 
 
 class LineDict(dict):
@@ -59,6 +68,11 @@ def _construct_mapping(loader: _Loader, node: yaml.MappingNode) -> LineDict:
     for key_node, value_node in node.value:
         key = loader.construct_object(key_node, deep=True)
         line = key_node.start_mark.line + 1
+        if isinstance(key, (dict, list, set)):
+            kind = "mapping" if isinstance(key, dict) else type(key).__name__.lower()
+            kind = "list" if isinstance(key, list) else kind
+            raise ProfileError(f"a mapping key must be a single value, not a {kind}",
+                               loader.name, line)
         if key in result:
             raise ProfileError(f"duplicate key {key!r}", loader.name, line)
         result[key] = loader.construct_object(value_node, deep=True)
@@ -77,19 +91,115 @@ _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _constru
 _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_sequence)
 
 
-def parse_yaml(text: str, source: str) -> Any:
-    loader = _Loader(text)
+class _Bounds:
+    """Counts the nodes of a document as the parser's events go by, aliases expanded."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+        self.nodes = 0
+        self.sizes: dict[str, int] = {}  # anchor -> expanded nodes, once its node is complete
+        self.open: list[tuple[str | None, int]] = []  # collections being read: anchor, nodes
+
+    def add(self, count: int, line: int) -> None:
+        self.nodes += count
+        if self.nodes > MAX_YAML_NODES:
+            raise ProfileError(f"more than {MAX_YAML_NODES} YAML nodes with aliases expanded "
+                               "(an alias bomb?)", self.source, line)
+        if self.open:
+            anchor, size = self.open[-1]
+            self.open[-1] = (anchor, size + count)
+
+    def event(self, event: yaml.Event) -> None:
+        line = event.start_mark.line + 1 if event.start_mark else 0
+        if isinstance(event, yaml.AliasEvent):
+            if event.anchor not in self.sizes:
+                if any(anchor == event.anchor for anchor, _ in self.open):
+                    raise ProfileError(f"alias *{event.anchor} refers to itself", self.source,
+                                       line)
+                return  # an undefined alias: the composer reports it
+            self.add(self.sizes[event.anchor], line)
+        elif isinstance(event, yaml.ScalarEvent):
+            self.add(1, line)
+            if event.anchor:
+                self.sizes[event.anchor] = 1
+        elif isinstance(event, yaml.CollectionStartEvent):
+            if len(self.open) >= MAX_YAML_DEPTH:
+                raise ProfileError(f"YAML nested deeper than {MAX_YAML_DEPTH} levels",
+                                   self.source, line)
+            self.add(1, line)
+            self.open.append((event.anchor, 1))
+        elif isinstance(event, yaml.CollectionEndEvent):
+            anchor, size = self.open.pop()
+            if anchor:
+                self.sizes[anchor] = size
+            if self.open:
+                parent, total = self.open[-1]
+                self.open[-1] = (parent, total + size - 1)  # its start was counted already
+
+
+def _yaml_error(exc: Exception, source: str) -> ProfileError:
+    if isinstance(exc, yaml.MarkedYAMLError):
+        mark = exc.problem_mark or exc.context_mark
+        line = mark.line + 1 if mark else None
+        return ProfileError(f"not valid YAML: {exc.problem or exc}", source, line)
+    # e.g. a timestamp with a day 2001-02-30, or an integer of 5000 digits
+    message = " ".join(str(exc).split()) or type(exc).__name__
+    return ProfileError(f"not valid YAML: {message}", source)
+
+
+def check_yaml_bounds(text: str, source: str) -> None:
+    """Refuse a document nested too deeply or too large with its aliases expanded.
+
+    Runs over the parser's events only, stopping at the first excess: the C composer
+    recurses without a limit and the node graph of an alias bomb is small until expanded.
+    """
+    bounds = _Bounds(source)
+    try:
+        for event in yaml.parse(text, Loader=_BaseLoader):
+            bounds.event(event)
+    except yaml.YAMLError as exc:
+        raise _yaml_error(exc, source) from None
+
+
+def load_data(text: str, source: str, loader_class: type | None = None) -> Any:
+    """One YAML document, bounded, built with ``loader_class`` (default: the line-keeping one)."""
+    check_yaml_bounds(text, source)
+    loader = (loader_class or _Loader)(text)
     loader.name = source
     try:
         return loader.get_single_data()
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        line = mark.line + 1 if mark else None
-        raise ProfileError(f"not valid YAML: {exc.problem or exc}", source, line) from None
-    except yaml.YAMLError as exc:
-        raise ProfileError(f"not valid YAML: {exc}", source) from None
+    except ProfileError:
+        raise
+    except (yaml.YAMLError, ArithmeticError, LookupError, TypeError, ValueError,
+            RecursionError) as exc:
+        raise _yaml_error(exc, source) from None
     finally:
         loader.dispose()
+
+
+def parse_yaml(text: str, source: str) -> Any:
+    return load_data(text, source)
+
+
+def read_text(path: Path, what: str) -> str:
+    """The file's text, refusing one larger than MAX_PROFILE_BYTES before reading it."""
+    from deltoctl.profile.catalog import MAX_PROFILE_BYTES
+
+    source = str(path)
+    try:
+        if not stat.S_ISREG(path.stat().st_mode):  # a FIFO or a device would block or not end
+            raise ProfileError("not a regular file", source)
+        with path.open("rb") as f:
+            data = f.read(MAX_PROFILE_BYTES + 1)
+    except OSError as exc:
+        raise ProfileError(f"cannot read the file: {exc.strerror}", source) from None
+    if len(data) > MAX_PROFILE_BYTES:
+        raise ProfileError(f"larger than {MAX_PROFILE_BYTES >> 20} MiB, the limit for a profile",
+                           source)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ProfileError(f"not a text file (expected UTF-8 {what})", source) from None
 
 
 class _Reader:
@@ -309,12 +419,7 @@ def profile_from_data(data: Any, source: str) -> Profile:
 
 def load_yaml_profile(path: Path) -> Profile:
     source = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ProfileError(f"cannot read the file: {exc.strerror}", source) from None
-    except UnicodeDecodeError:
-        raise ProfileError("not a text file (expected UTF-8 YAML)", source) from None
+    text = read_text(path, "YAML")
     data = parse_yaml(text, source)
     if data is None:
         raise ProfileError("the file is empty (expected a YAML profile)", source, 1)
