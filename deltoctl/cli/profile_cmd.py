@@ -7,7 +7,7 @@ import typer
 
 from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, info, say, table
-from deltoctl.errors import DeltoctlError, InvalidInput
+from deltoctl.errors import WARNINGS, DeltoctlError, InvalidInput
 
 app = typer.Typer(help="Browse, check and convert device profiles.", no_args_is_help=True)
 
@@ -198,22 +198,35 @@ def validate_cmd(
     ctx: typer.Context,
     profiles: Annotated[list[str] | None, typer.Argument(
         metavar="[PROFILE]...", help="Catalog names or files; default: --profile.")] = None,
+    strict: Annotated[bool, typer.Option(
+        "--strict", help="Warnings (what ros2_control lets through but deltoctl thinks wrong) "
+                         "are errors.")] = False,
 ) -> None:
-    """Check profiles against ros2_control's rules and deltoctl's own (exit 2 if any fails)."""
+    """Check profiles against ros2_control's rules and deltoctl's own (exit 2 if any fails,
+    3 if any has warnings)."""
+    from deltoctl.profile.validate import validate
+
     opts = options(ctx)
     specs = list(profiles or []) or ([opts.profile] if opts.profile else [])
     if not specs:
         raise InvalidInput("no profile given: name one, or pass --profile")
     results = []
     failed: DeltoctlError | None = None
+    warned = False
     for spec in specs:
         try:
             prof = opts.load_profile(spec)
-            results.append({"profile": spec, "ok": True, **prof.counts()})
+            if strict:
+                validate(prof, strict=True)
+            notes = [str(w) for w in prof.warnings]
+            warned = warned or bool(notes)
+            results.append({"profile": spec, "ok": True, **prof.counts(), "warnings": notes})
             if not opts.json and not opts.quiet:
                 c = prof.counts()
                 say(f"ok: {spec} ({c['joints']} joints, {c['sensors']} sensors, "
-                     f"{c['gpios']} gpios)")
+                    f"{c['gpios']} gpios)")
+                for note in notes:
+                    info(f"warning: {note}")
         except DeltoctlError as exc:
             results.append({"profile": spec, "ok": False, "error": exc.message})
             failed = failed or exc
@@ -223,6 +236,8 @@ def validate_cmd(
         emit_json(results)
     if failed:
         raise typer.Exit(failed.exit_code)
+    if warned:
+        raise typer.Exit(WARNINGS)
 
 
 def _write(text: str, output: Path | None) -> None:
