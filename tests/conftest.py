@@ -37,9 +37,9 @@ def eventually(predicate, timeout: float = 2.0) -> bool:
 @pytest.fixture
 def mh5_buses():
     """The MH5's two Dynamixel buses on ptys and its I2C bus (the IMU) on loopback."""
-    from deltoctl.profile.catalog import load_profile
     from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
-    from deltoctl.sim.i2c_bus import I2CSocketServer, bus_for_profile
+    from deltoctl.profile.catalog import load_profile
+    from deltoctl.sim.i2c_bus import I2CSocketServer
 
     profile = load_profile("mh5")
     servers = {}
@@ -47,10 +47,62 @@ def mh5_buses():
         if profile.family_of(hw) == "dynamixel":
             bus = DynamixelBus([Servo(j.address) for j in hw.joints])
             servers[hw.bus] = DynamixelPtyServer(bus).start()
-    servers["i2c"] = I2CSocketServer(bus_for_profile(profile)).start()  # the IMU
+    servers["i2c"] = I2CSocketServer(sim_i2c_bus(profile)).start()  # the IMU
     yield servers
     for server in servers.values():
         server.close()
+
+
+def block_of(report, name=None):
+    """The entry of block ``name`` (the only one when None) in a verb's ``blocks`` list."""
+    blocks = report["blocks"]
+    if name is None:
+        assert len(blocks) == 1, [b["name"] for b in blocks]
+        return blocks[0]
+    found = [b for b in blocks if b["name"] == name]
+    assert len(found) == 1, [b["name"] for b in blocks]
+    return found[0]
+
+
+def joints_of(report, key):
+    """``{joint: entry[key]}`` over every block of a home or jog report (``position``,
+    ``outcome`` of a homing routine, ``settled``, ``target``)."""
+    found = {}
+    for block in report["blocks"]:
+        for joint, entry in block["joints"].items():
+            assert joint not in found, joint  # a joint belongs to one block
+            found[joint] = entry[key]
+    return found
+
+
+def block_for(profile, hw, url="", **kwargs):
+    """What a driver is built from (``DriverClass(block_for(profile, hw, url))``), as the
+    System builds it; ``links`` (a ``Links``) to hand the driver a transport already open."""
+    from deltoctl import registry
+    from deltoctl.core.driver import Block
+
+    family = registry.of_block(profile.family_of(hw), hw.plugin)
+    assert family is not None, hw.name
+    return Block(profile, hw, family, url, **kwargs)
+
+
+def sim_i2c_bus(profile):
+    """Every I2C device of the profile on one simulated bus: each Bioscara block's joints and
+    an LSM6DS3 chip at each IMU sensor's address (what `sim serve` puts on the bus)."""
+    from deltoctl import registry
+    from deltoctl.families.bioscara.emulator import joints_for_block
+    from deltoctl.families.lsm6ds3.emulator import Lsm6ds3Chip
+    from deltoctl.sim.i2c_bus import SimSMBus
+
+    sim = SimSMBus({})
+    for hw in profile.hardware:
+        family = getattr(registry.of_block(profile.family_of(hw), hw.plugin), "name", None)
+        if family == "bioscara":
+            sim.devices.update(joints_for_block(hw))
+        elif family == "lsm6ds3":
+            sim.devices.update({s.address: Lsm6ds3Chip() for s in hw.sensors
+                                if s.address is not None})
+    return sim
 
 
 def ros2_messages(path, topics=None):

@@ -10,12 +10,14 @@ def test_bench_loop_reports_stages(cli):
                  "--json")
     assert result.exit_code == 0, result.stderr
     report = json.loads(result.stdout)
-    assert set(report["paced"]["stage_us_per_cycle"]) == {"codec", "socket", "write",
-                                                           "recording"}
-    assert report["paced"]["cycles"] > 0 and report["unpaced"]["cycles"] > 0
+    assert set(report["hands"]) == {"1"}  # one hand by default
+    one = report["hands"]["1"]
+    assert set(one["paced"]["stage_us_per_cycle"]) == {"codec", "socket", "write",
+                                                       "recording"}
+    assert one["paced"]["cycles"] > 0 and one["unpaced"]["cycles"] > 0
     assert 0 < report["idle_loop"]["achieved_fraction"] <= 1.01  # the machine's own floor
-    assert set(report["goals"]) == {"achieved_rate_ge_99_5_percent", "p99_lateness_le_0_5_ms",
-                                    "unpaced_ge_5_khz"}
+    assert set(report["goals"]) == {"1_hands_rate_ge_99_5_percent",
+                                    "1_hands_p99_lateness_le_0_5_ms", "unpaced_1_hand_ge_5_khz"}
 
 
 def test_bench_dynamixel_compares_with_the_sdk(cli):

@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from deltoctl.families.bioscara import codec
 from deltoctl.errors import InvalidInput, ProtocolError
+from deltoctl.families.bioscara import codec
 
 
 def test_request_bytes():

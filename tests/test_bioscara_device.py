@@ -9,12 +9,13 @@ import sys
 
 import pytest
 
+from deltoctl.errors import Refused
 from deltoctl.families.bioscara import codec
 from deltoctl.families.bioscara.driver import BioscaraDriver
-from deltoctl.errors import Refused
 from deltoctl.profile.catalog import load_profile
-from deltoctl.sim.i2c_bus import I2CSocketServer, bus_for_profile
-from tests.conftest import ros2_messages
+from deltoctl.sim.i2c_bus import I2CSocketServer
+from deltoctl.transport.i2c import I2CBus
+from tests.conftest import block_for, block_of, joints_of, ros2_messages, sim_i2c_bus
 
 J4 = 0x14
 J4_MAX = 3.01069
@@ -23,10 +24,20 @@ J4_MAX = 3.01069
 @pytest.fixture
 def arm():
     """A served bioscara-arm bus: ``(target, {address: firmware})``."""
-    bus = bus_for_profile(load_profile("bioscara-arm"))
+    bus = sim_i2c_bus(load_profile("bioscara-arm"))
     server = I2CSocketServer(bus).start()
     yield server.url, bus.devices
     server.close()
+
+
+def in_process_driver(profile, smbus):
+    """The arm's driver on a simulated bus in this process (no socket in the way)."""
+    from deltoctl.core.driver import Links
+
+    url = "i2c:///dev/i2c-sim"
+    links = Links()
+    links.open[url] = I2CBus(smbus, url)
+    return BioscaraDriver(block_for(profile, profile.hardware[0], url, links=links))
 
 
 def run_json(cli, *args):
@@ -40,11 +51,11 @@ def test_connect_identify_detect_stream_with_sim(cli):
     assert result.exit_code == 0
     # the result is data (stdout), even for people
     assert "round trip median" in result.stdout and "finalized" in result.stdout
-    ident = run_json(cli, "--sim", "identify")
+    ident = block_of(run_json(cli, "--sim", "identify"))["identity"]
     assert ident["joints"]["j2"] == {"address": "0x12", "answers": True,
                                      "flags": "not homed, not enabled", "homed": False,
                                      "home_offset": None}
-    detect = run_json(cli, "--sim", "detect")
+    detect = block_of(run_json(cli, "--sim", "detect"))["details"]
     assert detect["found"] == ["0x11", "0x12", "0x13", "0x14"] and detect["missing"] == []
     lines = cli("-p", "bioscara-arm", "--sim", "stream", "-d", "0.1", "-i", "j1/*")
     sample = json.loads(lines.stdout.splitlines()[0])["values"]
@@ -74,7 +85,7 @@ def test_homing_in_the_profile_order_then_the_offset_survives(cli, arm):
     assert values["j4/position"] == pytest.approx(J4_MAX) and values["j4/home"] == 1.0
     assert values["j2/home"] == 0.0
     again = run_json(cli, "-t", target, "home", "--yes", "-j", "j4")
-    assert again["homed"] == {"j4": "already homed"}
+    assert joints_of(again, "outcome") == {"j4": "already homed"}
 
 
 def test_jog_is_refused_until_homed_then_moves(cli, arm):
@@ -84,7 +95,8 @@ def test_jog_is_refused_until_homed_then_moves(cli, arm):
     assert devices[J4].requests < 20 and devices[J4].target is None  # nothing was commanded
     assert cli("-p", "bioscara-arm", "-t", target, "home", "--yes", "-j", "j4").exit_code == 0
     moved = run_json(cli, "-t", target, "jog", "j4", "-0.2", "--yes")
-    assert moved["settled"] and moved["positions"]["j4"] == pytest.approx(J4_MAX - 0.2, abs=1e-3)
+    assert moved["settled"] and joints_of(moved, "position")["j4"] == pytest.approx(
+        J4_MAX - 0.2, abs=1e-3)
     too_far = cli("-p", "bioscara-arm", "-t", target, "jog", "j4", "-0.6", "--yes")
     assert too_far.exit_code == 5  # the profile's max_jog_step
 
@@ -101,8 +113,8 @@ def test_a_stall_during_a_jog_is_reported_and_leaves_the_joint_disabled(cli, arm
 
 def test_ctrl_c_while_homing_sends_stop():
     profile = load_profile("bioscara-arm")
-    bus = bus_for_profile(profile)
-    driver = BioscaraDriver(profile, profile.hardware[0], "i2c+sim://arm", bus)
+    bus = sim_i2c_bus(profile)
+    driver = in_process_driver(profile, bus)
     driver.configure()
 
     def interrupt(name, status, fraction):
@@ -120,11 +132,11 @@ def test_the_deadman_and_one_command_mode_per_joint():
     import time
 
     profile = load_profile("bioscara-arm")
-    bus = bus_for_profile(profile)
+    bus = sim_i2c_bus(profile)
     j1 = bus.devices[0x11]
     j1.flags &= ~codec.NOTHOMED  # as if homed, mid-range
     j1.angle = j1.command = 0.0
-    driver = BioscaraDriver(profile, profile.hardware[0], "i2c+sim://arm", bus)
+    driver = in_process_driver(profile, bus)
     driver.configure()
     with pytest.raises(Refused, match="j2 is not homed"):
         driver.set_command("j2/velocity", 0.01)
@@ -161,7 +173,7 @@ def test_sim_serve_in_its_own_process():
         result = subprocess.run([sys.executable, "-m", "deltoctl", "-p", "bioscara-arm", "-t",
                                  target, "detect", "--json"], capture_output=True, text=True)
         assert result.returncode == 3
-        assert json.loads(result.stdout)["missing"] == ["j2"]
+        assert block_of(json.loads(result.stdout))["details"]["missing"] == ["j2"]
     finally:
         proc.terminate()
         assert proc.wait(timeout=5) == 0
@@ -173,5 +185,5 @@ def test_detect_still_draws_a_bus_where_no_joint_answers(cli, arm):
     assert cli("-p", "bioscara-arm", "-t", target, "identify").exit_code == 4
     result = cli("-p", "bioscara-arm", "-t", target, "detect", "--json")
     assert result.exit_code == 3, result.stderr
-    report = json.loads(result.stdout)
+    report = block_of(json.loads(result.stdout))["details"]
     assert report["found"] == [] and report["missing"] == ["j1", "j2", "j3", "j4"]

@@ -52,8 +52,9 @@ def test_every_topic_matches_the_reference_encoder(name):
                for j in joints]}
     assert packed["/dynamic_joint_states"] == _encode("control_msgs/msg/DynamicJointState", dyn)
     groups = [(g.name, [i.name for i in g.state_interfaces])
-              for _, g in profile.components() if g.kind == "gpio"] + [("system",
-                                                                      ["connection_status"])]
+              for _, g in profile.components() if g.kind == "gpio"]
+    groups += [(hw.name, ["connection_status"]) for hw in profile.hardware]  # each block's link
+    groups.append(("system", ["connection_status"]))
     gpio = {"header": {**_stamp(), "frame_id": ""}, "interface_groups": [g for g, _ in groups],
             "interface_values": [{"interface_names": itfs,
                                   "values": [values.get(f"{g}/{i}", math.nan) for i in itfs]}

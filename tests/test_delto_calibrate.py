@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import json
 
-from deltoctl.profile.catalog import load_profile
 from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
+from deltoctl.profile.catalog import load_profile
 
 
 def test_tare_removes_the_offset_and_writes_a_report(cli, tmp_path):
@@ -14,8 +14,10 @@ def test_tare_removes_the_offset_and_writes_a_report(cli, tmp_path):
         result = cli("-p", "dg-4f", "-t", server.endpoint, "calibrate", "ft", "--json",
                      "-n", "20", "-o", str(tmp_path))
     assert result.exit_code == 0, result.stderr
-    report = json.loads(result.stdout)
-    assert report["pass"] is True
+    result = json.loads(result.stdout)
+    assert result["pass"] is True
+    (report,) = result["blocks"]  # the gripper's one block
+    assert report["pass"] is True and report["block"] == load_profile("dg-4f").hardware[0].name
     assert set(report["sensors"]) == {f"fingertip_finger_{n}" for n in range(1, 5)}
     removed = max(abs(v) for s in report["sensors"].values()
                   for k, v in s["offset_removed"].items() if k.startswith("force"))
@@ -23,6 +25,7 @@ def test_tare_removes_the_offset_and_writes_a_report(cli, tmp_path):
     files = list(tmp_path.glob("calibration-DG-4F-127.0.0.1_*-*Z.json"))
     assert len(files) == 1
     assert json.loads(files[0].read_text())["sensors"] == report["sensors"]
+    assert report["report_file"] == str(files[0])
 
 
 def test_firmware_without_offset_command_fails_the_check(cli, tmp_path):

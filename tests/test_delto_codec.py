@@ -6,9 +6,9 @@ import math
 
 import pytest
 
+from deltoctl.errors import ProtocolError
 from deltoctl.families.delto import codec
 from deltoctl.families.delto.models import FT_6AXIS, MODELS, SENSOR_NONE, TACTILE_M, TACTILE_S
-from deltoctl.errors import ProtocolError
 
 DG5F_R, DG3F_B, DG5F_S = MODELS[0x5F22], MODELS[0x3F01], MODELS[0x5F24]
 

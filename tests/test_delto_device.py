@@ -8,12 +8,14 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import pytest
 
-from deltoctl.core.session import Session
-from deltoctl.profile.catalog import load_profile
+from deltoctl.core.system import System
 from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
+from deltoctl.profile.catalog import load_profile
+from tests.conftest import block_of
 
 DELTO = ["dg-3f-b", "dg-3f-m", "dg-4f", "dg-5f-left", "dg-5f-right", "dg-5f-s-left",
          "dg-5f-s-right", "dg-5f-s15-left", "dg-5f-s15-right"]
@@ -39,7 +41,9 @@ def test_identify_every_model(cli, gripper, name):
     server = gripper(name)
     result = cli("-p", name, "-t", server.endpoint, "identify", "--json")
     assert result.exit_code == 0, result.stderr
-    ident = json.loads(result.stdout)
+    entry = block_of(json.loads(result.stdout))
+    assert entry["family"] == "delto" and entry["target"] == server.endpoint
+    ident = entry["identity"]
     assert ident["model_match"] is True
     assert ident["reported_model"].startswith(load_profile(name).model)
     # the emulator reports firmware 3.0: revised everywhere but on the DG-3F-B (from 3.6)
@@ -50,16 +54,18 @@ def test_identify_every_model(cli, gripper, name):
 def test_connect_detect_and_stream_every_model(cli, name):
     result = cli("--sim", "-p", name, "connect", "--json", "-n", "3")
     assert result.exit_code == 0, result.stderr
-    assert json.loads(result.stdout)["lifecycle"][-1] == "finalized"
+    assert block_of(json.loads(result.stdout))["lifecycle"][-1] == "finalized"
     result = cli("--sim", "-p", name, "detect", "--json")
     assert result.exit_code == 0, result.stderr
-    assert all(c["match"] for c in json.loads(result.stdout)["checks"])
+    checks = block_of(json.loads(result.stdout))["checks"]
+    assert checks and all(c["match"] for c in checks)
     result = cli("--sim", "-p", name, "stream", "--json", "--duration", "0.1", "--rate", "40")
     assert result.exit_code == 0, result.stderr
     lines = [json.loads(line) for line in result.stdout.splitlines()]
     assert len(lines) >= 2
     profile = load_profile(name)
     assert set(lines[-1]["values"]) == set(profile.state_interfaces()) | {
+        f"{hw.name}/connection_status" for hw in profile.hardware} | {
         "system/connection_status"}
     assert all(v is not None for v in lines[-1]["values"].values())
 
@@ -84,7 +90,7 @@ def test_the_live_table_has_a_row_per_part(cli):
     console = Console(record=True, width=120)
     console.print(live_tables(sample, "3 samples at 50 Hz"))
     lines = [line for line in console.export_text().splitlines() if line.strip()]
-    assert "3 samples at 50 Hz · link up" in lines[0]
+    assert "3 samples at 50 Hz · links up" in lines[0]
     assert lines[1].split() == ["position", "velocity", "effort", "temperature"]
     rows = {line.split()[0]: line.split()[1:] for line in lines if line.strip()[:3] in
             ("rj_", "rig", "gpi")}
@@ -95,22 +101,24 @@ def test_the_live_table_has_a_row_per_part(cli):
 
 def test_old_firmware_selects_the_legacy_direction_map(cli, gripper):
     server = gripper("dg-5f-right", firmware=(2, 7))
-    ident = json.loads(cli("-p", "dg-5f-right", "-t", server.endpoint, "identify",
-                           "--json").stdout)
+    ident = block_of(json.loads(cli("-p", "dg-5f-right", "-t", server.endpoint, "identify",
+                                    "--json").stdout))["identity"]
     assert ident["direction_map"] == "legacy"
     assert ident["direction"][:4] == [1, 1, -1, -1]
     # a positive effort still moves joint 3 (wired reversed on this firmware) positive
     profile = load_profile("dg-5f-right")
-    with Session(profile, [server.endpoint]) as session:
-        session.driver.write_efforts({"rj_dg_1_3": 0.3})
+    with System(profile, [server.endpoint]) as system:
+        (member,) = system.members
+        member.driver.write_efforts({"rj_dg_1_3": 0.3})
         time.sleep(0.2)
         assert server.firmware.duty[2] < 0
-        assert session.driver.read()["rj_dg_1_3/position"] > 0.01
+        assert system.read()["rj_dg_1_3/position"] > 0.01
 
 
 def test_short_version_reply_of_old_firmware(cli, gripper):
     server = gripper("dg-3f-m", firmware=(2, 2), short_version=True)
-    ident = json.loads(cli("-p", "dg-3f-m", "-t", server.endpoint, "identify", "--json").stdout)
+    ident = block_of(json.loads(cli("-p", "dg-3f-m", "-t", server.endpoint, "identify",
+                                    "--json").stdout))["identity"]
     assert ident["short_version_reply"] is True
     assert ident["sensor_type"] == "ft_6axis"  # assumed from the profile's fingertip sensors
     assert ident["direction_map"] == "legacy"
@@ -125,7 +133,8 @@ def test_model_mismatch_is_a_clear_error_or_a_warning(cli, gripper):
     result = cli("-p", "dg-5f-right", "-t", server.endpoint, "identify", "--json",
                  "--allow-model-mismatch")
     assert result.exit_code == 3
-    assert json.loads(result.stdout)["reported_model"] == "DG-4F (0x4f02)"
+    assert block_of(json.loads(result.stdout))["identity"]["reported_model"] == "DG-4F (0x4f02)"
+    assert "model mismatch" in result.stderr  # the warning behind exit 3
 
 
 def test_unreachable_device_exits_4(cli):
@@ -147,7 +156,7 @@ def test_a_silent_peer_exits_4_naming_developer_mode(cli):
     assert "no version reply" in result.stderr and "developer mode" in result.stderr
 
 
-def test_gpio_get_and_set(cli, gripper):
+def test_gpio_get_and_set(cli, gripper, tmp_path):
     server = gripper("dg-5f-right")
     server.firmware.input_1 = True
     target = ("-p", "dg-5f-right", "-t", server.endpoint)
@@ -162,21 +171,32 @@ def test_gpio_get_and_set(cli, gripper):
     assert server.firmware.gpio_out == [True, True, False]  # the others keep their state
     assert cli(*target, "gpio", "set", "output_9", "on").exit_code == 2
     assert cli(*target, "gpio", "set", "output_1", "maybe").exit_code == 2
-    assert cli("--sim", "-p", "dg-5f-s15-right", "gpio", "get").exit_code == 1
+    no_gpio = cli("--sim", "-p", "dg-5f-s15-right", "gpio", "get")
+    assert no_gpio.exit_code == 2 and "has no GPIO" in no_gpio.stderr  # none in the profile
+    # GPIO in the profile, but IO false: the gripper sends none
+    custom = tmp_path / "no-io.yaml"
+    text = Path(load_profile("dg-5f-right").source).read_text()
+    assert "IO: true" in text
+    custom.write_text(text.replace("IO: true", "IO: false"))
+    silent = cli("-p", str(custom), "-t", server.endpoint, "gpio", "get")
+    assert silent.exit_code == 1 and "send no GPIO values" in silent.stderr
 
 
 def test_reconnect_after_the_link_drops(gripper):
     server = gripper("dg-5f-right")
     profile = load_profile("dg-5f-right")
     statuses = []
-    with Session(profile, [server.endpoint]) as session:
-        driver = session.driver
-        statuses.append(driver.read()["system/connection_status"])
+    with System(profile, [server.endpoint]) as system:
+        (member,) = system.members
+        driver = member.driver
+        statuses.append(system.read()["system/connection_status"])
         server.drop_connections()
         deadline = time.monotonic() + 5
         seen_down = False
         while time.monotonic() < deadline:
-            status = driver.read()["system/connection_status"]
+            values = system.read()
+            status = values["system/connection_status"]
+            assert values[member.status_key] == status  # the one block's link is the system's
             seen_down = seen_down or status == 0.0
             if seen_down and status == 1.0:
                 break
@@ -186,11 +206,11 @@ def test_reconnect_after_the_link_drops(gripper):
     assert driver.stats["reconnects"] == 1
 
 
-def test_leaving_a_session_sets_duty_zero(gripper):
+def test_leaving_a_system_sets_duty_zero(gripper):
     server = gripper("dg-5f-right")
-    with Session(load_profile("dg-5f-right"), [server.endpoint]) as session:
-        session.driver.write_efforts({"rj_dg_2_2": 0.5})
-        session.driver.read()
+    with System(load_profile("dg-5f-right"), [server.endpoint]) as system:
+        system.members[0].driver.write_efforts({"rj_dg_2_2": 0.5})
+        system.read()
         assert server.firmware.duty[5] != 0
     time.sleep(0.05)
     assert server.firmware.duty == [0] * 20
@@ -204,7 +224,8 @@ def test_sim_serve_in_another_process(tmp_path):
         out = subprocess.run([sys.executable, "-m", "deltoctl", "-p", "dg-5f-left", "-t",
                               endpoint, "identify", "--json"], capture_output=True, text=True)
         assert out.returncode == 0, out.stderr
-        assert json.loads(out.stdout)["reported_model"] == "DG-5F-L (0x5f12)"
+        identity = block_of(json.loads(out.stdout))["identity"]
+        assert identity["reported_model"] == "DG-5F-L (0x5f12)"
     finally:
         proc.terminate()
         assert proc.wait(timeout=5) == 0
@@ -212,14 +233,14 @@ def test_sim_serve_in_another_process(tmp_path):
 
 def test_truncated_and_late_replies_are_counted_and_recovered(gripper):
     server = gripper("dg-4f")
-    with Session(load_profile("dg-4f"), [server.endpoint]) as session:
-        driver = session.driver
-        driver.read()
+    with System(load_profile("dg-4f"), [server.endpoint]) as system:
+        driver = system.members[0].driver
+        system.read()
         server.firmware.faults.truncate_next = True
-        assert driver.read()["system/connection_status"] == 0.0  # half a frame: timed out
-        assert driver.stats["errors"] == 1
+        assert system.read()["system/connection_status"] == 0.0  # half a frame: timed out
+        assert not driver.connected and driver.stats["errors"] == 1
         deadline = time.monotonic() + 5
-        while driver.read()["system/connection_status"] == 0.0 and time.monotonic() < deadline:
+        while system.read()["system/connection_status"] == 0.0 and time.monotonic() < deadline:
             time.sleep(0.05)
         assert driver.connected
         server.firmware.faults.delay = 0.7  # beyond the 0.5 s data timeout

@@ -12,8 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from deltoctl.profile.catalog import load_profile
 from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
+from deltoctl.profile.catalog import load_profile
+from tests.conftest import joints_of
 
 
 @pytest.fixture
@@ -28,10 +29,11 @@ def test_jog_moves_the_joint(cli, server):
     assert result.exit_code == 0, result.stderr
     report = json.loads(result.stdout)
     assert report["settled"] is True
-    assert report["positions"]["rj_dg_2_2"] == pytest.approx(math.radians(15), abs=math.radians(2))
+    assert joints_of(report, "position")["rj_dg_2_2"] == pytest.approx(math.radians(15),
+                                                                      abs=math.radians(2))
     assert server.firmware.position[5] == pytest.approx(math.radians(15), abs=math.radians(2))
     result = cli(*target, "jog", "rj_dg_2_2", "-5deg", "--yes", "--json")  # negative, relative
-    assert json.loads(result.stdout)["positions"]["rj_dg_2_2"] == pytest.approx(
+    assert joints_of(json.loads(result.stdout), "position")["rj_dg_2_2"] == pytest.approx(
         math.radians(10), abs=math.radians(2))
     result = cli(*target, "jog", "rj_dg_2_2", "--to", "0.05", "--velocity", "1", "--yes")
     assert result.exit_code == 0

@@ -12,8 +12,8 @@ import time
 
 from mcap.reader import make_reader
 
-from deltoctl.profile.catalog import load_profile
 from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
+from deltoctl.profile.catalog import load_profile
 from tests.conftest import ros2_messages
 
 
@@ -46,8 +46,10 @@ def test_record_decodes_with_expected_counts(cli, tmp_path):
         "position", "velocity", "effort", "temperature"]
     assert 20 < dyn.interface_values[0].values[3] < 40  # °C
     gpio = last["/gpio"]
-    assert list(gpio.interface_groups) == ["gpio", "system"]
+    block = load_profile("dg-5f-right").hardware[0].name
+    assert list(gpio.interface_groups) == ["gpio", block, "system"]  # the block's link, all
     assert list(gpio.interface_values[1].values) == [1.0]
+    assert list(gpio.interface_values[2].values) == [1.0]
     assert abs(last["/right_fingertip_finger_1/wrench"].wrench.force.z) < 10
     with out.open("rb") as f:
         reader = make_reader(f)
@@ -55,7 +57,10 @@ def test_record_decodes_with_expected_counts(cli, tmp_path):
         assert reader.get_summary().statistics.message_count == sum(counts.values())
     assert meta["profile"]["name"] == "dg-5f-right"
     assert "rj_dg_1_1" in meta["profile"]["yaml"]
-    assert meta["identify"]["reported_model"] == "DG-5F-R (0x5f22)"
+    assert set(meta["identify"]) == {block}
+    identity = json.loads(meta["identify"][block])
+    assert identity["reported_model"] == "DG-5F-R (0x5f22)"
+    assert identity["family"] == "delto" and identity["target"].startswith("tcp://")
 
 
 def test_sigterm_leaves_a_valid_indexed_file(tmp_path):

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from deltoctl.families.dynamixel import codec
 from deltoctl.errors import ProtocolError
+from deltoctl.families.dynamixel import codec
 
 
 def test_crc_check_value():

@@ -6,14 +6,15 @@ import json
 
 import pytest
 
-from tests.conftest import eventually, mh5_targets, ros2_messages
+from tests.conftest import block_for, block_of, eventually, mh5_targets, ros2_messages
 
 
 def test_identify_detect_stream_with_sim(cli):
     result = cli("--sim", "-p", "mh5", "identify", "--json")
     assert result.exit_code == 0, result.stderr
-    buses = json.loads(result.stdout)["buses"]
-    servos = {**buses["upper_body"]["servos"], **buses["lower_body"]["servos"]}
+    report = json.loads(result.stdout)
+    servos = {**block_of(report, "upper_body")["identity"]["servos"],
+              **block_of(report, "lower_body")["identity"]["servos"]}
     assert len(servos) == 22 and servos["l_kne_p"]["id"] == 14
     assert all(s["model_number"] == 1060 for s in servos.values())
     assert cli("--sim", "-p", "mh5", "detect").exit_code == 0
@@ -28,7 +29,7 @@ def test_detect_names_a_missing_servo(cli, mh5_buses):
     result = cli("-p", "mh5", *mh5_targets(mh5_buses), "detect", "--json")
     assert result.exit_code == 3
     report = json.loads(result.stdout)
-    assert report["buses"]["lower_body"]["missing"] == [24]
+    assert block_of(report, "lower_body")["details"]["missing"] == [24]
     identify = cli("-p", "mh5", *mh5_targets(mh5_buses), "identify")
     assert identify.exit_code == 3 and "r_kne_p" in identify.stderr
 
@@ -149,14 +150,15 @@ def test_register_get_and_set_with_the_eeprom_rule(cli, mh5_buses):
 
 
 def test_register_reads_retry_then_say_so(mh5_buses):
+    from deltoctl.errors import DeviceError
     from deltoctl.families.dynamixel.control_table import BY_NAME
     from deltoctl.families.dynamixel.driver import DynamixelDriver
-    from deltoctl.errors import DeviceError
     from deltoctl.profile.catalog import load_profile
 
     profile = load_profile("mh5")
     hw = next(h for h in profile.hardware if h.name == "upper_body")
-    driver = DynamixelDriver(profile, hw, f"serial://{mh5_buses['upper_body'].port}?baud=1000000")
+    driver = DynamixelDriver(block_for(
+        profile, hw, f"serial://{mh5_buses['upper_body'].port}?baud=1000000"))
     driver.configure()
     bus = mh5_buses["upper_body"].bus
     bus.faults.corrupt_crc.add(52)
@@ -184,7 +186,7 @@ def test_detect_finds_a_servo_at_another_baud_rate():
         proc.terminate()
         proc.wait(timeout=5)
     assert result.returncode == 3, result.stderr
-    upper = json.loads(result.stdout)["buses"]["upper_body"]
+    upper = block_of(json.loads(result.stdout), "upper_body")["details"]
     assert upper["missing"] == [52] and upper["wrong_baud"] == {"52": 57600}
     assert "head_y (ID 52) baud rate" in result.stderr
 
@@ -234,5 +236,5 @@ def test_detect_finds_a_whole_bus_at_another_baud_rate(cli):
         assert cli("-p", "mh5", *targets, "identify").exit_code == 4  # nothing at 2 Mbps
         result = cli("-p", "mh5", *targets, "detect", "--json")
     assert result.exit_code == 3, result.stderr
-    lower = json.loads(result.stdout)["buses"]["lower_body"]
+    lower = block_of(json.loads(result.stdout), "lower_body")["details"]
     assert lower["wrong_baud"] == {"11": 1_000_000, "12": 1_000_000}

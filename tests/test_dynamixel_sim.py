@@ -7,7 +7,7 @@ import time
 import pytest
 
 from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
-from tests.conftest import eventually
+from tests.conftest import block_for, eventually
 
 sdk = pytest.importorskip("dynamixel_sdk")
 
@@ -123,8 +123,8 @@ def test_a_paced_bus_takes_the_wire_time():
 
     from deltoctl.families.dynamixel import codec
     from deltoctl.families.dynamixel.driver import DynamixelDriver
-    from deltoctl.profile.model import Component, Hardware, Profile
     from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
+    from deltoctl.profile.model import Component, Hardware, Profile
 
     servos = [Servo(i) for i in range(1, 12)]
     for servo in servos:
@@ -132,8 +132,8 @@ def test_a_paced_bus_takes_the_wire_time():
     hw = Hardware("bus", family="dynamixel", joints=[
         Component("joint", f"j{i}", address=i) for i in range(1, 12)])
     with DynamixelPtyServer(DynamixelBus(servos), pace=True) as server:
-        driver = DynamixelDriver(Profile("t", hardware=[hw]), hw,
-                                 f"serial://{server.port}?baud=57600")
+        driver = DynamixelDriver(block_for(Profile("t", hardware=[hw]), hw,
+                                           f"serial://{server.port}?baud=57600"))
         driver.configure()
         start = time.perf_counter()
         replies = driver._sync_read(126, 10, list(range(1, 12)))
@@ -159,8 +159,8 @@ def test_sdk_fast_sync_read_and_the_driver_agree(bus):
     port.closePort()
     hw = Hardware("bus", family="dynamixel", params={"fast_sync_read": "true"},
                   joints=[Component("joint", f"j{i}", address=i) for i in (11, 12, 13)])
-    driver = DynamixelDriver(Profile("t", hardware=[hw]), hw,
-                             f"serial://{port.port_name}?baud=1000000")
+    driver = DynamixelDriver(block_for(Profile("t", hardware=[hw]), hw,
+                                       f"serial://{port.port_name}?baud=1000000"))
     driver.configure()
     replies = driver._sync_read(132, 4, [11, 12, 13])
     values = driver.read()

@@ -7,17 +7,19 @@ import time
 
 import pytest
 
-from deltoctl.families.generic.driver import GenericDriver
 from deltoctl.errors import InvalidInput
+from deltoctl.families.generic.driver import GenericDriver
 from deltoctl.profile.catalog import load_profile
 from deltoctl.profile.model import Interface
+from tests.conftest import block_for, block_of
 
 
 def _driver(name: str, **params: str) -> GenericDriver:
     profile = load_profile(name)
     for hw in profile.hardware:
         hw.params.update(params)
-    driver = GenericDriver(profile, profile.hardware)
+    (hw,) = profile.hardware  # one block: its driver holds every interface
+    driver = GenericDriver(block_for(profile, hw))
     driver.configure()
     return driver
 
@@ -55,7 +57,7 @@ def test_disable_commands_offset_and_dynamics():
     joint = profile.component("joint1")
     joint.state_interfaces.append(Interface("velocity"))
     profile.hardware[0].params["calculate_dynamics"] = "true"
-    d = GenericDriver(profile, profile.hardware)
+    d = GenericDriver(block_for(profile, profile.hardware[0]))
     d.configure()
     d.set_command("joint1/position", 0.0)
     time.sleep(0.05)
@@ -80,6 +82,6 @@ def test_gpio_and_jog_on_rrbot(cli):
     assert result.exit_code == 0
     assert json.loads(result.stdout)["flange_analog_IOs/analog_output1"] == 2.5
     result = cli("-p", "rrbot-gpio", "jog", "joint1", "--to", "0.4", "--yes", "--json")
-    assert json.loads(result.stdout)["positions"]["joint1"] == 0.4
+    assert block_of(json.loads(result.stdout))["joints"]["joint1"]["position"] == 0.4
     assert cli("-p", "rrbot-gpio", "jog", "joint1", "--to", "1.5", "--yes").exit_code == 5
     assert cli("-p", "multimodal-gripper", "home", "--yes").exit_code == 0

@@ -8,8 +8,8 @@ import pytest
 import smbus2
 
 from deltoctl.errors import InvalidInput, Unreachable
-from deltoctl.sim.i2c_bus import I2CSocketServer, SimSMBus
 from deltoctl.families.lsm6ds3.emulator import Lsm6ds3Chip
+from deltoctl.sim.i2c_bus import I2CSocketServer, SimSMBus
 from deltoctl.transport.i2c import I2CBus, NoAnswer, open_smbus, parse_i2c_url, wire_bits
 
 

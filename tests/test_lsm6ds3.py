@@ -8,9 +8,9 @@ import math
 
 import pytest
 
-from deltoctl.families.lsm6ds3 import codec
 from deltoctl.errors import InvalidInput, ProtocolError
-from tests.conftest import mh5_targets, ros2_messages
+from deltoctl.families.lsm6ds3 import codec
+from tests.conftest import block_of, mh5_targets, ros2_messages
 
 
 def test_settings_and_scaling():
@@ -70,7 +70,7 @@ def test_detect_names_the_chip_and_a_wrong_one_is_a_clear_error(cli, mh5_buses):
     chip.registers[codec.WHO_AM_I] = 0x69
     result = cli("-p", "mh5", *mh5_targets(mh5_buses), "detect", "--json")
     assert result.exit_code == 0, result.stderr
-    assert json.loads(result.stdout)["buses"]["i2c"]["chip"] == "LSM6DS3"
+    assert block_of(json.loads(result.stdout), "i2c")["details"]["chip"] == "LSM6DS3"
     chip.registers[codec.WHO_AM_I] = 0x12
     result = cli("-p", "mh5", *mh5_targets(mh5_buses), "detect")
     assert result.exit_code == 1

@@ -7,13 +7,14 @@ import json
 from typer.testing import CliRunner
 
 from deltoctl.cli.main import app
+from tests.conftest import block_of, joints_of
 
 
 def test_deltoctl_sim_fixture(deltoctl_sim):
     target = deltoctl_sim("dg-5f-left", firmware="2.7")
     result = CliRunner().invoke(app, ["-p", "dg-5f-left", "-t", target, "identify", "--json"])
     assert result.exit_code == 0, result.stderr
-    assert json.loads(result.stdout)["direction_map"] == "legacy"
+    assert block_of(json.loads(result.stdout))["identity"]["direction_map"] == "legacy"
 
 
 def test_deltoctl_sim_fixture_serves_an_i2c_arm(deltoctl_sim):
@@ -22,7 +23,7 @@ def test_deltoctl_sim_fixture_serves_an_i2c_arm(deltoctl_sim):
     home = CliRunner().invoke(app, ["-p", "bioscara-arm", "-t", target, "home", "--yes",
                                     "-j", "j3", "--json"])
     assert home.exit_code == 0, home.stderr
-    assert json.loads(home.stdout)["homed"] == {"j3": "homed"}
+    assert joints_of(json.loads(home.stdout), "outcome") == {"j3": "homed"}
 
 
 def test_deltoctl_sim_buses_serves_every_bus_with_faults(deltoctl_sim):
@@ -31,7 +32,7 @@ def test_deltoctl_sim_buses_serves_every_bus_with_faults(deltoctl_sim):
     targets = [a for bus, url in buses.items() for a in ("-t", f"{bus}={url}")]
     result = CliRunner().invoke(app, ["-p", "mh5", *targets, "detect", "--json"])
     assert result.exit_code == 3  # head_y is missing
-    assert json.loads(result.stdout)["buses"]["upper_body"]["missing"] == [52]
+    assert block_of(json.loads(result.stdout), "upper_body")["details"]["missing"] == [52]
     try:
         deltoctl_sim("mh5")
     except ValueError as exc:

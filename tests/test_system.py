@@ -139,10 +139,10 @@ def test_a_joint_outside_the_chosen_blocks_is_a_usage_error(cli):
 
 
 def test_sim_serve_serves_every_block(cli):
+    import contextlib
+
     from deltoctl.profile.catalog import load_profile
     from deltoctl.sim.serve import ServeOptions, serve_profile
-
-    import contextlib
 
     with contextlib.ExitStack() as stack:
         served = serve_profile(stack, load_profile(BIMANUAL), ServeOptions())
