@@ -19,7 +19,7 @@ from deltoctl.cli.device_cmd import (
 )
 from deltoctl.cli.output import emit_json, info, progress
 from deltoctl.core.runner import Sink
-from deltoctl.errors import InvalidInput
+from deltoctl.errors import DeviceError, InvalidInput
 
 SHOW_PERIOD = 0.25  # s between updates of the status line people watch
 
@@ -82,11 +82,12 @@ def record(
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
-    valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back."""
+    valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back, 1 when
+    the file could not be written to the end (disk full, file too large, removed)."""
     import dataclasses
 
     from deltoctl import __version__
-    from deltoctl.core.runner import run_cycles
+    from deltoctl.core.runner import interrupted_by_signals, run_cycles
     from deltoctl.profile.exporter import to_yaml
     from deltoctl.record.recorder_process import RecorderProcess
 
@@ -94,21 +95,24 @@ def record(
     check_loop(rate, duration)
     if not output.parent.is_dir():
         raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
-    # the file is created once the devices answer: an unreachable one leaves no empty file
-    with open_system(opts, allow_model_mismatch) as system:
+    # the file is created once the devices answer: an unreachable one leaves no empty file;
+    # SIGTERM and SIGHUP before the loop interrupt like Ctrl-C, so the file is finished too
+    with interrupted_by_signals(), open_system(opts, allow_model_mismatch) as system:
         _create(output)
         recorded = dataclasses.replace(system.profile, hardware=[m.hw for m in system])
         identities = {m.name: {"family": m.family.name, "target": m.url,
                                **m.driver.identify()} for m in system.able("identify")}
-        recorder = RecorderProcess(output, recorded, {
+        with RecorderProcess(output, recorded, {
             "profile": {"name": recorded.name, "yaml": to_yaml(recorded)},
             "identify": {name: json.dumps(ident, default=str)
                          for name, ident in identities.items()},
             "deltoctl": {"version": __version__},
-        }, tuple(system.extra_states()))
-        links = LinkWatch(system)
-        stats = run_cycles(system, rate, duration, [
-            RecordSink(recorder, output, duration, progress(opts, elapsed=True)), links])
+        }, tuple(system.extra_states())) as recorder:
+            links = LinkWatch(system)
+            stats = run_cycles(system, rate, duration, [
+                RecordSink(recorder, output, duration, progress(opts, elapsed=True)), links])
+    if recorder.error:  # a write failed or the file was removed: the message says what is left
+        raise DeviceError(recorder.error)
     summary = stats.summary()
     result = {"output": str(output), "messages": recorder.counts,
               "link_losses": recorder.link_losses, "loop": summary}

@@ -7,10 +7,14 @@ orientation, per IMU), /gpio (control_msgs/DynamicInterfaceGroupValues, with
 system/connection_status), /diagnostics (link events and loop statistics). The resolved
 profile and the identify result are stored as metadata. ``close()`` always leaves a valid,
 indexed file. Messages are CDR-encoded from precompiled layouts (record/cdr.py).
+
+``McapFile`` is the output file as the recorder process writes it: a readable MCAP at every
+moment, also when a write fails (disk full, file too large) or the process is killed.
 """
 
 from __future__ import annotations
 
+import os
 from operator import itemgetter
 from typing import Any, BinaryIO
 
@@ -44,6 +48,7 @@ class McapRecorder:
 
         from deltoctl import __version__
 
+        self.stream = stream
         self.writer = Writer(stream)
         self.writer.start(profile="ros2", library=f"deltoctl {__version__}")
         self.schemas = {name: self.writer.register_schema(name, "ros2msg", text.encode())
@@ -175,16 +180,165 @@ class McapRecorder:
                 w.string(key).string(str(value))
         self._emit("/diagnostics", w.bytes(), t_ns)
 
+    def flush(self) -> None:
+        """Write the chunk in progress: what is recorded is on disk within a flush."""
+        flush = getattr(self.writer, "flush", None)  # older mcap releases lack it
+        if flush is not None:
+            flush()
+
     def close(self, loop_summary: dict[str, Any] | None = None, t_ns: int = 0) -> None:
         """Finish the file; with the loop's final statistics, as a last diagnostic (a warning
-        when the link was lost) and as the ``recording`` metadata."""
+        when the link was lost) and as the ``recording`` metadata. A ``McapFile`` that failed
+        keeps the end it has: a whole file with every record written before the failure."""
         if self.closed:
             return
         self.closed = True
+        if getattr(self.stream, "error", None) is not None:
+            return
         if loop_summary is not None:
             self.diagnostic(t_ns, WARN if self.link_losses else OK, "loop",
                             "record loop (final)", loop_summary)
             self.writer.add_metadata("recording", {
                 "link_losses": str(self.link_losses),
                 **{k: str(v) for k, v in loop_summary.items()}})
+        finishing = getattr(self.stream, "finishing", None)
+        if finishing is not None:  # the last chunk while the file still ends validly
+            self.flush()
+            finishing()
         self.writer.finish()
+
+
+MAGIC = b"\x89MCAP0\r\n"
+
+
+def _provisional_end() -> bytes:
+    """Data End, a Footer that points to no summary, the magic: what makes the records before
+    it a whole MCAP file (readers then scan the records; make_reader does)."""
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import DataEnd, Footer
+
+    builder = RecordBuilder()
+    DataEnd(0).write(builder)
+    Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
+    return builder.end() + MAGIC
+
+
+def _pwrite_all(fd: int, data: bytes, offset: int) -> None:
+    view = memoryview(data)
+    while view:
+        n = os.pwrite(fd, view, offset)
+        view, offset = view[n:], offset + n
+
+
+class McapFile:
+    """The output file as mcap's Writer sees it (``write``, ``tell``, ``flush``), a readable
+    MCAP at every moment.
+
+    Each group of records the Writer hands over (a chunk, its message indexes, a metadata
+    record) is followed on disk by a provisional end, which the next group overwrites; the
+    provisional end goes first, beyond the group, so even a process killed between the two
+    writes leaves a file that reads. A group that cannot be written (disk full, file too large,
+    an I/O error) is taken back whole and the provisional end put back, so the file keeps every
+    group written before it; the error is raised then and by every later write. ``finishing``
+    turns the provisional ends off for the Writer's own summary and footer.
+    """
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_TRUNC | getattr(os, "O_CLOEXEC", 0),
+                          0o666)
+        self.tail = _provisional_end()
+        self.end = 0  # the Writer's bytes on disk
+        self.tail_at: int | None = None  # where the provisional end on disk starts
+        self.provisional = True
+        self.error: OSError | None = None
+        self.removed = False  # the file was unlinked (its directory removed) while written
+
+    def tell(self) -> int:
+        return self.end
+
+    def flush(self) -> None:
+        """Nothing is buffered: every write goes to the file at once."""
+
+    def write(self, data: bytes) -> int:
+        if self.error is not None:
+            raise self.error
+        at, size = self.end, len(data)
+        if not size:
+            return 0
+        try:
+            if self.provisional and at + size > len(MAGIC):  # a header on disk: end it
+                _pwrite_all(self.fd, self.tail, at + size)
+                _pwrite_all(self.fd, data, at)
+                self.tail_at = at + size
+            else:
+                _pwrite_all(self.fd, data, at)
+        except OSError as exc:
+            self.error = exc
+            self._take_back()
+            raise
+        self.end = at + size
+        self.removed = os.fstat(self.fd).st_nlink == 0
+        return size
+
+    def _take_back(self) -> None:
+        """The file as it was before the failed group: its provisional end rewritten in place
+        (on blocks it already had, so a full disk cannot refuse it)."""
+        try:
+            if self.tail_at is None:
+                os.ftruncate(self.fd, self.end)
+            else:
+                os.ftruncate(self.fd, self.tail_at + len(self.tail))
+                _pwrite_all(self.fd, self.tail, self.tail_at)
+        except OSError:
+            pass  # nothing more can be done; the error already raised says why
+
+    def finishing(self) -> None:
+        """The Writer's summary and footer come next: no provisional ends between them."""
+        self.provisional = False
+
+    @property
+    def readable(self) -> bool:
+        """The file on disk is a whole MCAP: its header was written, so an end follows."""
+        return self.tail_at is not None
+
+    def _trim(self) -> None:
+        """A finished file loses the provisional end that followed its own."""
+        if not self.provisional and self.error is None:
+            os.ftruncate(self.fd, self.end)
+
+    def close(self) -> None:
+        if self.fd < 0:
+            return
+        try:
+            self._trim()
+        finally:
+            os.close(self.fd)
+            self.fd = -1
+
+    def save_copy(self) -> str:
+        """Copy the file, removed while written, to its directory if that is still there,
+        else to the temporary directory, under a name not taken; returns the copy's path."""
+        import shutil
+        import tempfile
+
+        folder, name = os.path.split(os.path.abspath(self.path))
+        if not os.path.isdir(folder):
+            folder = tempfile.gettempdir()
+        stem, ext = os.path.splitext(name)
+        self._trim()
+        for n in range(1000):
+            target = os.path.join(folder, name if n == 0 else f"{stem}-{n}{ext}")
+            try:
+                fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            except FileExistsError:
+                continue
+            os.lseek(self.fd, 0, os.SEEK_SET)
+            try:
+                with open(self.fd, "rb", closefd=False) as src, open(fd, "wb") as dst:
+                    shutil.copyfileobj(src, dst, 1 << 20)
+            except OSError:
+                os.unlink(target)  # no half copy that looks like a recording
+                raise
+            return target
+        raise FileExistsError(f"no free name for {name} in {folder}")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+import os
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
@@ -22,14 +24,47 @@ def parse_serial_url(url: str) -> tuple[str, int, bool]:
     return parts.path, baud, rs485
 
 
+# errno of a port another process holds: its flock (pyserial's exclusive), or TIOCEXCL
+_BUSY = frozenset({errno.EAGAIN, errno.EWOULDBLOCK, errno.EBUSY})
+
+
+def holders(path: str) -> list[str]:
+    """Who has the port open, ``name (pid N)`` each, as far as /proc lets us see (other users'
+    processes need root); empty where there is no /proc."""
+    target = os.path.realpath(path)
+    found = []
+    try:
+        pids = [p for p in os.listdir("/proc") if p.isdigit()]
+    except OSError:
+        return []
+    for pid in pids:
+        try:
+            if not any(os.readlink(f"/proc/{pid}/fd/{fd}") == target
+                       for fd in os.listdir(f"/proc/{pid}/fd")):
+                continue
+            with open(f"/proc/{pid}/comm") as comm:
+                name = comm.read().strip()
+        except OSError:  # gone meanwhile, or not ours to look at
+            continue
+        found.append(f"this deltoctl (pid {pid})" if int(pid) == os.getpid()
+                     else f"{name} (pid {pid})")
+    return found
+
+
 def open_serial(url: str, timeout: float = 0.05) -> Any:
-    """An open pyserial port; RS-485 mode through the kernel where the port supports it."""
+    """An open pyserial port, locked for this process (two commands cannot share a bus); RS-485
+    mode through the kernel where the port supports it."""
     import serial
 
     path, baud, rs485 = parse_serial_url(url)
     try:
-        port = serial.Serial(path, baudrate=baud, timeout=timeout)
+        port = serial.Serial(path, baudrate=baud, timeout=timeout, exclusive=True)
     except (serial.SerialException, OSError) as exc:
+        if getattr(exc, "errno", None) in _BUSY:
+            who = ", ".join(holders(path)) or "another program"
+            raise Unreachable(f"{path} is busy: open in {who}",
+                              hint=f"stop it and try again (`fuser -v {path}` lists what "
+                                   "holds the port)") from None
         raise Unreachable(f"cannot open {path}: {exc}",
                           hint="check the adapter is plugged in and you may use it "
                                "(the dialout group)") from None

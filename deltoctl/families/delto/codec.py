@@ -18,7 +18,6 @@ from deltoctl.errors import ProtocolError
 from deltoctl.families.delto.models import (
     FT_TYPES,
     MODELS,
-    SENSOR_NONE,
     TACTILE_M,
     TACTILE_S,
     DeltoModel,
@@ -153,13 +152,28 @@ class DataRecord:
     gpio: tuple[bool, bool, bool, bool] | None = None  # output 1..3, input 1
 
 
+# Each fingertip's block per sensor type: its struct format and how many values it holds.
+# A type the gripper reports beyond these has no block (the vendor's parser reads none).
+SENSOR_BLOCKS = {**dict.fromkeys(FT_TYPES, ("6h", 6)), TACTILE_M: ("15B", 15),
+                 TACTILE_S: ("18H", 18)}
+
+
+def sensor_block(model: DeltoModel, codes: tuple[int, ...],
+                 sensor_type: int) -> tuple[str, int] | None:
+    """The fingertip block a GET_DATA reply carries per finger, or None: one rule for the
+    reply's size and its fields' positions, whatever the SensorType byte says."""
+    if FINGERTIP_SENSOR not in codes or model.legacy:
+        return None
+    return SENSOR_BLOCKS.get(sensor_type)
+
+
 @lru_cache(maxsize=64)
 def _reply_layout(model: DeltoModel, codes: tuple[int, ...], sensor_type: int) -> struct.Struct:
     """One precompiled struct for a whole GET_DATA reply body: the hot path of every cycle."""
     fmt = ">" + ("Bhh" if model.legacy else "Bhhhb") * model.motors
-    if FINGERTIP_SENSOR in codes and not model.legacy and sensor_type != SENSOR_NONE:
-        per_finger = {TACTILE_M: "15B", TACTILE_S: "18H"}.get(sensor_type, "6h")
-        fmt += per_finger * model.fingers
+    block = sensor_block(model, codes, sensor_type)
+    if block is not None:
+        fmt += block[0] * model.fingers
     if GPIO in codes and not model.legacy:
         fmt += "4B"
     return struct.Struct(fmt)
@@ -181,15 +195,15 @@ def reply_fields(model: DeltoModel, codes: tuple[int, ...],
     fields["temperature"] = tuple((m * 5 + 3, 0.1) for m in motors)
     fields["velocity"] = tuple((m * 5 + 4, RPM_TO_RAD_S) for m in motors)
     at = model.motors * 5
-    if FINGERTIP_SENSOR in codes and sensor_type != SENSOR_NONE:
+    block = sensor_block(model, codes, sensor_type)
+    if block is not None:
+        width = block[1] * model.fingers
         if sensor_type in FT_TYPES:  # F in 0.1 N, T in 0.001 N·m
             scales = (0.1, 0.1, 0.1, 0.001, 0.001, 0.001)
-            fields["ft"] = tuple((at + f * 6 + k, scales[k])
-                                 for f in range(model.fingers) for k in range(6))
+            fields["ft"] = tuple((at + k, scales[k % 6]) for k in range(width))
         else:  # tactile cells, as read
-            width = 15 if sensor_type == TACTILE_M else 18
-            fields["tactile"] = tuple((at + k, 1) for k in range(model.fingers * width))
-        at += len(fields.get("ft", fields.get("tactile", ())))
+            fields["tactile"] = tuple((at + k, 1) for k in range(width))
+        at += width
     if GPIO in codes:
         fields["gpio"] = tuple((at + k, 1) for k in range(4))
     return fields
@@ -239,14 +253,15 @@ def encode_data_reply(record: DataRecord, model: DeltoModel, codes: tuple[int, .
         temperature = [round(t * 10) for t in record.temperature[:n]]
         velocity = [round(v * (1.0 / RPM_TO_RAD_S)) for v in record.velocity[:n]]
         values = list(chain.from_iterable(zip(ids, position, current, temperature, velocity)))
-    if FINGERTIP_SENSOR in codes and not model.legacy and sensor_type != SENSOR_NONE:
+    block = sensor_block(model, codes, sensor_type)
+    if block is not None:
         for f in range(model.fingers):
             if sensor_type in FT_TYPES:
                 fx, fy, fz, tx, ty, tz = record.ft[f]
                 values += (round(fx * 10), round(fy * 10), round(fz * 10),
                            round(tx * 1000), round(ty * 1000), round(tz * 1000))
             else:
-                values += record.tactile[f][: 15 if sensor_type == TACTILE_M else 18]
+                values += record.tactile[f][: block[1]]
     if GPIO in codes and not model.legacy:
         values += (1 if b else 0 for b in (record.gpio or (False,) * 4))
     layout = _reply_layout(model, codes, sensor_type)
