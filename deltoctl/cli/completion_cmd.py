@@ -19,7 +19,9 @@ def completion_script(shell: str) -> str:
 def register(app: typer.Typer) -> None:
     @app.command("completion")
     def completion(
-        shell: Annotated[str, typer.Argument(help="bash, zsh or fish.")],
+        shell: Annotated[str, typer.Argument(
+            help="bash, zsh or fish.",
+            autocompletion=lambda incomplete: [s for s in SHELLS if s.startswith(incomplete)])],
     ) -> None:
         """Print the completion script for a shell (see README: Shell completion)."""
         from deltoctl.errors import InvalidInput

@@ -253,7 +253,11 @@ def select(names: list[str], patterns: list[str]) -> list[str]:
     globs = [p for item in patterns for p in item.split(",") if p]
     chosen = [n for n in names if any(fnmatch.fnmatchcase(n, g) for g in globs)]
     if not chosen:
-        raise InvalidInput(f"--interfaces {','.join(globs)} matches no interface")
+        from deltoctl.suggest import did_you_mean
+
+        typed = globs[0].translate(str.maketrans("", "", "*?[]")) if globs else ""
+        raise InvalidInput(f"--interfaces {','.join(globs)} matches no interface"
+                           + did_you_mean(typed, names))
     return chosen
 
 
@@ -368,9 +372,9 @@ class LinkWatch(Sink):
 def live_tables(sample: dict[str, Any], title: str) -> Any:
     """One row per part and a column per interface: a table for each set of interfaces
     (joints, F/T sensors, GPIO), so a hand of 20 joints fits on a screen; the links' states in
-    the title."""
+    the title. Laid out for the console it is drawn on: columns that do not fit its width go
+    to a table of their own below (the part's name repeated), so no value is ever cut."""
     from rich import box
-    from rich.console import Group
     from rich.table import Table
 
     parts: dict[str, dict[str, Any]] = {}
@@ -386,15 +390,38 @@ def live_tables(sample: dict[str, Any], title: str) -> Any:
         down = [p for p, v in links.items() if not v]
         title += (" · links up" if overall else
                   f" · [bold red]link lost: {', '.join(down) or 'reconnecting'}[/]")
-    tables: dict[tuple[str, ...], Table] = {}
+    sets: dict[tuple[str, ...], list[tuple[str, list[str]]]] = {}
     for part, values in parts.items():
-        columns = tuple(values)
-        if columns not in tables:
-            tables[columns] = t = Table(title=None if tables else title, title_justify="left",
-                                        box=box.SIMPLE_HEAD)
-            t.add_column(no_wrap=True)
-            for column in columns:
-                t.add_column(column, justify="right")
-        tables[columns].add_row(part, *("—" if v is None else f"{v:.4g}"
-                                        for v in values.values()))
-    return Group(*tables.values())
+        sets.setdefault(tuple(values), []).append(
+            (part, ["—" if v is None else f"{v:.4g}" for v in values.values()]))
+
+    def chunks(columns: tuple[str, ...], rows: list, width: int) -> list[list[int]]:
+        """Column indexes per table: as many as fit ``width`` (a column costs its text + 3,
+        a table 1 more)."""
+        start = used = max(len(p) for p, _ in rows) + 4
+        out: list[list[int]] = [[]]
+        for i, column in enumerate(columns):
+            cost = max([len(column)] + [len(r[i]) for _, r in rows]) + 3
+            if out[-1] and used + cost > width:
+                out.append([])
+                used = start
+            out[-1].append(i)
+            used += cost
+        return out
+
+    class Tables:
+        def __rich_console__(self, console: Any, options: Any) -> Any:
+            first = True
+            for columns, rows in sets.items():
+                for chunk in chunks(columns, rows, options.max_width):
+                    t = Table(title=title if first else None, title_justify="left",
+                              box=box.SIMPLE_HEAD)
+                    first = False
+                    t.add_column(no_wrap=True)
+                    for i in chunk:
+                        t.add_column(columns[i], justify="right", overflow="fold")
+                    for part, cells in rows:
+                        t.add_row(part, *(cells[i] for i in chunk))
+                    yield t
+
+    return Tables()

@@ -1,10 +1,10 @@
 """The ``deltoctl`` application: global options, error handling and the verb registry.
 
 Global options are accepted before the verb and after it (``deltoctl --json identify`` and
-``deltoctl identify --json``): the root group moves them to the front before parsing.
+``deltoctl identify --json -yq``): the root group moves them to the front before parsing.
+Every verb's help lists them in a "Global options" panel, with an example and the exit codes.
 """
 
-import re
 import sys
 from typing import Annotated, Any
 
@@ -19,10 +19,37 @@ from deltoctl.errors import DeltoctlError
 # option spellings → whether they take a value
 GLOBAL_OPTIONS: dict[str, bool] = {
     "--profile": True, "-p": True, "--target": True, "-t": True, "--arg": True,
-    "--package-path": True, "--hardware": True, "--xacro": False, "--sim": False,
-    "--json": False, "--yes": False, "-y": False, "--verbose": False, "--quiet": False, "-q": False,
+    "--package-path": True, "--hardware": True, "--log-file": True, "--xacro": False,
+    "--sim": False, "--json": False, "--yes": False, "-y": False, "--verbose": False,
+    "-v": False, "--quiet": False, "-q": False,
 }
-_VERBOSE = re.compile(r"^-v+$")
+# single letters of the global short options, for clusters such as -yq or -vvp NAME
+SHORT_FLAGS = frozenset("yqv")
+SHORT_VALUED = frozenset("pt")
+
+
+def split_cluster(arg: str) -> tuple[str, str, bool]:
+    """A short-option cluster (``-yq``, ``-yn5``, ``-5deg``) → (its global options, the rest,
+    whether the global part still needs the next argument as its value).
+
+    The global part runs from the start up to the first letter that is not a global short
+    option; a global option that takes a value ends it, its value attached or next."""
+    if len(arg) < 2 or arg[0] != "-" or arg[1] == "-":
+        return "", arg, False
+    for i, letter in enumerate(arg[1:], start=1):
+        if letter in SHORT_VALUED:
+            return arg, "", i == len(arg) - 1
+        if letter not in SHORT_FLAGS:
+            return (arg[:i] if i > 1 else ""), "-" + arg[i:], False
+    return arg, "", False
+
+
+def _needs_value(arg: str) -> bool:
+    """Whether a global option before the verb takes the next argument (``-p NAME``,
+    ``-yp NAME``, not ``--profile=NAME``)."""
+    if arg.startswith("--"):
+        return GLOBAL_OPTIONS.get(arg, False)
+    return split_cluster(arg)[2]
 
 
 def hoist_global_options(args: list[str]) -> list[str]:
@@ -36,19 +63,31 @@ def hoist_global_options(args: list[str]) -> list[str]:
         if tail and arg == "--":
             tail.extend(args[i:])
             break
-        name = arg.split("=", 1)[0]
-        is_global = name in GLOBAL_OPTIONS or bool(_VERBOSE.match(arg))
-        takes_value = GLOBAL_OPTIONS.get(name, False) and "=" not in arg
         if not tail and not arg.startswith("-"):
             tail.append(arg)  # the verb
-        elif tail and not is_global:
-            tail.append(arg)
-        else:
-            group = hoisted if tail else head
-            group.append(arg)
-            if takes_value and i + 1 < len(args):
-                group.append(args[i + 1])
+        elif not tail:
+            head.append(arg)
+            if _needs_value(arg) and i + 1 < len(args):
+                head.append(args[i + 1])
                 i += 1
+        elif arg.startswith("--"):
+            name = arg.split("=", 1)[0]
+            if name not in GLOBAL_OPTIONS:
+                tail.append(arg)
+            else:
+                hoisted.append(arg)
+                if GLOBAL_OPTIONS[name] and "=" not in arg and i + 1 < len(args):
+                    hoisted.append(args[i + 1])
+                    i += 1
+        else:
+            ours, rest, needs_value = split_cluster(arg)
+            if ours:
+                hoisted.append(ours)
+                if needs_value and i + 1 < len(args):
+                    hoisted.append(args[i + 1])
+                    i += 1
+            if rest:
+                tail.append(rest)
         i += 1
     return head + hoisted + tail
 
@@ -61,14 +100,19 @@ VERBS = {
     "calibrate": "calibrate_cmd", "gpio": "device_cmd", "stream": "device_cmd",
     "record": "record_cmd", "torque": "servo_cmd", "reboot": "servo_cmd",
     "register": "servo_cmd",
-    "sim": "sim_cmd", "bench": "bench_cmd",
-    "completion": "completion_cmd",
+    "sim": "sim_cmd", "bench": "bench_cmd", "doctor": "doctor_cmd",
+    "completion": "completion_cmd", "help": "help_cmd",
 }
+
+EXIT_LINE = ("Exit codes: 0 ok · 1 failed · 2 usage or invalid input · 3 warnings · "
+             "4 unreachable · 5 refused for safety · 130 interrupted")
+
+TEACH = "deltoctl.teach"  # ctx.meta key: this run shows help or completes, so verbs are taught
 
 
 class DeltoctlGroup(TyperGroup):
-    """Loads verbs on demand, hoists global options, and turns DeltoctlError into one line
-    and its exit code."""
+    """Loads verbs on demand, hoists global options, suggests verbs, and turns DeltoctlError
+    into one line (one JSON object with --json) and its exit code."""
 
     def list_commands(self, ctx: Any) -> list[str]:
         return list(VERBS)
@@ -82,43 +126,106 @@ class DeltoctlGroup(TyperGroup):
             module = importlib.import_module(f"deltoctl.cli.{VERBS[cmd_name]}")
             holder = typer.Typer()
             module.register(holder)
-            self.commands.update(get_group(holder).commands)
+            loaded = get_group(holder).commands
+            if ctx.resilient_parsing or ctx.meta.get(TEACH):  # help or completion only
+                from deltoctl.cli.help_cmd import teach_verbs
+
+                teach_verbs(self, loaded)
+            self.commands.update(loaded)
         return self.commands.get(cmd_name)
 
+    def resolve_command(self, ctx: Any, args: list[str]) -> Any:
+        try:
+            return self._click_resolve_command(ctx, args)
+        except click_exceptions.UsageError as exc:
+            from deltoctl.suggest import close_matches
+
+            close = close_matches(args[0], VERBS) if args else []
+            if close:
+                exc.message = (f"{exc.message.rstrip('.')}. Did you mean "
+                               f"{', '.join(repr(c) for c in close)}?")
+            raise
+
     def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
-        return super().parse_args(ctx, hoist_global_options(list(args)))
+        args = hoist_global_options(list(args))
+        options_part = args[:args.index("--")] if "--" in args else args
+        ctx.meta[TEACH] = "-h" in options_part or "--help" in options_part
+        try:
+            return super().parse_args(ctx, args)
+        except click_exceptions.UsageError as exc:
+            if "--json" in options_part and not isinstance(
+                    exc, click_exceptions.NoArgsIsHelpError):
+                _usage_error(exc, True)
+            raise
 
     def invoke(self, ctx: Any) -> Any:
         try:
             return super().invoke(ctx)
         except DeltoctlError as exc:
-            typer.echo(f"deltoctl: error: {exc.message}", err=True)
-            if exc.hint:
-                typer.echo(f"  hint: {exc.hint}", err=True)
+            emit_error(exc.message, exc.hint, exc.exit_code, _json(ctx))
             raise typer.Exit(exc.exit_code) from None
         except KeyboardInterrupt:
-            typer.echo("deltoctl: interrupted", err=True)
+            emit_error("interrupted", None, 130, _json(ctx))
             raise typer.Exit(130) from None
+        except click_exceptions.NoArgsIsHelpError:
+            raise
+        except click_exceptions.UsageError as exc:
+            if isinstance(exc, click_exceptions.NoSuchOption):
+                _suggest_option(exc)
+            _usage_error(exc, _json(ctx))
+            raise
         except (typer.Exit, typer.Abort, click_exceptions.ClickException):
             raise
         except BrokenPipeError:  # the reader went away (`| head`): stop quietly
             import os
-            import sys
 
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             raise typer.Exit(0) from None
         except Exception as exc:  # a bug: one line for people, the traceback with -v
             if ctx.obj is not None and getattr(ctx.obj, "verbose", 0):
                 raise
-            typer.echo(f"deltoctl: internal error: {type(exc).__name__}: {exc} "
-                       "(run with -v for the traceback, and please report it)", err=True)
+            emit_error(f"internal error: {type(exc).__name__}: {exc}",
+                       "run with -v for the traceback, and please report it", 1, _json(ctx))
             raise typer.Exit(1) from None
+
+
+def _suggest_option(exc: Any) -> None:
+    """An unknown option after a verb: the nearest of its own options and the global ones
+    (which the verb's parser does not know: they were hoisted)."""
+    from deltoctl.suggest import close_matches
+
+    own = [o for p in exc.ctx.command.params for o in getattr(p, "opts", ())] if exc.ctx else []
+    names = [*own, *(o for o in GLOBAL_OPTIONS if o.startswith("--"))]
+    exc.possibilities = close_matches(exc.option_name, names)
+
+
+def emit_error(message: str, hint: str | None, exit_code: int, as_json: bool) -> None:
+    from deltoctl.cli.output import emit_error as emit  # only when something went wrong
+
+    emit(message, hint, exit_code, as_json)
+
+
+def _json(ctx: Any) -> bool:
+    """Whether --json was given (parsed by the root, or its Options built already)."""
+    return bool(getattr(ctx.obj, "json", False) or ctx.params.get("json_out"))
+
+
+def _usage_error(exc: Any, as_json: bool) -> None:
+    """A usage error as one JSON object (exit 2); without --json typer draws its panel."""
+    if not as_json:
+        return
+    where = getattr(exc, "ctx", None)
+    hint = f"see '{where.command_path} -h'" if where is not None else None
+    emit_error(exc.format_message(), hint, exc.exit_code, True)
+    raise typer.Exit(exc.exit_code)
 
 
 app = typer.Typer(
     cls=DeltoctlGroup,
     name="deltoctl",
     help="Bring-up toolkit for robot hardware: profiles, lifecycle verbs, simulated devices.",
+    epilog="Example: deltoctl -p dg-5f-right --sim identify\n\n" + EXIT_LINE
+           + " ('deltoctl help exit-codes').",
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     context_settings={"help_option_names": ["-h", "--help"]},
@@ -150,18 +257,24 @@ def root(
         "--profile", "-p", envvar="DELTOCTL_PROFILE", autocompletion=_complete_profile,
         help="Device profile: a catalog name or a YAML/URDF/xacro file.")] = None,
     target: Annotated[list[str] | None, typer.Option(
-        "--target", "-t", envvar="DELTOCTL_TARGET",
-        help="Where the device is: [BUS=]URL, e.g. tcp://169.254.186.72:502 (repeatable).")] = None,
+        "--target", "-t", envvar="DELTOCTL_TARGET", metavar="[BUS=]URL",
+        help="Where the device is, e.g. tcp://169.254.186.72:502 (repeatable).")] = None,
     sim: Annotated[bool, typer.Option(
         "--sim", help="Run against a simulated device started for this command.")] = False,
     json_out: Annotated[bool, typer.Option(
-        "--json", help="Write one JSON document (NDJSON for streams) on stdout.")] = False,
+        "--json", help="Write one JSON document (NDJSON for streams) on stdout; an error is "
+                       "one JSON object on stderr.")] = False,
     yes: Annotated[bool, typer.Option(
         "--yes", "-y", help="Do not ask for confirmation before motion.")] = False,
     verbose: Annotated[int, typer.Option(
-        "--verbose", "-v", count=True, help="More diagnostics on stderr.")] = 0,
+        "--verbose", "-v", count=True, metavar="", show_default=False,
+        help="More diagnostics on stderr: -v each link, -vv every packet too.")] = 0,
     quiet: Annotated[bool, typer.Option(
-        "--quiet", "-q", help="Fewer diagnostics on stderr.")] = False,
+        "--quiet", "-q", help="No progress or notes on stderr (results and warnings stay).")]
+        = False,
+    log_file: Annotated[str | None, typer.Option(
+        "--log-file", envvar="DELTOCTL_LOG", metavar="FILE",
+        help="Append the log and the packet trace to FILE as NDJSON.")] = None,
     xacro_arg: Annotated[list[str] | None, typer.Option(
         "--arg", metavar="NAME:=VALUE", help="A xacro argument (repeatable).")] = None,
     hardware: Annotated[list[str] | None, typer.Option(
@@ -177,23 +290,29 @@ def root(
         "--version", callback=_version, is_eager=True, help="Show the version and exit.")] = False,
 ) -> None:
     """Global options may come before or after the verb."""
-    try:
-        ctx.obj = Options(
-            profile=profile,
-            target=list(target or []),
-            sim=sim,
-            json=json_out,
-            yes=yes,
-            verbose=verbose,
-            quiet=quiet,
-            xacro_args=parse_pairs(list(xacro_arg or []), ":=", "--arg", "NAME:=VALUE"),
-            hardware=list(hardware or []),
-            xacro=xacro,
-            package_paths=parse_pairs(list(package_path or []), "=", "--package-path", "PKG=DIR"),
-        )
-    except DeltoctlError as exc:
-        typer.echo(f"deltoctl: error: {exc.message}", err=True)
-        raise typer.Exit(exc.exit_code) from None
+    _logging(verbose, log_file)
+    ctx.obj = Options(
+        profile=profile,
+        target=list(target or []),
+        sim=sim,
+        json=json_out,
+        yes=yes,
+        verbose=verbose,
+        quiet=quiet,
+        xacro_args=parse_pairs(list(xacro_arg or []), ":=", "--arg", "NAME:=VALUE"),
+        hardware=list(hardware or []),
+        xacro=xacro,
+        package_paths=parse_pairs(list(package_path or []), "=", "--package-path", "PKG=DIR"),
+    )
+
+
+def _logging(verbose: int, log_file: str | None) -> None:
+    """Logging and the packet trace, set up only when asked for (and reset when a previous
+    command in this process asked: CliRunner runs many)."""
+    if verbose or log_file or "deltoctl.trace" in sys.modules:
+        from deltoctl import trace
+
+        trace.configure(verbose, log_file)
 
 
 def main() -> None:

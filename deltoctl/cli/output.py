@@ -38,14 +38,42 @@ def _jsonable(value: Any) -> Any:
     raise TypeError(f"cannot write {type(value).__name__} as JSON")
 
 
+def emit_error(message: str, hint: str | None, exit_code: int, as_json: bool) -> None:
+    """An error on stderr: one line (and its hint) for people; with --json one object,
+    ``{"error": {"message", "hint", "exit_code"}}``, so stdout holds data only."""
+    if as_json:
+        import json
+
+        error = {"message": message, "hint": hint, "exit_code": exit_code}
+        typer.echo(json.dumps({"error": error}), err=True)
+        return
+    typer.echo(f"deltoctl: error: {message}", err=True)
+    if hint:
+        typer.echo(f"  hint: {hint}", err=True)
+
+
 def say(message: str) -> None:
-    """A line of a verb's result for people, on stdout (scripts ask for --json instead)."""
+    """A line of a verb's result for people, on stdout, whatever -q says (scripts ask for
+    --json instead)."""
     typer.echo(message)
 
 
 def info(message: str) -> None:
-    """A diagnostic line for people, on stderr."""
-    typer.echo(message, err=True)
+    """A diagnostic line for people, on stderr; -q hides it, unless it is a warning."""
+    if message.startswith("warning") or not _quiet():
+        typer.echo(message, err=True)
+
+
+def warn(message: str) -> None:
+    """A warning on stderr, shown even with -q (it explains an exit code of 3)."""
+    typer.echo(f"warning: {message}", err=True)
+
+
+def _quiet() -> bool:
+    from typer._click.globals import get_current_context
+
+    ctx = get_current_context(silent=True)
+    return ctx is not None and bool(getattr(ctx.find_root().obj, "quiet", False))
 
 
 def progress(opts: Any, transient: bool = True, elapsed: bool = False):  # type: ignore[no-untyped-def]
@@ -71,11 +99,16 @@ def table(title: str | None, columns: Sequence[str], rows: Sequence[Sequence[Any
         from rich.table import Table
 
         t = Table(title=title, header_style="bold")
-        for column in columns:
-            t.add_column(column)
+        for column in columns:  # too narrow a terminal wraps a value, never cuts it
+            t.add_column(column, overflow="fold")
         for row in cells:
             t.add_row(*row)
-        Console().print(t)
+        console = Console()
+        if _natural_width(console, t) > console.width:  # no room for the borders
+            from rich import box
+
+            t.box, t.pad_edge, t.show_edge = box.SIMPLE_HEAD, False, False
+        console.print(t)
         return
     widths = [max([len(c)] + [len(r[i]) for r in cells]) for i, c in enumerate(columns)]
     if title:
@@ -83,3 +116,10 @@ def table(title: str | None, columns: Sequence[str], rows: Sequence[Sequence[Any
     typer.echo("  ".join(c.upper().ljust(w) for c, w in zip(columns, widths)).rstrip())
     for row in cells:
         typer.echo("  ".join(v.ljust(w) for v, w in zip(row, widths)).rstrip())
+
+
+def _natural_width(console: Any, renderable: Any) -> int:
+    """The width ``renderable`` takes with all the room it wants."""
+    from rich.measure import Measurement
+
+    return Measurement.get(console, console.options.update_width(1 << 16), renderable).maximum

@@ -110,6 +110,22 @@ def complete_blocks(ctx: typer.Context, incomplete: str) -> list[str]:
     return [hw.name for hw in prof.hardware if hw.name.startswith(incomplete)]
 
 
+def complete_joints(ctx: typer.Context, incomplete: str) -> list[str]:
+    """The profile's joint names only."""
+    prof = _completion_profile(ctx)
+    if prof is None:
+        return []
+    return [j.name for j in prof.joints() if j.name.startswith(incomplete)]
+
+
+def complete_register_items(incomplete: str) -> list[str]:
+    """Control table item names as the register verbs take them (return_delay_time)."""
+    from deltoctl.families.dynamixel.control_table import XL430
+
+    names = [i.name.lower().replace(" ", "_") for i in XL430]
+    return [n for n in names if n.startswith(incomplete.lower())]
+
+
 def _complete_profile(incomplete: str) -> list[str]:
     from deltoctl.profile.catalog import catalog_names
 
@@ -251,8 +267,31 @@ def _write(text: str, output: Path | None) -> None:
     info(f"wrote {output}")
 
 
+def _written(ctx: typer.Context, prof: Any, fmt: str, text: str, output: Path | None) -> None:
+    """The converted profile: to the file or stdout; with --json, one document saying what was
+    written (the text itself in ``content`` when no file was named)."""
+    if not options(ctx).json:
+        _write(text, output)
+        return
+    if output is not None:
+        _write(text, output)
+    c = prof.counts()
+    emit_json({"profile": prof.name, "source": prof.source, "format": fmt,
+               "output": None if output is None else str(output.resolve()),
+               "bytes": len(text.encode("utf-8")),
+               "blocks": [hw.name for hw in prof.hardware],
+               "joints": c["joints"], "sensors": c["sensors"], "gpios": c["gpios"],
+               "warnings": [str(w) for w in prof.warnings],
+               **({"content": text} if output is None else {})})
+
+
 OutputOpt = Annotated[Path | None, typer.Option(
     "--output", "-o", help="Write to this file instead of stdout.")]
+FORMATS = ("urdf", "xacro", "yaml")
+
+
+def _complete_format(incomplete: str) -> list[str]:
+    return [f for f in FORMATS if f.startswith(incomplete)]
 
 
 @app.command("import")
@@ -261,11 +300,12 @@ def import_cmd(
     source: Annotated[str, typer.Argument(help="A URDF or xacro file with <ros2_control>.")],
     output: OutputOpt = None,
 ) -> None:
-    """Read a URDF/xacro's <ros2_control> blocks and write them as a YAML profile."""
+    """Read a URDF/xacro's <ros2_control> blocks and write them as a YAML profile (with
+    --json: one document naming what was written)."""
     from deltoctl.profile.exporter import to_yaml
 
     prof = options(ctx).load_profile(source)
-    _write(to_yaml(prof), output)
+    _written(ctx, prof, "yaml", to_yaml(prof), output)
 
 
 @app.command("export")
@@ -273,18 +313,22 @@ def export_cmd(
     ctx: typer.Context,
     profile: ProfileArg = None,
     fmt: Annotated[str, typer.Option(
-        "--format", "-f", help="urdf (a loadable URDF), xacro (a macro of the "
-        "<ros2_control> blocks) or yaml.")] = "urdf",
+        "--format", "-f", autocompletion=_complete_format, help="urdf (a loadable URDF), "
+        "xacro (a macro of the <ros2_control> blocks) or yaml.")] = "urdf",
     output: OutputOpt = None,
 ) -> None:
-    """Write a profile as a <ros2_control> URDF, a xacro macro, or YAML."""
+    """Write a profile as a <ros2_control> URDF, a xacro macro, or YAML (with --json: one
+    document naming what was written)."""
     from deltoctl.profile.exporter import to_urdf, to_yaml
 
-    if fmt not in ("urdf", "xacro", "yaml"):
-        raise InvalidInput(f"unknown --format {fmt!r} (expected urdf, xacro or yaml)")
+    if fmt not in FORMATS:
+        from deltoctl.suggest import did_you_mean
+
+        raise InvalidInput(f"unknown --format {fmt!r}{did_you_mean(fmt, FORMATS)}: expected "
+                           "urdf, xacro or yaml")
     prof = options(ctx).load_profile(profile)
     text = to_yaml(prof) if fmt == "yaml" else to_urdf(prof, macro=fmt == "xacro")
-    _write(text, output)
+    _written(ctx, prof, fmt, text, output)
 
 
 def register(root: typer.Typer) -> None:

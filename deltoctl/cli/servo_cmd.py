@@ -13,7 +13,33 @@ from deltoctl.errors import DeviceError, InvalidInput
 # groups that gather other groups (MH5's torque_control)
 NESTED = {"arms": ("left_arm", "right_arm"), "legs": ("left_leg", "right_leg")}
 
+
+def _complete_target(ctx: typer.Context, incomplete: str) -> list[str]:
+    """The profile's joint groups (their ``group`` param, and arms/legs), all, and joints."""
+    from deltoctl.cli.profile_cmd import _completion_profile
+
+    prof = _completion_profile(ctx)
+    if prof is None:
+        return []
+    joints = list(prof.joints())
+    groups = {str(j.params["group"]) for j in joints if j.params.get("group")}
+    groups |= {name for name, halves in NESTED.items() if set(halves) <= groups}
+    names = [*sorted(groups), "all", *(j.name for j in joints)]
+    return [n for n in names if n.startswith(incomplete)]
+
+
+def _complete_state(incomplete: str) -> list[str]:
+    return [s for s in ("on", "off") if s.startswith(incomplete)]
+
+
+def _complete_item(incomplete: str) -> list[str]:
+    from deltoctl.cli.profile_cmd import complete_register_items
+
+    return complete_register_items(incomplete)
+
+
 TargetArg = Annotated[str, typer.Argument(
+    autocompletion=_complete_target,
     help="A joint, a group (head, left_arm, right_arm, arms, left_leg, right_leg, legs) "
          "or all.")]
 
@@ -72,6 +98,7 @@ def register_get(
     ctx: typer.Context,
     joint: JointArg,
     items: Annotated[list[str] | None, typer.Argument(
+        autocompletion=_complete_item,
         help="Items to read (default: the whole table, in one read).")] = None,
 ) -> None:
     """Read control table items of one servo."""
@@ -90,7 +117,8 @@ def register_get(
 def register_set(
     ctx: typer.Context,
     joint: JointArg,
-    item: Annotated[str, typer.Argument(help="The item, e.g. return_delay_time.")],
+    item: Annotated[str, typer.Argument(autocompletion=_complete_item,
+                                        help="The item, e.g. return_delay_time.")],
     value: Annotated[int, typer.Argument(help="The raw value.")],
 ) -> None:
     """Write one control table item and read it back (asks first: a write can move)."""
@@ -115,7 +143,7 @@ def _per_block(system: Any, joints: list[str], capability: str) -> dict[Any, lis
 
 def torque(
     ctx: typer.Context,
-    state: Annotated[str, typer.Argument(help="on or off.")],
+    state: Annotated[str, typer.Argument(autocompletion=_complete_state, help="on or off.")],
     target: TargetArg = "all",
 ) -> None:
     """Switch servo torque on or off for a joint or a group."""

@@ -11,11 +11,25 @@ from deltoctl.errors import InvalidInput
 app = typer.Typer(help="Simulated devices that speak the real protocol.", no_args_is_help=True)
 
 
+def _complete_profile(incomplete: str) -> list[str]:
+    from deltoctl.cli.profile_cmd import _complete_profile as names
+
+    return names(incomplete)
+
+
+def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
+    """Joints of the PROFILE argument (or --profile), for the faults that name one."""
+    from deltoctl.cli.profile_cmd import complete_joints
+
+    return complete_joints(ctx, incomplete)
+
+
 @app.command("serve")
 def serve(
     ctx: typer.Context,
     profile: Annotated[str | None, typer.Argument(
-        metavar="[PROFILE]", help="Catalog name or file; default: --profile.")] = None,
+        metavar="[PROFILE]", autocompletion=_complete_profile,
+        help="Catalog name or file; default: --profile.")] = None,
     host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
     port: Annotated[int, typer.Option(help="TCP port (0: any free port).")] = 0,
     firmware: Annotated[str, typer.Option(
@@ -30,13 +44,16 @@ def serve(
     delay: Annotated[float, typer.Option(help="Fault: seconds added before every reply.")]
         = 0.0,
     stall: Annotated[list[str] | None, typer.Option(
+        autocompletion=_complete_joint,
         help="Fault: a joint that cannot move (repeatable).")] = None,
     missing: Annotated[list[str] | None, typer.Option(
+        autocompletion=_complete_joint,
         help="Fault: a joint (servo, I2C joint) that never answers (repeatable).")] = None,
     pace: Annotated[bool, typer.Option(
         help="Serial buses take the wire time of every byte at the baud rate the host "
              "set, as a real bus does.")] = False,
     wrong_baud: Annotated[list[str] | None, typer.Option(
+        autocompletion=_complete_joint,
         help="Fault: a servo set to another baud rate than its bus (repeatable).")] = None,
     who_am_i: Annotated[str, typer.Option(
         help="WHO_AM_I of a simulated LSM6DS3: 0x69 (LSM6DS3), 0x6A (LSM6DS3TR-C), or "

@@ -48,8 +48,10 @@ def select_blocks(profile: Profile, names: list[str] | tuple[str, ...] = ()) -> 
     known = {hw.name: hw for hw in profile.hardware}
     unknown = [n for n in names if n not in known]
     if unknown:
-        raise InvalidInput(f"--hardware {', '.join(unknown)}: {profile.name} has no such block "
-                           f"(its blocks: {', '.join(known)})")
+        from deltoctl.suggest import did_you_mean
+
+        raise InvalidInput(f"--hardware {', '.join(unknown)}: {profile.name} has no such block"
+                           f"{did_you_mean(unknown[0], known)}; its blocks: {', '.join(known)}")
     return [hw for hw in profile.hardware if hw.name in names]
 
 
@@ -200,7 +202,11 @@ class System:
             if where:
                 raise InvalidInput(f"{name} is in block {where[0]}, which this command does "
                                    "not drive (see --hardware)")
-            raise InvalidInput(f"{self.profile.name} has no joint, sensor or GPIO {name!r}")
+            from deltoctl.suggest import did_you_mean
+
+            names = [c.name for hw in self.profile.hardware for c in hw.components()]
+            raise InvalidInput(f"{self.profile.name} has no joint, sensor or GPIO {name!r}"
+                               + did_you_mean(name, names))
         return m
 
     def component(self, name: str) -> Component:

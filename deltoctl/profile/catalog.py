@@ -39,9 +39,9 @@ def resolve(spec: str) -> Path:
     candidate = catalog_dir() / f"{spec}.yaml"
     if candidate.is_file():
         return candidate
-    from difflib import get_close_matches
+    from deltoctl.suggest import close_matches
 
-    close = get_close_matches(spec, catalog_names(), n=3)
+    close = close_matches(spec, catalog_names())
     hint = f" Did you mean {', '.join(close)}?" if close else ""
     raise InvalidInput(f"no profile named {spec!r}.{hint} "
                        "Run 'deltoctl profile list' to see the catalog, or give a file path.")

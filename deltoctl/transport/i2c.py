@@ -11,10 +11,11 @@ from __future__ import annotations
 import errno
 import time
 from typing import Any
-from urllib.parse import urlsplit
+from urllib.parse import parse_qsl, urlsplit
 
 from smbus2 import i2c_msg
 
+from deltoctl import trace
 from deltoctl.errors import DeviceError, InvalidInput, Unreachable
 
 TRIES = 3
@@ -27,14 +28,30 @@ class NoAnswer(DeviceError):
 
 
 def parse_i2c_url(url: str) -> tuple[str, str, int]:
-    """``(kind, path_or_host, port)`` with kind ``dev`` or ``tcp``."""
+    """``(kind, path_or_host, port)`` with kind ``dev`` or ``tcp``; a query key, a host on a
+    kernel bus or a bad port is an error naming it."""
     parts = urlsplit(url)
-    if parts.scheme == "i2c" and parts.path:
+    expected = "expected i2c:///dev/i2c-N or i2c+tcp://HOST:PORT from `deltoctl sim serve`"
+    if parts.scheme not in ("i2c", "i2c+tcp"):
+        raise InvalidInput(f"{url!r} is not an I2C target ({expected})")
+    keys = [key for key, _ in parse_qsl(parts.query, keep_blank_values=True)]
+    if keys:
+        raise InvalidInput(f"{url!r}: unknown key {keys[0]!r} (an I2C target takes no keys)")
+    if parts.scheme == "i2c" and parts.netloc:
+        raise InvalidInput(f"{url!r}: {parts.netloc!r} is read as a host; {expected} "
+                           "(three slashes)")
+    if parts.scheme == "i2c" and parts.path and not parts.fragment:
         return "dev", parts.path, 0
-    if parts.scheme == "i2c+tcp" and parts.hostname and parts.port:
-        return "tcp", parts.hostname, parts.port
-    raise InvalidInput(f"{url!r} is not an I2C target (expected i2c:///dev/i2c-N or "
-                       "i2c+tcp://HOST:PORT from `deltoctl sim serve`)")
+    if parts.scheme == "i2c+tcp" and parts.hostname and parts.path in ("", "/"):
+        try:
+            port = parts.port
+        except ValueError:
+            port = 0
+        if port == 0:
+            raise InvalidInput(f"{url!r}: the port must be a number from 1 to 65535")
+        if port is not None:
+            return "tcp", parts.hostname, port
+    raise InvalidInput(f"{url!r} is not an I2C target ({expected})")
 
 
 def open_smbus(url: str) -> Any:
@@ -72,6 +89,9 @@ class I2CBus:
         self.stats = {"packets": 0, "errors": 0, "bytes": 0}
         self._writes: dict[tuple[int, bytes], object] = {}  # reused messages for fixed requests
         self._reads: dict[tuple[int, int], object] = {}
+        trace.link("i2c %s: open", url)
+        if trace.PACKETS:  # checked once per bus: an untraced bus's methods stay as they are
+            trace.trace_i2c(self)
 
     def _message(self, address: int, data: bytes) -> Any:
         key = (address, data)
@@ -120,6 +140,7 @@ class I2CBus:
             return False
 
     def close(self) -> None:
+        trace.link("i2c %s: closed", self.url)
         self.smbus.close()
 
 

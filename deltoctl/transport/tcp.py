@@ -6,7 +6,45 @@ import contextlib
 import socket
 import time
 
-from deltoctl.errors import DeviceError, Unreachable
+from deltoctl import trace
+from deltoctl.errors import DeviceError, InvalidInput, Unreachable
+
+DEFAULT_PORT = 502  # Modbus TCP's, which a Delto's developer mode keeps
+
+
+def parse_tcp_url(url: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
+    """``tcp://HOST[:PORT]`` → (host, port); anything else in it (a query key, a path, a
+    port out of range) is an error naming it, never silently dropped."""
+    from urllib.parse import parse_qsl, urlsplit
+
+    parts = urlsplit(url)
+    if parts.scheme != "tcp" or not parts.hostname:
+        raise InvalidInput(f"{url!r} is not a TCP target (expected tcp://HOST:PORT)")
+    keys = [key for key, _ in parse_qsl(parts.query, keep_blank_values=True)]
+    if keys:
+        raise InvalidInput(f"{url!r}: unknown key {keys[0]!r} (a tcp:// target takes no keys)")
+    if parts.path not in ("", "/") or parts.fragment or parts.username is not None:
+        raise InvalidInput(f"{url!r}: expected tcp://HOST:PORT and nothing else")
+    try:
+        port = parts.port
+    except ValueError:
+        port = -1
+    if port is not None and not 0 < port < 65536:
+        raise InvalidInput(f"{url!r}: the port must be a number from 1 to 65535")
+    _check_host(url, parts.hostname)
+    return parts.hostname, port or default_port
+
+
+def _check_host(url: str, host: str) -> None:
+    """A dotted-number host must be an IPv4 address (169.254.186.720 is a typo, not a name)."""
+    import ipaddress
+
+    if ":" in host or not host.replace(".", "").isdigit():
+        return
+    try:
+        ipaddress.IPv4Address(host)
+    except ValueError:
+        raise InvalidInput(f"{url!r}: {host} is not an IPv4 address") from None
 
 
 class LinkLost(DeviceError):
@@ -16,9 +54,11 @@ class LinkLost(DeviceError):
 class TcpLink:
     def __init__(self, host: str, port: int, connect_timeout: float = 3.0) -> None:
         self.host, self.port = host, port
+        started = time.perf_counter()
         try:
             sock = socket.create_connection((host, port), timeout=connect_timeout)
         except OSError as exc:
+            trace.link("tcp %s:%d: cannot connect: %s", host, port, exc.strerror or exc)
             raise Unreachable(
                 f"cannot connect to {host}:{port}: {exc.strerror or exc}",
                 hint="check that the device is powered, cabled and at that address "
@@ -31,6 +71,10 @@ class TcpLink:
         self.sock = sock
         self._pending = bytearray()
         self._timeout: float | None = None
+        trace.link("tcp %s:%d: connected in %.1f ms", host, port,
+                   (time.perf_counter() - started) * 1e3)
+        if trace.PACKETS:  # checked once per link: an untraced link's methods stay as they are
+            trace.trace_tcp(self)
 
     def send(self, data: bytes) -> None:
         try:
@@ -71,5 +115,6 @@ class TcpLink:
             buf += chunk
 
     def close(self) -> None:
+        trace.link("tcp %s:%d: closed", self.host, self.port)
         with contextlib.suppress(OSError):
             self.sock.close()

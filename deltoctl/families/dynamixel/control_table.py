@@ -97,5 +97,8 @@ def item_named(name: str) -> Item:
     for item in XL430:
         if item.name.lower() == key or (name.isdigit() and item.address == int(name)):
             return item
-    raise InvalidInput(f"no control table item {name!r} (e.g. return_delay_time, "
-                       "present_temperature, goal_position, or an address)")
+    from deltoctl.suggest import did_you_mean
+
+    close = did_you_mean(name, (i.name.replace(" ", "_").lower() for i in XL430))
+    raise InvalidInput(f"no control table item {name!r}{close}: give a name such as "
+                       "return_delay_time or present_temperature, or an address")

@@ -1,0 +1,157 @@
+"""``deltoctl help [exit-codes | VERB …]``: the help of deltoctl or of a verb, and the table of
+exit codes (README: Exit codes); and what every verb's help shows besides its own options: the
+global options, an example and the exit codes.
+
+Loaded only when help is shown or a command line is completed: a verb that just runs pays
+nothing for it.
+"""
+
+from typing import Annotated, Any
+
+import typer
+
+from deltoctl.cli.main import EXIT_LINE, TEACH, VERBS
+
+EXIT_CODES = (
+    (0, "ok"),
+    (1, "the device or the operation failed"),
+    (2, "usage error or invalid input (bad profile, argument or file)"),
+    (3, "finished with warnings (reconnects, data gaps, a model mismatch you allowed)"),
+    (4, "device unreachable"),
+    (5, "refused for safety (limit, not homed, no confirmation)"),
+    (130, "interrupted (Ctrl-C)"),
+)
+
+
+# one example per verb, shown in its help (command path without "deltoctl")
+EXAMPLES = {
+    "profile": "deltoctl profile show dg-5f-right rj_dg_1_2",
+    "profile list": "deltoctl profile list --json",
+    "profile show": "deltoctl profile show dg-5f-right rj_dg_1_2",
+    "profile validate": "deltoctl profile validate my_robot.yaml --strict",
+    "profile import": "deltoctl profile import robot.urdf.xacro -o robot.yaml",
+    "profile export": "deltoctl profile export dg-5f-right --format xacro -o dg5f.xacro",
+    "connect": "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 connect",
+    "identify": "deltoctl -p dg-5f-right --sim identify --json",
+    "detect": "deltoctl -p mh5 --hardware upper_body detect",
+    "home": "deltoctl -p bioscara-arm home -j j1 --yes",
+    "jog": "deltoctl -p dg-5f-right jog rj_dg_2_2 5deg -y",
+    "calibrate": "deltoctl -p dg-5f-right calibrate ft",
+    "calibrate ft": "deltoctl -p dg-5f-right calibrate ft --samples 200",
+    "gpio": "deltoctl -p rrbot-gpio gpio set flange_vacuum/vacuum on",
+    "gpio get": "deltoctl -p dg-5f-right gpio get --json",
+    "gpio set": "deltoctl -p rrbot-gpio gpio set flange_vacuum/vacuum on",
+    "stream": "deltoctl -p dg-5f-right stream --rate 50 -i 'rj_dg_1_*/position'",
+    "record": "deltoctl -p mh5 record run.mcap --duration 60",
+    "torque": "deltoctl -p mh5 torque off left_arm",
+    "reboot": "deltoctl -p mh5 reboot head_y",
+    "register": "deltoctl -p mh5 register get head_y present_temperature",
+    "register get": "deltoctl -p mh5 register get head_y present_temperature",
+    "register set": "deltoctl -p mh5 register set head_y return_delay_time 0",
+    "sim": "deltoctl sim serve mh5 --missing head_y",
+    "sim serve": "deltoctl sim serve dg-5f-right --firmware 2.7",
+    "bench": "deltoctl bench loop --duration 2",
+    "doctor": "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 doctor",
+    "completion": "deltoctl completion bash > ~/.local/share/bash-completion/completions/deltoctl",
+    "help": "deltoctl help exit-codes",
+}
+GLOBAL_PANEL = "Global options (before or after the verb)"
+_NOT_GLOBAL = ("version", "help", "install_completion", "show_completion")
+
+
+def _documented(param: Any) -> Any:
+    """A copy of a root option that only shows in a verb's help (and completes there): the
+    value itself is hoisted to the root before any parsing, so the copy never receives one."""
+    import copy
+
+    doc = copy.copy(param)
+    doc.name = f"global_{param.name}"  # apart from a verb's own (torque's TARGET argument)
+    doc.expose_value = False
+    doc.callback = None
+    doc.is_eager = False
+    doc.envvar = None  # read once, by the root
+    doc.show_envvar = False
+    doc.rich_help_panel = GLOBAL_PANEL
+    return doc
+
+
+def teach_verbs(root: Any, loaded: dict[str, Any]) -> None:
+    """Teach the verbs just loaded by the root group."""
+    globals_ = [_documented(p) for p in root.params if p.name not in _NOT_GLOBAL]
+    for name, command in loaded.items():
+        teach(command, name, globals_)
+
+
+def teach(command: Any, path: str, globals_: list[Any]) -> None:
+    """Give a verb (and its sub-verbs) the global options panel, its example and the exit
+    codes."""
+    known = {o for p in command.params for o in getattr(p, "opts", ())}
+    command.params.extend(p for p in globals_ if not known & set(p.opts))
+    command.parse_args = _lenient(command, command.parse_args)
+    example = EXAMPLES.get(path)
+    command.epilog = (f"Example: {example}\n\n" if example else "") + EXIT_LINE
+    for name, sub in getattr(command, "commands", {}).items():
+        teach(sub, f"{path} {name}", globals_)
+
+
+def _lenient(command: Any, parse: Any) -> Any:
+    """``parse_args`` that, while completing, drops a last option still waiting for its value
+    (the one being completed): click would stop there, before the arguments, and
+    ``sim serve mh5 --missing <TAB>`` would not know the profile."""
+    def parse_args(ctx: Any, args: list[str]) -> list[str]:
+        if ctx.resilient_parsing and args and _wants_value(command, args[-1]):
+            args = args[:-1]
+        return parse(ctx, args)
+
+    return parse_args
+
+
+def _wants_value(command: Any, arg: str) -> bool:
+    return any(arg in p.opts and not (p.is_flag or p.count) for p in command.params
+               if getattr(p, "param_type_name", "") == "option")
+
+
+def register(holder: typer.Typer) -> None:
+    holder.command("help")(help_cmd)
+
+
+def _complete_topic(incomplete: str) -> list[str]:
+    return [t for t in ("exit-codes", *VERBS) if t.startswith(incomplete)]
+
+
+def help_cmd(
+    ctx: typer.Context,
+    topic: Annotated[list[str] | None, typer.Argument(
+        metavar="[exit-codes | VERB...]", autocompletion=_complete_topic,
+        help="exit-codes, or a verb (e.g. register get).")] = None,
+) -> None:
+    """Show the help of deltoctl, of a verb, or the exit codes."""
+    words = list(topic or [])
+    if words == ["exit-codes"]:
+        _exit_codes(ctx)
+        return
+    command, cctx = ctx.find_root().command, ctx.find_root()
+    cctx.meta[TEACH] = True  # the verbs loaded from here on show the global options
+    for word in words:
+        sub = command.get_command(cctx, word) if hasattr(command, "get_command") else None
+        if sub is None:
+            from deltoctl.errors import InvalidInput
+            from deltoctl.suggest import did_you_mean
+
+            names = [*getattr(command, "list_commands", lambda _: [])(cctx), "exit-codes"]
+            raise InvalidInput(f"no help topic {' '.join(words)!r}" + did_you_mean(word, names))
+        cctx = sub.make_context(word, [], parent=cctx, resilient_parsing=True)
+        command = sub
+    text = command.get_help(cctx)  # rich prints it itself and returns ""
+    if text:
+        typer.echo(text)
+
+
+def _exit_codes(ctx: typer.Context) -> None:
+    from deltoctl.cli.context import options
+    from deltoctl.cli.output import emit_json, table
+
+    if options(ctx).json:
+        emit_json([{"code": c, "meaning": m} for c, m in EXIT_CODES])
+    else:
+        table(None, ["code", "meaning"], EXIT_CODES)
