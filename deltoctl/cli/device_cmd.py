@@ -8,7 +8,15 @@ from typing import Annotated, Any
 import typer
 
 from deltoctl.cli.context import Options, options
-from deltoctl.cli.output import emit_json, emit_json_line, info, say, stdout_is_terminal, table
+from deltoctl.cli.output import (
+    emit_json,
+    emit_json_line,
+    info,
+    say,
+    stdout_is_terminal,
+    table,
+    warn,
+)
 from deltoctl.core.runner import Sink
 from deltoctl.errors import WARNINGS, DeviceError, InvalidInput
 
@@ -45,7 +53,7 @@ def finish(system: Any, extra: list[str] | None = None) -> None:
     allowed, reconnects)."""
     warnings = system.warnings() + (extra or [])
     for w in warnings:
-        info(f"warning: {w}")
+        warn(w)
     if warnings:
         raise typer.Exit(WARNINGS)
 
@@ -173,6 +181,22 @@ def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> N
            if mismatches else None)
 
 
+def _gpio_command(system: Any, output: str) -> str:
+    """The GPIO command interface a bare name (``output_2``) means: the one of that name."""
+    found = [n for m in system for c in m.hw.gpios for n in c.interface_names("command")
+             if n.endswith("/" + output)]
+    if len(found) == 1:
+        return found[0]
+    if found:
+        raise InvalidInput(f"{output} is ambiguous: name one of {', '.join(found)}")
+    from deltoctl.suggest import did_you_mean
+
+    commands = [n for m in system for c in m.hw.gpios for n in c.interface_names("command")]
+    raise InvalidInput(f"{system.profile.name} has no GPIO output {output!r}"
+                       + (did_you_mean(output, commands) or
+                          f" (its outputs: {', '.join(commands) or 'none'})"))
+
+
 def _gpio_names(system: Any) -> list[str]:
     return [n for m in system for c in m.hw.gpios for n in c.interface_names("state")]
 
@@ -228,8 +252,8 @@ def gpio_set(
         raise InvalidInput(f"value must be on, off or a number, got {value!r}") from None
     if not math.isfinite(number):
         raise InvalidInput(f"value must be finite, got {value!r}")
-    full = name if "/" in name else f"gpio/{name}"
     with open_system(opts) as system:
+        full = name if "/" in name else _gpio_command(system, name)
         m = system.member(full)
         if not m.can("gpio"):
             raise InvalidInput(f"{m.name} has no GPIO outputs to set")
@@ -240,7 +264,7 @@ def gpio_set(
         raise DeviceError(f"{full} reads back {after[full]:g} after setting it to {number:g}")
     if opts.json:
         emit_json({n: after[n] for n in names if n in after})
-    elif not opts.quiet:
+    else:
         say(f"{full} = {number:g}")
     finish(system)
 
@@ -334,8 +358,7 @@ def stream(
                 else LiveSink(names, rate))
         links = LinkWatch(system)
         run_cycles(system, rate, duration, [sink, links])
-    if not opts.quiet:
-        info(f"{sink.samples} samples of {len(names)} interfaces")
+    info(f"{sink.samples} samples of {len(names)} interfaces")
     links.finish()
     finish(system)
 

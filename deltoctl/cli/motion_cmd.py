@@ -83,7 +83,7 @@ def _move(opts: Options, system: Any, targets: dict[str, float], velocity: float
             for name, joints in groups.items()],
         "unsettled": result.unsettled,
     }
-    if not opts.json and not opts.quiet:
+    if not opts.json:
         say(f"{label}: {'settled' if result.settled else 'did not settle'} in "
             f"{result.seconds:.2f} s")
     return report
@@ -158,8 +158,14 @@ def _known(profile: Any, names: list[str]) -> list[str]:
     joints = [j.name for j in profile.joints()]
     for name in names:
         if name not in joints:
-            raise InvalidInput(f"{profile.name} has no joint {name!r}")
+            raise InvalidInput(f"{profile.name} has no joint {name!r}" + _near(name, joints))
     return names
+
+
+def _near(name: str, names: list[str]) -> str:
+    from deltoctl.suggest import did_you_mean
+
+    return did_you_mean(name, names)
 
 
 def _home_routine(opts: Options, system: Any, homing: list[str],
@@ -176,7 +182,7 @@ def _home_routine(opts: Options, system: Any, homing: list[str],
     def show(name: str, status: str, fraction: float) -> None:
         if bar is not None:
             bar.update(tasks[name], completed=fraction, description=f"{name}: {status}")
-        elif not (opts.json or opts.quiet):
+        elif not opts.json:
             info(f"{name}: {status}")
 
     blocks = []
@@ -212,7 +218,8 @@ def jog(
     profile = opts.load_profile()
     comp = profile.component(joint)
     if comp is None or comp.kind != "joint":
-        raise InvalidInput(f"{profile.name} has no joint {joint!r}")
+        raise InvalidInput(f"{profile.name} has no joint {joint!r}"
+                           + _near(joint, [j.name for j in profile.joints()]))
     if comp.command("effort") is None and comp.command("position") is None:
         raise InvalidInput(f"{joint} has no effort or position command interface to move it")
     if (delta is None) == (to is None):

@@ -237,7 +237,7 @@ def validate_cmd(
             notes = [str(w) for w in prof.warnings]
             warned = warned or bool(notes)
             results.append({"profile": spec, "ok": True, **prof.counts(), "warnings": notes})
-            if not opts.json and not opts.quiet:
+            if not opts.json:
                 c = prof.counts()
                 say(f"ok: {spec} ({c['joints']} joints, {c['sensors']} sensors, "
                     f"{c['gpios']} gpios)")

@@ -118,7 +118,7 @@ def record(
               "link_losses": recorder.link_losses, "loop": summary}
     if opts.json:
         emit_json(result)
-    elif not opts.quiet:
+    else:
         info(f"wrote {output}: {sum(recorder.counts.values())} messages on "
              f"{len(recorder.counts)} topics, {summary['cycles']} cycles at "
              f"{summary['real_rate']} Hz")

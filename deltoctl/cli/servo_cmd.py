@@ -61,9 +61,13 @@ def select_joints(profile: Any, target: str, capability: str) -> list[str]:
     groups = set(NESTED.get(target, (target,)))
     chosen = [j.name for j in joints if j.name == target or j.params.get("group") in groups]
     if not chosen:
+        from deltoctl.suggest import did_you_mean
+
         known = sorted({j.params.get("group", "") for j in joints} | set(NESTED) - {""})
-        raise InvalidInput(f"{target!r} is neither a joint nor a group of {profile.name} "
-                           f"(groups: {', '.join(known)}, all)")
+        near = did_you_mean(target, [*known, "all", *(j.name for j in joints)])
+        groups = f" (groups: {', '.join(known)}, all)"
+        raise InvalidInput(f"{target!r} is neither a joint nor a group of {profile.name}"
+                           + (near or groups))
     return chosen
 
 
@@ -181,5 +185,5 @@ def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
 def _report(opts: Any, data: dict, text: str) -> None:
     if opts.json:
         emit_json(data)
-    elif not opts.quiet:
+    else:
         say(text)

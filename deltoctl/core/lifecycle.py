@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from deltoctl import trace
 from deltoctl.errors import DeltoctlError
 
 UNCONFIGURED, INACTIVE, ACTIVE, FINALIZED = "unconfigured", "inactive", "active", "finalized"
@@ -22,7 +23,8 @@ class Lifecycle:
     """Tracks the state and the transitions taken; a failed transition goes through on_error
     back to unconfigured, as ros2_control does."""
 
-    def __init__(self) -> None:
+    def __init__(self, name: str = "") -> None:
+        self.name = name  # the block's, for the -v log
         self.state = UNCONFIGURED
         self.history: list[str] = [UNCONFIGURED]
 
@@ -35,7 +37,9 @@ class Lifecycle:
         except BaseException:
             self.state = UNCONFIGURED
             self.history.append(f"error→{UNCONFIGURED}")
+            trace.lifecycle(self.name, f"{name} failed", UNCONFIGURED)
             raise
         self.state = end
         self.history.append(end)
+        trace.lifecycle(self.name, name, end)
         return result

@@ -30,7 +30,7 @@ class Member:
     def __init__(self, hw: Hardware, family: Family, driver: Driver) -> None:
         self.hw, self.family, self.driver = hw, family, driver
         self.name = hw.name
-        self.lifecycle = Lifecycle()
+        self.lifecycle = Lifecycle(hw.name)
         self.status_key = f"{hw.name}/connection_status"
 
     @property
@@ -63,8 +63,11 @@ def parse_targets(profile: Profile, targets: list[str] | tuple[str, ...]) -> tup
         name, found, url = item.partition("=")
         if found and "://" not in name:
             if name not in profile.buses:
-                raise InvalidInput(f"--target names unknown bus {name!r} "
-                                   f"(the profile's buses: {', '.join(profile.buses)})")
+                from deltoctl.suggest import did_you_mean
+
+                raise InvalidInput(f"--target names unknown bus {name!r}"
+                                   + (did_you_mean(name, profile.buses) or
+                                      f" (the profile's buses: {', '.join(profile.buses)})"))
             named[name] = url
         else:
             bare.append(item)
@@ -158,6 +161,9 @@ class System:
             if not isinstance(exc, Exception):
                 raise exc  # Ctrl-C
         unreachable = {n: e for n, e in errors.items() if isinstance(e, Unreachable)}
+        other = [e for e in errors.values() if not isinstance(e, Unreachable)]
+        if other:  # a wrong target or a device that answers wrongly says more than silence
+            raise other[0]
         if unreachable:
             others = [m.name for m in self.members if m.name not in errors]
             hint = next(iter(unreachable.values())).hint
@@ -165,8 +171,6 @@ class System:
                 hint = f"--hardware {' --hardware '.join(others)} works on the others"
             raise Unreachable("; ".join(f"{n}: {e.message}" if n not in e.message else e.message
                                         for n, e in unreachable.items()), hint=hint)
-        if errors:
-            raise next(iter(errors.values()))
         self._owner = {c.name: m for m in self.members for c in m.hw.components()}
 
     def close(self) -> None:

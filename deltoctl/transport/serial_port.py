@@ -7,21 +7,36 @@ import os
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
+from deltoctl import trace
 from deltoctl.errors import InvalidInput, Unreachable
+
+KEYS = ("baud", "rs485")
+MAX_BAUD = 12_000_000
+_BOOL = {"1": True, "true": True, "yes": True, "0": False, "false": False, "no": False}
 
 
 def parse_serial_url(url: str) -> tuple[str, int, bool]:
+    """``serial:///dev/PORT?baud=N&rs485=1`` → (path, baud, rs485); an unknown or repeated key,
+    a baud that is not a rate, or ``serial://dev/…`` (two slashes) is an error naming it."""
     parts = urlsplit(url)
-    if parts.scheme != "serial" or not parts.path:
+    if parts.scheme != "serial" or not parts.path or parts.netloc:
         raise InvalidInput(f"{url!r} is not a serial target (expected "
-                           "serial:///dev/PORT?baud=N[&rs485=1])")
-    query = parse_qs(parts.query)
-    try:
-        baud = int(query.get("baud", ["1000000"])[0])
-    except ValueError:
-        raise InvalidInput(f"{url!r}: baud must be a number") from None
-    rs485 = query.get("rs485", ["0"])[0].lower() in ("1", "true", "yes")
-    return parts.path, baud, rs485
+                           "serial:///dev/PORT?baud=N[&rs485=1], three slashes)")
+    query = parse_qs(parts.query, keep_blank_values=True)
+    for key, values in query.items():
+        if key not in KEYS:
+            raise InvalidInput(f"{url!r}: unknown key {key!r} (a serial target takes "
+                               f"{', '.join(KEYS)})")
+        if len(values) > 1:
+            raise InvalidInput(f"{url!r}: {key} is given {len(values)} times")
+    text = query.get("baud", ["1000000"])[0]
+    if not text.isdigit() or not 0 < int(text) <= MAX_BAUD:
+        raise InvalidInput(f"{url!r}: baud must be a rate in bits per second, up to "
+                           f"{MAX_BAUD}, got {text!r}")
+    flag = query.get("rs485", ["0"])[0].lower()
+    if flag not in _BOOL:
+        raise InvalidInput(f"{url!r}: rs485 must be 1 or 0, got {flag!r}")
+    return parts.path, int(text), _BOOL[flag]
 
 
 # errno of a port another process holds: its flock (pyserial's exclusive), or TIOCEXCL
@@ -76,4 +91,7 @@ def open_serial(url: str, timeout: float = 0.05) -> Any:
                                                          rts_level_for_rx=False)
         except (ValueError, OSError, serial.SerialException):
             port.rs485_mode = None  # e.g. a USB adapter that switches direction itself
+    trace.link("serial %s: open at %d baud%s", path, baud, ", RS-485" if rs485 else "")
+    if trace.PACKETS:  # checked once per port: an untraced port keeps its own methods
+        trace.trace_serial(port, url)
     return port

@@ -8,6 +8,7 @@ from __future__ import annotations
 import struct
 from typing import Any
 
+from deltoctl import trace
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
 from deltoctl.core.loop import CommLoop
 from deltoctl.errors import DeviceError, InvalidInput, ProtocolError, Refused
@@ -177,7 +178,7 @@ class DynamixelDriver(Driver):
         from deltoctl.transport.serial_port import open_serial
 
         self.port = open_serial(self.url)
-        if hasattr(self.port, "fd"):
+        if hasattr(self.port, "fd") and not trace.PACKETS:  # traced: through the port's calls
             import select
 
             self._poll = select.poll()
