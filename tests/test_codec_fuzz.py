@@ -318,8 +318,6 @@ def test_dynamixel_fast_sync_round_trip(length, servo_ids, data):
     assert dxl.split_fast_sync(raw, length, servo_ids) == [(i, e, d) for e, i, d in blocks]
 
 
-@pytest.mark.xfail(strict=True, reason="the emulator's Fast Sync Read status is not stuffed "
-                   "while every reader (deltoctl's, dynamixel-sdk's) unstuffs status packets")
 def test_dynamixel_fast_sync_status_with_ff_ff_fd_in_its_data_round_trips():
     blocks = [(0, 1, b"\xff\xff\xfd\xfd")]  # read as stuffed: one FD goes
     raw = dxl.fast_sync_status(blocks)

@@ -288,19 +288,21 @@ def split_statuses(data: bytes) -> list[tuple[int, int, bytes]]:
 
 def fast_sync_status(blocks: list[tuple[int, int, bytes]]) -> bytes:
     """The emulator's side of a Fast Sync Read: one status packet from ID 0xFE holding
-    [ERR, ID, data, CRC] per servo, unstuffed. Each block's CRC is that of the packet up to
-    the block's end (unverified: dynamixel-sdk checks only the last, the packet's own)."""
+    [ERR, ID, data, CRC] per servo, stuffed as every status packet is. Each inner block's
+    CRC is that of the unstuffed packet up to the block's end (unverified: dynamixel-sdk
+    checks only the packet's own, the last one, over the stuffed packet as always)."""
     body = bytearray([STATUS])
     ends = []
     for error, device_id, data in blocks:
         body += bytes([error, device_id]) + data + b"\0\0"
         ends.append(len(body) - 2)
-    head = HEADER + bytes([BROADCAST_ID]) + struct.pack("<H", len(body))
-    raw = bytearray(head + body)
-    for end in ends:
-        at = len(head) + end
-        raw[at:at + 2] = struct.pack("<H", crc16(bytes(raw[:at])))
-    return bytes(raw)
+    head = HEADER + bytes([BROADCAST_ID])
+    for end in ends[:-1]:
+        prefix = head + struct.pack("<H", len(body)) + bytes(body[:end])
+        body[end:end + 2] = struct.pack("<H", crc16(prefix))
+    stuffed = stuff(bytes(body[:-2]))
+    packet = head + struct.pack("<H", len(stuffed) + 2) + stuffed
+    return packet + struct.pack("<H", crc16(packet))
 
 
 def split_fast_sync(data: bytes, length: int, ids: list[int]) -> list[tuple[int, int, bytes]]:
