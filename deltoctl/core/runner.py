@@ -44,6 +44,32 @@ def interrupted_by_signals() -> Iterator[None]:
             signal.signal(sig, handler)
 
 
+PRIORITY = 50  # SCHED_FIFO priority of a paced loop: ros2_control's controller manager's default
+
+
+@contextlib.contextmanager
+def realtime(rate: float) -> Iterator[bool]:
+    """Run a paced loop at real-time priority where the system allows it (root, or
+    CAP_SYS_NICE / an rtprio limit, as ros2_control asks of its control loop), so the devices'
+    and the recorder's processes cannot delay a cycle; quietly as before where it does not.
+    An unpaced loop never runs real-time: it would take a whole CPU from everything else."""
+    import os
+
+    if rate <= 0 or not hasattr(os, "sched_setscheduler"):
+        yield False
+        return
+    try:
+        before = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(PRIORITY))
+    except (OSError, AttributeError):
+        yield False
+        return
+    try:
+        yield True
+    finally:
+        os.sched_setscheduler(0, before[0], before[1])
+
+
 def run_cycles(system: Any, rate: float, duration: float | None, sinks: list[Sink],
                write: Callable[[dict[str, float]], None] | None = None) -> LoopStats:
     """Run until ``duration`` passes or an interrupt; returns the loop's statistics. ``write``
@@ -54,7 +80,7 @@ def run_cycles(system: Any, rate: float, duration: float | None, sinks: list[Sin
     stats = loop.stats
     next_stats = time.monotonic() + STATS_PERIOD
     try:
-        with interrupted_by_signals():
+        with interrupted_by_signals(), realtime(rate):
             for _ in loop:
                 before = sum(d.stats["errors"] for d in members)
                 values = system.read()
