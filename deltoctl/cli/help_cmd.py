@@ -54,6 +54,10 @@ EXAMPLES = {
     "doctor": "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 doctor",
     "completion": "deltoctl completion bash > ~/.local/share/bash-completion/completions/deltoctl",
     "help": "deltoctl help exit-codes",
+    "config": "deltoctl -p mh5 config snapshot",
+    "config snapshot": "deltoctl -p mh5 config snapshot -o mh5.yaml",
+    "config diff": "deltoctl -p mh5 config diff mh5.yaml",
+    "config restore": "deltoctl -p mh5 config restore mh5.yaml --allow torque-off",
 }
 GLOBAL_PANEL = "Global options (before or after the verb)"
 _NOT_GLOBAL = ("version", "help", "install_completion", "show_completion")

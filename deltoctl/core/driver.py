@@ -2,8 +2,8 @@
 
 ros2_control's lifecycle (configure, activate, read, write, stop, deactivate, cleanup), then the
 capabilities a verb may ask for (identify, detect, home, jog, calibrate_ft, gpio, registers,
-torque, reboot) — declared in the family's descriptor, so a verb asks what a block can do, never
-which family it is. Every driver is built the same way: ``DriverClass(block)``.
+torque, reboot, config) — declared in the family's descriptor, so a verb asks what a block can
+do, never which family it is. Every driver is built the same way: ``DriverClass(block)``.
 """
 
 from __future__ import annotations
@@ -170,6 +170,23 @@ class Driver:
 
     def reboot(self, joints: list[str]) -> list[str]:
         raise Unsupported(f"{self.hw.name} cannot reboot")
+
+    def config_read(self) -> dict[str, dict[str, dict[str, Any]]]:
+        """Every configurable value of the block, part → item → entry. An entry holds
+        ``value`` (int, float, str, bool or None) and ``access`` ("RW", "R", or "profile":
+        set from the profile at each start), and may hold ``unit``, ``area``, ``meaning``,
+        ``note``, ``min``/``max`` (an integer's range), ``state`` (a reading or a command,
+        never compared), ``fixed`` (writable, but restore leaves it: why), ``needs`` (written
+        only with this permission, refused otherwise: "torque-off") and ``opt_in`` (written
+        only with this permission, skipped otherwise: "home-offset")."""
+        raise Unsupported(f"{self.hw.name} cannot report its configuration")
+
+    def config_write(self, changes: dict[str, dict[str, Any]],
+                     allow: frozenset[str] = frozenset()) -> dict[str, dict[str, Any]]:
+        """Write these values (part → item → value) in the order the device requires, with
+        the permissions in ``allow``; returns part → item → the value read back. Raises
+        Refused, before writing anything, when a change needs a permission not given."""
+        raise Unsupported(f"{self.hw.name} cannot write its configuration")
 
     # -- shared by the bus drivers -------------------------------------------------------------
     def roll_call(self, missing: list[str], answered: bool, parts: str, hint: str) -> None:

@@ -14,6 +14,6 @@ FAMILY = Family(
     address_param="i2c_address",
     address_kind="I2C address",
     address_format="#04x",
-    capabilities=frozenset({"identify", "detect", "home", "jog"}),
+    capabilities=frozenset({"identify", "detect", "home", "jog", "config"}),
     serve_options=("missing", "stall"),
 )

@@ -10,6 +10,7 @@ hardware interface does on deactivate.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 from deltoctl.core.driver import Block, Driver, HomeProgress, MoveResult, Progress
 from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Refused
@@ -238,6 +239,76 @@ class BioscaraDriver(Driver):
             joint.set_velocity(value)
         else:
             raise InvalidInput(f"{name} is not a position or velocity command interface")
+
+    # -- configuration -----------------------------------------------------------------------------
+    def config_read(self) -> dict[str, dict[str, dict[str, Any]]]:
+        """Per joint that answers: what it reports (its flags, the home offset it keeps while
+        powered) and the parameters the driver sends it from the profile when enabling it
+        (the joint has no read for them)."""
+        parts = {}
+        for joint in self.present:
+            comp = next(c for c in self.hw.joints if c.name == joint.name)
+            unit = "m" if comp.joint_type == "prismatic" else "rad"
+            flags = joint.ping()
+            parts[joint.name] = {
+                "flags": {"value": flags, "access": "R", "state": True,
+                          "meaning": codec.describe_flags(flags)},
+                "home offset": {"value": joint.read_home_offset(), "access": "RW",
+                                "unit": unit, "opt_in": "home-offset",
+                                "note": "the joint's zero, stored by homing"},
+                **self._profile_entries(joint, unit),
+            }
+        return parts
+
+    @staticmethod
+    def _profile_entries(joint: Joint, unit: str) -> dict[str, dict[str, Any]]:
+        def entry(value: Any, unit: str | None = None) -> dict[str, Any]:
+            return {"value": value, "access": "profile", **({"unit": unit} if unit else {})}
+
+        homing_units = {"speed": f"{unit}/s", "acceleration": f"{unit}/s²",
+                        "current": "% of 2.5 A"}
+        return {
+            "i2c address": entry(f"{joint.address:#04x}"),
+            "reduction": entry(joint.reduction),
+            "min": entry(joint.low, unit), "max": entry(joint.high, unit),
+            "drive current": entry(joint.drive, "% of 2.5 A"),
+            "hold current": entry(joint.hold, "% of 2.5 A"),
+            "stall threshold": entry(joint.stall_threshold),
+            "max acceleration": entry(joint.max_acceleration, f"{unit}/s²"),
+            "max velocity": entry(joint.max_velocity, f"{unit}/s"),
+            **{f"homing {k}": entry(v, homing_units.get(k)) for k, v in joint.homing.items()},
+        }
+
+    def config_write(self, changes: dict[str, dict[str, Any]],
+                     allow: frozenset[str] = frozenset()) -> dict[str, dict[str, Any]]:
+        """The home offset is the one value a joint keeps: written only with ``allow``
+        "home-offset" (it moves where the joint believes it is), then read back."""
+        import math
+
+        for part, items in changes.items():
+            joint = self.joint(part)
+            for name, value in items.items():
+                if name != "home offset":
+                    raise InvalidInput(f"{part}: {name!r} is not written to the joint (the "
+                                       "driver sends its parameters from the profile)")
+                if (not isinstance(value, (int, float)) or isinstance(value, bool)
+                        or not math.isfinite(value)):
+                    raise InvalidInput(f"{part}: the home offset must be a number, not "
+                                       f"{value!r}")
+            if joint.busy:
+                raise Refused(f"{part} is busy with a blocking command (homing?)")
+        if changes and "home-offset" not in allow:
+            raise Refused(f"{', '.join(changes)}: a home offset is written only when asked",
+                          hint="pass --allow home-offset")
+        read_back = {}
+        for part, items in changes.items():
+            joint = self.joint(part)
+            joint.command(codec.write_float(codec.HOMEOFFSET, float(items["home offset"])))
+            value = joint.read_home_offset()
+            if joint.homed:  # positions read from now on count from it
+                joint.offset = value
+            read_back[part] = {"home offset": value}
+        return read_back
 
     # -- detect ------------------------------------------------------------------------------------
     def detect(self) -> dict:

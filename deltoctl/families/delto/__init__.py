@@ -13,6 +13,7 @@ FAMILY = Family(
     address_kind="motor index",
     address_by_position=True,
     endpoint_params=("delto_ip", "delto_port", 502),
-    capabilities=frozenset({"identify", "detect", "home", "jog", "calibrate_ft", "gpio"}),
+    capabilities=frozenset({"identify", "detect", "home", "jog", "calibrate_ft", "gpio",
+                            "config"}),
     serve_options=("firmware", "model_id", "short_version", "input_1", "delay", "stall"),
 )

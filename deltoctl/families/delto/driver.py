@@ -13,6 +13,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from operator import itemgetter, mul
+from typing import Any
 from urllib.parse import urlsplit
 
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
@@ -193,6 +194,56 @@ class DeltoDriver(Driver):
             "summary": f"{self.hw.name}: sensor type {sensor}, fingers with a sensor: "
                        f"{', '.join(map(str, fingers)) or 'none'}",
         }
+
+    # -- configuration ---------------------------------------------------------------------------
+    def config_read(self) -> dict[str, dict[str, dict[str, Any]]]:
+        """What the gripper says it is (GET_VERSION: model, firmware, sensor type, finger
+        mask), all read-only over this protocol; and per F/T sensor what it reads at rest
+        now: the offset is set by SET_FT_SENSOR_OFFSET but has no read, so the residual
+        after it is the trace it leaves (a reading, never compared)."""
+        ident = self.identity
+        if ident is None:
+            raise DeviceError(f"{self.hw.name}: no version reply yet (the link is down)")
+        fingers = [str(f + 1) for f in range(8) if (ident.finger_mask or 0) >> f & 1]
+        device: dict[str, dict[str, Any]] = {
+            "model": {"value": model_label(ident.reported_model), "access": "R"},
+            "configured model": {"value": model_label(ident.configured_model),
+                                 "access": "profile"},
+            "firmware": {"value": f"{ident.firmware[0]}.{ident.firmware[1]}", "access": "R"},
+            "sensor type": {"value": SENSOR_NAMES.get(ident.sensor_type or 0, "unknown"),
+                            "access": "R"},
+            "finger mask": {"value": ident.finger_mask, "access": "R", "min": 0, "max": 255,
+                            "meaning": "fingers " + (", ".join(fingers) or "none")},
+            "short version reply": {"value": ident.short_version, "access": "R"},
+            "direction map": {"value": ident.direction_map, "access": "R"},
+        }
+        return {"gripper": device, **self._ft_residuals()}
+
+    def _ft_residuals(self, samples: int = 10) -> dict[str, dict[str, dict[str, Any]]]:
+        """Each F/T sensor's mean reading over a few cycles (N, N·m)."""
+        keys = [k for sensor in self._keys["ft"] for k in sensor]
+        if not keys or self.identity is None or self.identity.sensor_type not in FT_TYPES:
+            return {}
+        sums = dict.fromkeys(keys, 0.0)
+        for _ in range(samples):
+            values = self.read()
+            for k in keys:
+                sums[k] += values.get(k, 0.0)
+        parts: dict[str, dict[str, dict[str, Any]]] = {}
+        for key, total in sums.items():
+            sensor, _, axis = key.partition("/")
+            parts.setdefault(sensor, {})[f"residual {axis}"] = {
+                "value": round(total / samples, 5), "access": "R", "state": True,
+                "unit": "N" if axis.startswith("force") else "N·m"}
+        return parts
+
+    def config_write(self, changes: dict[str, dict[str, Any]],
+                     allow: frozenset[str] = frozenset()) -> dict[str, dict[str, Any]]:
+        """Nothing of it: the developer-mode protocol writes duties, GPIO and the F/T tare
+        only."""
+        names = ", ".join(f"{part} {item}" for part, items in changes.items() for item in items)
+        raise InvalidInput(f"{self.hw.name}: {names or 'nothing'}: read-only over the "
+                           "gripper's protocol")
 
     def set_command(self, name: str, value: float) -> None:
         """GPIO outputs by interface name; the three always travel together."""

@@ -13,6 +13,6 @@ FAMILY = Family(
     address_range=(0, 252),
     address_kind="Dynamixel ID",
     capabilities=frozenset({"identify", "detect", "home", "jog", "registers", "torque",
-                            "reboot"}),
+                            "reboot", "config"}),
     serve_options=("missing", "pace", "wrong_baud"),
 )

@@ -102,3 +102,32 @@ def item_named(name: str) -> Item:
     close = did_you_mean(name, (i.name.replace(" ", "_").lower() for i in XL430))
     raise InvalidInput(f"no control table item {name!r}{close}: give a name such as "
                        "return_delay_time or present_temperature, or an address")
+
+
+# the unit of one raw step (ROBOTIS e-manual); items not named are codes, flags or counts.
+# Profile Acceleration and Velocity count ms instead when Drive Mode selects a time profile.
+UNITS = {
+    "Return Delay Time": "2 µs", "Homing Offset": "0.088°", "Moving Threshold": "0.229 rpm",
+    "Temperature Limit": "°C", "Max Voltage Limit": "0.1 V", "Min Voltage Limit": "0.1 V",
+    "PWM Limit": "0.113 %", "Velocity Limit": "0.229 rpm", "Max Position Limit": "0.088°",
+    "Min Position Limit": "0.088°", "Bus Watchdog": "20 ms", "Goal PWM": "0.113 %",
+    "Goal Velocity": "0.229 rpm", "Profile Acceleration": "214.577 rev/min²",
+    "Profile Velocity": "0.229 rpm", "Goal Position": "0.088°", "Realtime Tick": "ms",
+    "Present PWM": "0.113 %", "Present Load": "0.1 %", "Present Velocity": "0.229 rpm",
+    "Present Position": "0.088°", "Velocity Trajectory": "0.229 rpm",
+    "Position Trajectory": "0.088°", "Present Input Voltage": "0.1 V",
+    "Present Temperature": "°C",
+}
+# what a servo does or is commanded to do, not how it is configured: kept in a configuration
+# snapshot, never compared or restored (restoring a goal would move the servo)
+READINGS = frozenset({
+    "Torque Enable", "Registered Instruction", "Hardware Error Status", "Goal PWM",
+    "Goal Velocity", "Goal Position", "Realtime Tick", "Moving", "Moving Status",
+    "Present PWM", "Present Load", "Present Velocity", "Present Position",
+    "Velocity Trajectory", "Position Trajectory", "Present Input Voltage",
+    "Present Temperature", "Backup Ready",
+})
+# how the servo is addressed and answers on its bus: a restore that changed one would lose the
+# servo (the profile addresses it by ID at the bus's rate); `register set` changes them
+BUS_ITEMS = frozenset({"ID", "Baud Rate", "Protocol Type", "Status Return Level"})
+OPERATING_MODES = {1: "velocity", 3: "position", 4: "extended position", 16: "PWM"}

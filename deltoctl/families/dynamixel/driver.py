@@ -457,6 +457,118 @@ class DynamixelDriver(Driver):
         self.write_register_item(device_id, chosen, value)
         return self.read_register(device_id, chosen)
 
+    # -- configuration ---------------------------------------------------------------------------
+    def config_read(self) -> dict[str, dict[str, dict[str, Any]]]:
+        """The whole control table of every servo that answers (one read each), by item name
+        with units; EEPROM items need torque off while the servo's is on."""
+        from deltoctl.families.dynamixel.control_table import XL430
+
+        parts = {}
+        for device_id, joint in self.joints.items():
+            if device_id not in self.present:
+                continue  # configure warned already
+            table = self.read_table(device_id)
+            values = {i.name: int.from_bytes(table[i.address:i.address + i.size], "little",
+                                             signed=i.signed) for i in XL430}
+            parts[joint.name] = {i.name: self._config_entry(i, values) for i in XL430}
+        return parts
+
+    @staticmethod
+    def _config_entry(item: Item, values: dict[str, int]) -> dict[str, Any]:
+        from deltoctl.families.dynamixel.control_table import (
+            BUS_ITEMS,
+            OPERATING_MODES,
+            READINGS,
+            UNITS,
+        )
+
+        value, bits = values[item.name], item.size * 8
+        low, high = ((-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if item.signed
+                     else (0, (1 << bits) - 1))
+        entry: dict[str, Any] = {"value": value, "access": item.access,
+                                 "area": "EEPROM" if item.eeprom else "RAM",
+                                 "address": item.address, "min": low, "max": high}
+        unit = UNITS.get(item.name)
+        if item.name in ("Profile Acceleration", "Profile Velocity") and values["Drive Mode"] & 4:
+            unit = "ms"  # a time-based profile
+        if unit:
+            entry["unit"] = unit
+        bauds = {code: f"{baud} bps" for code, baud in BAUD_RATES.items()}
+        meaning = {"Baud Rate": bauds, "Operating Mode": OPERATING_MODES}.get(item.name, {})
+        if value in meaning:
+            entry["meaning"] = meaning[value]
+        if item.name in READINGS:
+            entry["state"] = True
+        elif item.name in BUS_ITEMS:
+            entry["fixed"] = ("it changes how the servo answers on its bus: use deltoctl "
+                              "register set")
+        elif item.eeprom and item.access == "RW" and values["Torque Enable"]:
+            entry["needs"] = "torque-off"
+        return entry
+
+    def config_write(self, changes: dict[str, dict[str, Any]],
+                     allow: frozenset[str] = frozenset()) -> dict[str, dict[str, Any]]:
+        """Per servo, EEPROM items then RAM items, each in address order, then one read of
+        the table. EEPROM takes writes only with torque off (as Dynamixel Wizard): a servo
+        whose torque is on is refused, before anything is written, unless ``allow`` holds
+        "torque-off"; its torque then goes off for the writes and comes back on holding where
+        the servo is, as it was found."""
+        plan = {self.servo(part): sorted(((self._restorable(part, name, value), value)
+                                          for name, value in items.items()),
+                                         key=lambda w: (not w[0].eeprom, w[0].address))
+                for part, items in changes.items()}
+        torque = BY_NAME["Torque Enable"]
+        locked = {i for i, writes in plan.items() if any(item.eeprom for item, _ in writes)
+                  and self.read_register(i, torque)}
+        if locked and "torque-off" not in allow:
+            raise Refused(f"{', '.join(self.joints[i].name for i in sorted(locked))}: EEPROM "
+                          "items are written only with torque off, and the torque is on",
+                          hint="switch it off first (deltoctl torque off), or pass --allow "
+                               "torque-off to have it switched off for the writes and on "
+                               "again (support the robot)")
+        read_back = {}
+        for device_id, writes in plan.items():
+            self._write_servo(device_id, writes, device_id in locked)
+            table = self.read_table(device_id)
+            read_back[self.joints[device_id].name] = {
+                item.name: int.from_bytes(table[item.address:item.address + item.size],
+                                          "little", signed=item.signed) for item, _ in writes}
+        return read_back
+
+    @staticmethod
+    def _restorable(part: str, name: str, value: Any) -> Item:
+        """The item, when a restore may write it (not a reading, a command or a bus
+        setting)."""
+        from deltoctl.families.dynamixel.control_table import BUS_ITEMS, READINGS
+
+        item = BY_NAME.get(name)
+        if item is None or item.access != "RW" or name in READINGS or name in BUS_ITEMS:
+            raise InvalidInput(f"{part}: {name!r} is not a control table item a restore writes")
+        try:  # checked before any write: a restore is refused whole, never half done
+            if isinstance(value, bool):
+                raise TypeError
+            value.to_bytes(item.size, "little", signed=item.signed)
+        except (AttributeError, OverflowError, TypeError):
+            raise InvalidInput(f"{part}: {name} takes an integer of {item.size} byte(s), "
+                               f"{'signed' if item.signed else 'unsigned'}, not {value!r}") \
+                from None
+        return item
+
+    def _write_servo(self, device_id: int, writes: list[tuple[Item, int]],
+                     torque_off: bool) -> None:
+        torque = BY_NAME["Torque Enable"]
+        if torque_off:
+            self.write_register_item(device_id, torque, 0)
+            self.torque_enabled.discard(device_id)
+        try:
+            for item, value in writes:
+                self.write_register_item(device_id, item, value)
+        finally:
+            if torque_off:  # on again as found, holding where the servo is now: no jump
+                here = self.read_register(device_id, BY_NAME["Present Position"])
+                self.write_register_item(device_id, BY_NAME["Goal Position"], here)
+                self.write_register_item(device_id, torque, 1)
+
     def stop(self) -> None:
         """A move still under way stops where it is (goal = present position); the torque
         stays as it was found: a humanoid must not drop when a verb ends."""

@@ -7,5 +7,5 @@ FAMILY = Family(
     summary="ros2_control mock_components/GenericSystem (in-process, no transport)",
     driver="deltoctl.families.generic.driver:GenericDriver",
     plugins=("mock_components/GenericSystem",),
-    capabilities=frozenset({"identify", "detect", "home", "jog", "gpio"}),
+    capabilities=frozenset({"identify", "detect", "home", "jog", "gpio", "config"}),
 )

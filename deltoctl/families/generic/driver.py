@@ -12,6 +12,7 @@ velocity commands.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
 from deltoctl.errors import InvalidInput
@@ -93,6 +94,37 @@ class GenericDriver(Driver):
                   "states": [i.name for i in c.state_interfaces]}
                  for c in self.hw.components()]
         return {"parts": parts, "checks": [], "summary": f"{len(parts)} simulated parts"}
+
+    def config_read(self) -> dict[str, dict[str, dict[str, Any]]]:
+        """Every state interface's value, by part; writable where a command interface of the
+        same name (or a mock_*_commands param) feeds it."""
+        parts: dict[str, dict[str, dict[str, Any]]] = {}
+        for comp in self.hw.components():
+            for itf in comp.state_interfaces:
+                key = f"{comp.name}/{itf.name}"
+                parts.setdefault(comp.name, {})[itf.name] = {
+                    "value": self.values.get(key, 0.0),
+                    "access": "RW" if key in self.commands else "R"}
+        return parts
+
+    def config_write(self, changes: dict[str, dict[str, Any]],
+                     allow: frozenset[str] = frozenset()) -> dict[str, dict[str, Any]]:
+        """Each value as a command, mirrored to its state as the mock does; read back."""
+        import math
+
+        for part, items in changes.items():
+            for name, value in items.items():
+                if f"{part}/{name}" not in self.commands:
+                    raise InvalidInput(f"{part}/{name} is not a command interface of "
+                                       f"{self.hw.name}")
+                if (not isinstance(value, (int, float)) or isinstance(value, bool)
+                        or not math.isfinite(value)):
+                    raise InvalidInput(f"{part}/{name} takes a number, not {value!r}")
+        for part, items in changes.items():
+            for name, value in items.items():
+                self.set_command(f"{part}/{name}", float(value))
+        return {part: {name: self.values.get(f"{part}/{name}") for name in items}
+                for part, items in changes.items()}
 
     def stop(self) -> None:
         """Nothing moves on its own in the mock: holding the last command is the safe state."""
