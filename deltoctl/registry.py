@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 GROUP = "deltoctl.families"
@@ -41,13 +41,18 @@ class Family:
     emulator: str | None = None  # "module:function" serving a simulated device (sim/serve.py)
     serve_options: tuple[str, ...] = ()  # the `sim serve` faults and settings it takes
     summary: str = ""
-    extras: dict[str, Any] = field(default_factory=dict, compare=False)  # family-own data
+    refused_hint: str = ""  # what to do when its TCP target refuses the connection
+    register_items: str | None = None  # "module:function" → the register names it takes
 
     def driver_class(self) -> type:
         return _load(self.driver)
 
     def emulator_function(self) -> Callable[..., Any] | None:
         return _load(self.emulator) if self.emulator else None
+
+    def register_names(self) -> list[str]:
+        """The register item names its ``register`` verbs take (completion)."""
+        return list(_load(self.register_items)()) if self.register_items else []
 
     def show_address(self, address: int) -> str:
         return format(address, self.address_format)

@@ -209,8 +209,11 @@ def _reach(bus: str, host: str, port: int, timeout: float,
     try:
         socket.create_connection((host, port), timeout=timeout).close()
     except ConnectionRefusedError:
-        fix = ("switch the gripper to developer mode (DIP switches 2 and 4) and check the port"
-               if "delto" in families else f"check that the device listens on port {port}")
+        from deltoctl import registry
+
+        hints = [f.refused_hint for f in map(registry.get, sorted(families))
+                 if f is not None and f.refused_hint]
+        fix = "; ".join(hints) or f"check that the device listens on port {port}"
         return check("reachable", bus, False, f"{host}:{port} refused the connection", fix)
     except OSError as exc:
         return check("reachable", bus, False, f"no connection to {host}:{port} within "

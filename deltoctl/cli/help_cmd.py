@@ -54,6 +54,8 @@ EXAMPLES = {
     "doctor": "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 doctor",
     "completion": "deltoctl completion bash > ~/.local/share/bash-completion/completions/deltoctl",
     "help": "deltoctl help exit-codes",
+    "info": "deltoctl info run.mcap --json",
+    "plot": "deltoctl plot run.mcap 'rj_dg_1_*/position' --out plot.png",
     "config": "deltoctl -p mh5 config snapshot",
     "config snapshot": "deltoctl -p mh5 config snapshot -o mh5.yaml",
     "config diff": "deltoctl -p mh5 config diff mh5.yaml",

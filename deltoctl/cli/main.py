@@ -95,7 +95,7 @@ def hoist_global_options(args: list[str]) -> list[str]:
 # verb → the module of deltoctl.cli whose register(app) adds it. A module is imported only
 # when one of its verbs runs: every line of a bring-up script pays for what it imports.
 VERBS = {
-    "config": "config_cmd",
+    "config": "config_cmd", "info": "data_cmd", "plot": "data_cmd",
     "profile": "profile_cmd", "connect": "device_cmd", "identify": "device_cmd",
     "detect": "device_cmd", "home": "motion_cmd", "jog": "motion_cmd",
     "calibrate": "calibrate_cmd", "gpio": "device_cmd", "stream": "device_cmd",

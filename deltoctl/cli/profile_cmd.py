@@ -118,12 +118,16 @@ def complete_joints(ctx: typer.Context, incomplete: str) -> list[str]:
     return [j.name for j in prof.joints() if j.name.startswith(incomplete)]
 
 
-def complete_register_items(incomplete: str) -> list[str]:
-    """Control table item names as the register verbs take them (return_delay_time)."""
-    from deltoctl.families.dynamixel.control_table import XL430
+def complete_register_items(ctx: typer.Context, incomplete: str) -> list[str]:
+    """Register item names of the profile's families that have registers (return_delay_time)."""
+    from deltoctl import registry
 
-    names = [i.name.lower().replace(" ", "_") for i in XL430]
-    return [n for n in names if n.startswith(incomplete.lower())]
+    prof = _completion_profile(ctx)
+    if prof is None:
+        return []
+    families = {registry.of_block(prof.family_of(hw), hw.plugin) for hw in prof.hardware}
+    names = [n for f in families if f is not None for n in f.register_names()]
+    return [n for n in dict.fromkeys(names) if n.startswith(incomplete.lower())]
 
 
 def _complete_profile(incomplete: str) -> list[str]:

@@ -80,6 +80,11 @@ def record(
     rate: RateOpt = 100.0,
     duration: DurationOpt = None,
     allow_model_mismatch: AllowMismatch = False,
+    gpio_type: Annotated[str, typer.Option(
+        "--gpio-type", metavar="TYPE",
+        help="/gpio's type: group-values (control_msgs/DynamicInterfaceGroupValues, control_msgs "
+             "4.7+ on Humble, 5.3+ on Jazzy) or joint-state (control_msgs/DynamicJointState, "
+             "every control_msgs).")] = "group-values",
 ) -> None:
     """Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
     valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back, 1 when
@@ -93,6 +98,10 @@ def record(
 
     opts = options(ctx)
     check_loop(rate, duration)
+    from deltoctl.record.ros2_msgs import GPIO_TYPES
+
+    if gpio_type not in GPIO_TYPES:
+        raise InvalidInput(f"--gpio-type {gpio_type!r}: one of {', '.join(GPIO_TYPES)}")
     if not output.parent.is_dir():
         raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
     # the file is created once the devices answer: an unreachable one leaves no empty file;
@@ -107,7 +116,7 @@ def record(
             "identify": {name: json.dumps(ident, default=str)
                          for name, ident in identities.items()},
             "deltoctl": {"version": __version__},
-        }, tuple(system.extra_states())) as recorder:
+        }, tuple(system.extra_states()), gpio_type=gpio_type) as recorder:
             links = LinkWatch(system)
             stats = run_cycles(system, rate, duration, [
                 RecordSink(recorder, output, duration, progress(opts, elapsed=True)), links])

@@ -32,10 +32,10 @@ def _complete_state(incomplete: str) -> list[str]:
     return [s for s in ("on", "off") if s.startswith(incomplete)]
 
 
-def _complete_item(incomplete: str) -> list[str]:
+def _complete_item(ctx: typer.Context, incomplete: str) -> list[str]:
     from deltoctl.cli.profile_cmd import complete_register_items
 
-    return complete_register_items(incomplete)
+    return complete_register_items(ctx, incomplete)
 
 
 TargetArg = Annotated[str, typer.Argument(

@@ -86,8 +86,13 @@ class RecorderProcess:
     reason. Use it as a context manager so the file is finished whatever happens."""
 
     def __init__(self, path: Path, profile: Profile, metadata: dict[str, dict[str, str]],
-                 extra_states: tuple[str, ...] = ()) -> None:
+                 extra_states: tuple[str, ...] = (), gpio_type: str = "group-values") -> None:
+        """``gpio_type``: /gpio's message type (``ros2_msgs.GPIO_TYPES``)."""
         import deltoctl.record.mcap_recorder  # noqa: F401  (imported before a fork, not after)
+        from deltoctl.record.ros2_msgs import GPIO_TYPES
+
+        if gpio_type not in GPIO_TYPES:  # said here, not by a child that cannot start
+            raise ValueError(f"gpio_type {gpio_type!r}: one of {', '.join(GPIO_TYPES)}")
 
         ctx = _context()
         values_in, self._pipe = ctx.Pipe(duplex=False)
@@ -95,7 +100,7 @@ class RecorderProcess:
         self.path = path
         self.proc = ctx.Process(target=_record, name="deltoctl-recorder", daemon=True,
                                 args=(values_in, self._pipe, results_out, str(path), profile,
-                                      metadata, extra_states, os.getpid()))
+                                      metadata, extra_states, gpio_type, os.getpid()))
         _widen(self._pipe)
         with _signals_held():  # the child starts with them blocked and ignores them
             self.proc.start()
@@ -185,7 +190,8 @@ class RecorderProcess:
 # -- the child -----------------------------------------------------------------------------------
 
 def _record(pipe, parent_end, results, path: str, profile: Profile,  # type: ignore[no-untyped-def]
-            metadata: dict, extra_states: tuple[str, ...], parent_pid: int) -> None:
+            metadata: dict, extra_states: tuple[str, ...], gpio_type: str,
+            parent_pid: int) -> None:
     """The child: values in, MCAP out, until told to close or the parent is gone."""
     parent_end.close()  # else the pipe would never close while this process holds its end
     if _context().get_start_method() == "fork":  # spawn passes only the pipes
@@ -202,7 +208,7 @@ def _record(pipe, parent_end, results, path: str, profile: Profile,  # type: ign
     summary = None
     try:
         out = McapFile(path)
-        recorder = McapRecorder(out, profile, metadata, extra_states)
+        recorder = McapRecorder(out, profile, metadata, extra_states, gpio_type)
         summary = _receive(pipe, recorder, out, parent_pid)
     except Exception as exc:  # the file failed (OSError), or a bug: finish what was recorded
         error = exc

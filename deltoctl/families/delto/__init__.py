@@ -13,6 +13,8 @@ FAMILY = Family(
     address_kind="motor index",
     address_by_position=True,
     endpoint_params=("delto_ip", "delto_port", 502),
+    refused_hint="switch the gripper to developer mode (DIP switches 2 and 4: in operator mode "
+                 "it speaks Modbus TCP) and check the port",
     capabilities=frozenset({"identify", "detect", "home", "jog", "calibrate_ft", "gpio",
                             "config"}),
     serve_options=("firmware", "model_id", "short_version", "input_1", "delay", "stall"),

@@ -14,7 +14,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from operator import itemgetter, mul
 from typing import Any
-from urllib.parse import urlsplit
 
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
 from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Unreachable
@@ -29,7 +28,7 @@ from deltoctl.families.delto.models import (
     effort_to_duty_percent,
     model_label,
 )
-from deltoctl.transport.tcp import LinkLost, TcpLink
+from deltoctl.transport.tcp import LinkLost, TcpLink, parse_tcp_url
 
 VERSION_TIMEOUT = 3.0
 STOP_TIMEOUT = 0.3  # s: the one quick reconnection a stop tries on a lost link
@@ -62,16 +61,6 @@ class Identity:
             "direction_map": self.direction_map,
             "direction": list(self.direction),
         }
-
-
-def parse_tcp_url(url: str) -> tuple[str, int]:
-    parts = urlsplit(url)
-    if parts.scheme != "tcp" or not parts.hostname:
-        raise InvalidInput(f"{url!r} is not a TCP target (expected tcp://HOST:PORT)")
-    try:
-        return parts.hostname, parts.port or 502
-    except ValueError:
-        raise InvalidInput(f"{url!r} has a bad port") from None
 
 
 class DeltoDriver(Driver):

@@ -15,4 +15,5 @@ FAMILY = Family(
     capabilities=frozenset({"identify", "detect", "home", "jog", "registers", "torque",
                             "reboot", "config"}),
     serve_options=("missing", "pace", "wrong_baud"),
+    register_items="deltoctl.families.dynamixel.control_table:item_names",
 )

@@ -131,3 +131,8 @@ READINGS = frozenset({
 # servo (the profile addresses it by ID at the bus's rate); `register set` changes them
 BUS_ITEMS = frozenset({"ID", "Baud Rate", "Protocol Type", "Status Return Level"})
 OPERATING_MODES = {1: "velocity", 3: "position", 4: "extended position", 16: "PWM"}
+
+
+def item_names() -> list[str]:
+    """Item names as the register verbs take them (return_delay_time)."""
+    return [i.name.lower().replace(" ", "_") for i in XL430]
