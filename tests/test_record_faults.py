@@ -366,3 +366,22 @@ def test_a_link_lost_and_restored_ends_the_recording_with_exit_3(cli, tmp_path):
     assert result.exit_code == 3, result.stderr
     assert "the link was lost 1 time(s) and came back" in result.stderr
     assert check_mcap(out) > 0
+
+
+def test_a_servo_bus_that_disappears_ends_the_recording_with_exit_4(tmp_path):
+    """The RS-485 adapter pulled mid-record: no internal error; the bus reads as lost, the
+    recording goes on to its end, the file is whole, and the exit says the link is down."""
+    from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
+
+    hw = next(h for h in load_profile("mh5").hardware if h.name == "upper_body")
+    server = DynamixelPtyServer(DynamixelBus([Servo(j.address) for j in hw.joints])).start()
+    out = tmp_path / "bus.mcap"
+    proc = deltoctl("-p", "mh5", "--hardware", "upper_body", "-t",
+                    f"upper_body=serial://{server.port}?baud=2000000", "record", str(out),
+                    "--duration", "2")
+    recording(out, proc)
+    server.close()
+    code, err = finished(proc)
+    assert code == 4, err
+    assert "upper_body" in err and "did not come back" in err
+    assert check_mcap(out) > 0

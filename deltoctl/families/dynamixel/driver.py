@@ -5,13 +5,14 @@ rate (the block's ``<loop>_rate`` params) with its own communication statistics.
 
 from __future__ import annotations
 
+import contextlib
 import struct
 from typing import Any
 
 from deltoctl import trace
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
 from deltoctl.core.loop import CommLoop
-from deltoctl.errors import DeviceError, InvalidInput, ProtocolError, Refused
+from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, ProtocolError, Refused
 from deltoctl.families.dynamixel import codec
 from deltoctl.families.dynamixel.control_table import (
     BAUD_RATES,
@@ -30,6 +31,7 @@ LOAD_SCALE = 0.0014
 RETRIES = 3
 REGISTER_TRIES = 5  # as the MH5's register helpers
 SCAN_BAUDS = sorted(BAUD_RATES.values(), key=lambda b: (b < 57600, b))  # 9600 last: slowest
+REOPEN_PERIOD = 1.0  # s between attempts to reopen a lost port
 LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}  # default Hz
 
 
@@ -50,6 +52,7 @@ class DynamixelDriver(Driver):
         self._poll: Any = None
         self._stale = False
         self._inflight: tuple[int, list[int], Any] | None = None  # a sync read sent
+        self._retry_at = 0.0  # when a lost port is next reopened (0: not lost)
         self.loops = {}
         for name, default in LOOPS.items():
             try:
@@ -177,12 +180,7 @@ class DynamixelDriver(Driver):
     def configure(self) -> None:
         from deltoctl.transport.serial_port import open_serial
 
-        self.port = open_serial(self.url)
-        if hasattr(self.port, "fd") and not trace.PACKETS:  # traced: through the port's calls
-            import select
-
-            self._poll = select.poll()
-            self._poll.register(self.port.fd, select.POLLIN)
+        self._open(open_serial(self.url))
         for device_id in self.joints:
             found = self.ping(device_id)
             if found is not None:
@@ -203,17 +201,61 @@ class DynamixelDriver(Driver):
         """One ping of the first servo: what ``connect`` times."""
         self.ping(next(iter(self.present)))
 
+    def _open(self, port: Any) -> None:
+        self.port = port
+        if hasattr(port, "fd") and not trace.PACKETS:  # traced: through the port's calls
+            import select
+
+            self._poll = select.poll()
+            self._poll.register(port.fd, select.POLLIN)
+
+    def _lost(self, exc: Exception) -> None:
+        """The port went away (an adapter unplugged): the bus reads as lost, and is reopened
+        once a second; a recording goes on meanwhile."""
+        import time
+
+        if self.connected:
+            self.warnings.append(f"{self.hw.name}: {self.url} lost ({exc})")
+        self.connected = False
+        self.stats["errors"] += 1
+        self._inflight = None
+        self._retry_at = time.monotonic() + REOPEN_PERIOD
+        with contextlib.suppress(Exception):
+            self.port.close()
+        self.port = None
+        self._poll = None
+
+    def _reopen(self) -> None:
+        import time
+
+        from deltoctl.transport.serial_port import open_serial
+
+        if time.monotonic() < self._retry_at:
+            return
+        self._retry_at = time.monotonic() + REOPEN_PERIOD
+        try:
+            self._open(open_serial(self.url))
+        except DeltoctlError:
+            return
+        self._stale, self.connected = True, True
+        self.stats["reconnects"] += 1
+
     def start_read(self) -> None:
         """The slow loop's exchange when due, then the fast loop's sync read sent; ``read``
         takes its replies (the other bus sends its own meanwhile)."""
+        if self.port is None and self._retry_at:
+            self._reopen()
         if self._inflight is not None or self.port is None:
             return
         ids = list(self.present)
-        if self.loops["tv_reader"].due():
-            self._read_voltage_temperature(ids)
-        if self.loops["pvl_reader"].due():
-            self._inflight = (10, ids, self.loops["pvl_reader"])
-            self._send(self._sync_request(126, 10, ids))
+        try:
+            if self.loops["tv_reader"].due():
+                self._read_voltage_temperature(ids)
+            if self.loops["pvl_reader"].due():
+                self._inflight = (10, ids, self.loops["pvl_reader"])
+                self._send(self._sync_request(126, 10, ids))
+        except OSError as exc:  # pyserial's errors are OSErrors too
+            self._lost(exc)
 
     def read(self) -> dict[str, float]:
         if self._inflight is None:
@@ -223,7 +265,12 @@ class DynamixelDriver(Driver):
         length, ids, loop = self._inflight
         self._inflight = None
         values = self.values
-        for device_id, _, data in self._sync_replies(length, ids, loop):
+        try:
+            replies = self._sync_replies(length, ids, loop)
+        except OSError as exc:
+            self._lost(exc)
+            return values
+        for device_id, _, data in replies:
             joint = self.joints[device_id]
             load, velocity, position = PVL.unpack(data)
             name = joint.name
