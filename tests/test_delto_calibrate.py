@@ -42,3 +42,13 @@ def test_no_ft_sensors(cli, tmp_path):
     result = cli("--sim", "-p", "dg-5f-s15-right", "calibrate", "ft", "-o", str(tmp_path))
     assert result.exit_code == 2
     assert "no F/T sensors" in result.stderr
+
+
+def test_a_gripper_with_tactile_sensors_where_the_profile_says_ft(cli, tmp_path):
+    firmware = firmware_for_profile(load_profile("dg-5f-right"), sensor_type=3)  # TACTILE_M
+    with DeltoServer(firmware) as server:
+        result = cli("-p", "dg-5f-right", "-t", server.endpoint, "calibrate", "ft", "-n", "3",
+                     "-o", str(tmp_path))
+    assert result.exit_code == 1, result.stderr
+    assert "no F/T values" in result.stderr and "internal error" not in result.stderr
+    assert not list(tmp_path.glob("calibration-*.json"))

@@ -25,7 +25,11 @@ def _collect(system: Any, sensors: list[str], count: int,
             raise DeviceError("the link was lost during calibration; nothing was saved")
         for s in sensors:
             for a in AXES:
-                samples[s][a].append(values[f"{s}/{a}"])
+                value = values.get(f"{s}/{a}")
+                if value is None:  # e.g. the gripper reports tactile, not F/T, sensors
+                    raise DeviceError(f"{s} sends no {a}: the device reports no F/T values "
+                                      "for it", hint="deltoctl detect shows its sensor type")
+                samples[s][a].append(value)
         time.sleep(1.0 / rate)
     return samples
 
