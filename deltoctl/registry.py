@@ -44,6 +44,13 @@ class Family:
     refused_hint: str = ""  # what to do when its TCP target refuses the connection
     register_items: str | None = None  # "module:function" → the register names it takes
 
+    def __post_init__(self) -> None:
+        unknown = self.capabilities - CAPABILITIES
+        if unknown:  # a third party's typo would otherwise hide a verb without a word
+            known = ", ".join(sorted(CAPABILITIES))
+            raise ValueError(f"family {self.name!r}: unknown capabilities "
+                             f"{', '.join(sorted(unknown))} (known: {known})")
+
     def driver_class(self) -> type:
         return _load(self.driver)
 

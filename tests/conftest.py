@@ -105,6 +105,28 @@ def sim_i2c_bus(profile):
     return sim
 
 
+def record_with_a_dropped_link(cli, out):
+    """`record` of a simulated DG-5F-R whose connections are cut once, 0.3 s into the
+    recording (the gripper stays up, so the link comes back); the CLI's result."""
+    import threading
+
+    from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
+    from deltoctl.profile.catalog import load_profile
+
+    with DeltoServer(firmware_for_profile(load_profile("dg-5f-right"))) as server:
+        def drop_once_recording() -> None:
+            if eventually(lambda: out.exists() and out.stat().st_size > 0, timeout=15):
+                time.sleep(0.3)
+                server.drop_connections()
+
+        dropper = threading.Thread(target=drop_once_recording)
+        dropper.start()
+        result = cli("-p", "dg-5f-right", "-t", server.endpoint, "record", str(out),
+                     "--duration", "3", "--rate", "50")
+        dropper.join()
+    return result
+
+
 def ros2_messages(path, topics=None):
     """(topic, decoded ROS 2 message) for each message of an MCAP file, in log order."""
     from mcap.reader import make_reader

@@ -70,3 +70,10 @@ def test_reading_the_registry_imports_no_driver_or_emulator():
                          check=True)
     assert out.stdout.strip() == "[]"
     assert set(registry.families()) >= {"delto", "dynamixel", "bioscara", "lsm6ds3", "generic"}
+
+
+def test_a_descriptor_with_an_unknown_capability_is_refused():
+    from deltoctl.registry import Family
+
+    with pytest.raises(ValueError, match="unknown capabilities jogg"):
+        Family("typo", "tests.toyfamily.driver:ToyDriver", capabilities=frozenset({"jogg"}))

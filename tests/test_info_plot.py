@@ -6,20 +6,17 @@ from __future__ import annotations
 
 import json
 import math
-import threading
-import time
 
 import pytest
 from mcap.writer import Writer
 
 from deltoctl.cli import main
-from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
 from deltoctl.profile.catalog import load_profile
 from deltoctl.record.cdr import CdrTemplate
 from deltoctl.record.mcap_recorder import McapFile, McapRecorder
 from deltoctl.record.reader import read_recording, series
 from deltoctl.record.ros2_msgs import MSGDEFS
-from tests.conftest import eventually, ros2_messages
+from tests.conftest import record_with_a_dropped_link, ros2_messages
 from tests.test_recordings_rosbag2 import FAMILIES, family_recordings  # noqa: F401
 
 
@@ -95,17 +92,7 @@ def test_info_shows_a_link_lost_mid_recording_and_when(cli, tmp_path):
     """The Delto emulator drops its connections while recording: info names the loss, the
     block that went down, when, and when the link came back."""
     out = tmp_path / "lossy.mcap"
-    with DeltoServer(firmware_for_profile(load_profile("dg-5f-right"))) as server:
-        def drop_once_recording() -> None:
-            if eventually(lambda: out.exists() and out.stat().st_size > 0, timeout=15):
-                time.sleep(0.3)
-                server.drop_connections()
-
-        dropper = threading.Thread(target=drop_once_recording)
-        dropper.start()
-        result = cli("-p", "dg-5f-right", "-t", server.endpoint, "record", str(out),
-                     "--duration", "3", "--rate", "50")
-        dropper.join()
+    result = record_with_a_dropped_link(cli, out)
     assert result.exit_code == 3, result.stderr
     report = _info(cli, out)
     (loss,) = report["link_losses"]

@@ -28,7 +28,7 @@ from mcap.stream_reader import StreamReader
 
 from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
 from deltoctl.profile.catalog import load_profile
-from tests.conftest import REPO, eventually, ros2_messages
+from tests.conftest import REPO, eventually, record_with_a_dropped_link, ros2_messages
 
 pytestmark = pytest.mark.slow  # each test records for a second or more
 SIM = ("-p", "dg-5f-right", "--sim")
@@ -352,17 +352,7 @@ def test_a_link_lost_for_good_ends_the_recording_with_exit_4(tmp_path):
 
 def test_a_link_lost_and_restored_ends_the_recording_with_exit_3(cli, tmp_path):
     out = tmp_path / "restored.mcap"
-    with DeltoServer(firmware_for_profile(load_profile("dg-5f-right"))) as server:
-        def drop_once_recording() -> None:
-            if eventually(lambda: out.exists() and out.stat().st_size > 0, timeout=15):
-                time.sleep(0.3)
-                server.drop_connections()
-
-        dropper = threading.Thread(target=drop_once_recording)
-        dropper.start()
-        result = cli("-p", "dg-5f-right", "-t", server.endpoint, "record", str(out),
-                     "--duration", "3", "--rate", "50")
-        dropper.join()
+    result = record_with_a_dropped_link(cli, out)
     assert result.exit_code == 3, result.stderr
     assert "the link was lost 1 time(s) and came back" in result.stderr
     assert check_mcap(out) > 0

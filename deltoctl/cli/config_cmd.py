@@ -178,35 +178,14 @@ def snapshot(
 
 # -- loading a snapshot (untrusted) ------------------------------------------------------------
 
-def read_snapshot_text(path: Path) -> str:
-    """The file's text, refusing anything but a regular file of at most 16 MiB before
-    reading it."""
-    import stat
-
-    source = str(path)
-    try:
-        if not stat.S_ISREG(path.stat().st_mode):  # a FIFO or a device would never end
-            raise ProfileError("not a regular file", source)
-        with path.open("rb") as f:
-            data = f.read(MAX_SNAPSHOT_BYTES + 1)
-    except OSError as exc:
-        raise ProfileError(f"cannot read the snapshot: {exc.strerror}", source) from None
-    if len(data) > MAX_SNAPSHOT_BYTES:
-        raise ProfileError(f"larger than {MAX_SNAPSHOT_BYTES >> 20} MiB, the limit for a "
-                           "snapshot", source)
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ProfileError(f"not UTF-8 text (byte {exc.start})", source) from None
-
-
 def load_snapshot(path: Path) -> Snapshot:
     """A snapshot file, bounded and safely loaded, its shape and value types checked (names
     and ranges are checked against the live blocks by ``check_against``)."""
-    from deltoctl.profile.yaml_loader import load_data
+    from deltoctl.profile.yaml_loader import load_data, read_text
 
     source = str(path)
-    data = load_data(read_snapshot_text(path), source)  # safe loader, depth and node bounds
+    # the profile's bounded read and safe loader (depth and node bounds)
+    data = load_data(read_text(path, "YAML", MAX_SNAPSHOT_BYTES, "snapshot"), source)
     return _parse(data, source)
 
 

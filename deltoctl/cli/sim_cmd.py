@@ -68,6 +68,7 @@ def serve(
     --hardware serves some blocks only; with --json, one JSON line."""
     import gc
     import json
+    import math
     import signal
     import sys
     import threading
@@ -83,6 +84,12 @@ def serve(
     except ValueError:
         raise InvalidInput("--model-id and --who-am-i take numbers (0x5F22, 0x6A), "
                            "--orientation ROLL,PITCH in degrees") from None
+    if not (math.isfinite(delay) and 0 <= delay <= 10):
+        raise InvalidInput(f"--delay must be 0 to 10 seconds, got {delay:g}")
+    if not (0 <= port <= 65535 and 0 <= who <= 0xFF and 2 <= len(angles) <= 3
+            and all(math.isfinite(a) for a in angles)):
+        raise InvalidInput("--port takes 0-65535, --who-am-i a byte, --orientation ROLL,PITCH"
+                           "[,YAW] in finite degrees")
     serve_options = ServeOptions(
         host=host, port=port, firmware=firmware, model_id=model, short_version=short_version,
         input_1=input_1, delay=delay, stall=tuple(stall or ()), missing=tuple(missing or ()),

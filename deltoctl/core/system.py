@@ -223,9 +223,7 @@ class System:
         """Every state interface of the driven blocks, the drivers' extras, and the links'."""
         names = [n for m in self.members for c in m.hw.components()
                  for n in c.interface_names("state")]
-        names += [f"{j.name}/{e}" for m in self.members for j in m.hw.joints
-                  for e in m.driver.extra_states]
-        return [*names, *(m.status_key for m in self.members), STATUS]
+        return [*names, *self.extra_states(), *(m.status_key for m in self.members), STATUS]
 
     def extra_states(self) -> list[str]:
         return [f"{j.name}/{e}" for m in self.members for j in m.hw.joints

@@ -181,21 +181,22 @@ def parse_yaml(text: str, source: str) -> Any:
     return load_data(text, source)
 
 
-def read_text(path: Path, what: str) -> str:
-    """The file's text, refusing one larger than MAX_PROFILE_BYTES before reading it."""
+def read_text(path: Path, what: str, limit: int | None = None, kind: str = "profile") -> str:
+    """The text of a ``kind`` of file (a profile, a snapshot …), refusing one larger than
+    ``limit`` (MAX_PROFILE_BYTES by default) or not a regular file, before reading it."""
     from deltoctl.profile.catalog import MAX_PROFILE_BYTES
 
+    limit = MAX_PROFILE_BYTES if limit is None else limit
     source = str(path)
     try:
         if not stat.S_ISREG(path.stat().st_mode):  # a FIFO or a device would block or not end
             raise ProfileError("not a regular file", source)
         with path.open("rb") as f:
-            data = f.read(MAX_PROFILE_BYTES + 1)
+            data = f.read(limit + 1)
     except OSError as exc:
-        raise ProfileError(f"cannot read the file: {exc.strerror}", source) from None
-    if len(data) > MAX_PROFILE_BYTES:
-        raise ProfileError(f"larger than {MAX_PROFILE_BYTES >> 20} MiB, the limit for a profile",
-                           source)
+        raise ProfileError(f"cannot read the {kind}: {exc.strerror}", source) from None
+    if len(data) > limit:
+        raise ProfileError(f"larger than {limit >> 20} MiB, the limit for a {kind}", source)
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError:
