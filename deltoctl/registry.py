@@ -43,6 +43,9 @@ class Family:
     summary: str = ""
     refused_hint: str = ""  # what to do when its TCP target refuses the connection
     register_items: str | None = None  # "module:function" → the register names it takes
+    # a plugin param that, "true", makes the plugin simulate its device (Bioscara's
+    # use_mock_hardware): such a block runs on the family's emulator without --sim
+    mock_param: str | None = None
 
     def __post_init__(self) -> None:
         unknown = self.capabilities - CAPABILITIES
@@ -63,6 +66,10 @@ class Family:
 
     def show_address(self, address: int) -> str:
         return format(address, self.address_format)
+
+    def is_mock(self, params: dict[str, str]) -> bool:
+        """Whether a block with these params asks for the plugin's own mock mode."""
+        return self.mock_param is not None and params.get(self.mock_param) in ("true", "True")
 
 
 def _load(ref: str) -> Any:

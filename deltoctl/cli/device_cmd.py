@@ -32,18 +32,23 @@ def open_system(opts: Options, allow_model_mismatch: bool = False, profile: Any 
     with ``--sim``, each block's emulator is started first and its URL is the block's target.
     Pass ``profile`` when the verb loaded it already; ``probe`` for a verb that looks at a bus
     where nothing may answer."""
-    from deltoctl.core.system import System
+    from deltoctl.core.system import System, mock_blocks
 
     profile = profile or opts.load_profile()
     with contextlib.ExitStack() as stack:
-        targets = opts.target
-        if opts.sim:
+        targets = list(opts.target)
+        simulated = dict.fromkeys(opts.hardware or [hw.name for hw in profile.hardware],
+                                  "--sim") if opts.sim else mock_blocks(profile, opts.hardware)
+        if simulated:
             from deltoctl.sim.serve import ServeOptions, serve_profile
 
-            served = serve_profile(stack, profile, ServeOptions(), opts.hardware)
-            targets = [f"{bus}={url}" for bus, url in served["buses"].items()]
+            served = serve_profile(stack, profile, ServeOptions(), list(simulated))
+            targets += [f"{bus}={url}" for bus, url in served["buses"].items()]
+            for name, why in simulated.items():
+                if why != "--sim":  # the profile asked: say so before anything else
+                    info(f"{name}: simulated ({why}): no hardware is driven")
         system = System(profile, targets, opts.hardware, probe=probe,
-                        allow_model_mismatch=allow_model_mismatch)
+                        allow_model_mismatch=allow_model_mismatch, simulated=simulated)
         with system:
             yield system
 
@@ -73,7 +78,7 @@ def register(app: typer.Typer) -> None:
 def block_entry(m: Any, **data: Any) -> dict[str, Any]:
     """One block in a verb's JSON: the same keys first whatever the family."""
     return {"name": m.name, "family": m.family.name, "target": m.url or None,
-            "state": m.lifecycle.state, **data}
+            "simulated": m.simulated is not None, "state": m.lifecycle.state, **data}
 
 
 def connect(
@@ -108,7 +113,10 @@ def connect(
     else:
         for m, data in blocks:
             rtt = data["rtt_ms"]
-            say(f"{m.name}: connected to {m.url or 'the in-process mock'}: round trip median "
+            where = m.url or "the in-process mock"
+            if m.simulated:
+                where = f"its simulator at {where} ({m.simulated})"
+            say(f"{m.name}: connected to {where}: round trip median "
                 f"{rtt['median']} ms (min {rtt['min']}, max {rtt['max']}, "
                 f"n={data['round_trips']})")
             say(f"{m.name}: lifecycle " + " → ".join(m.lifecycle.history))

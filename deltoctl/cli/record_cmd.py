@@ -110,7 +110,7 @@ def record(
         _create(output)
         recorded = dataclasses.replace(system.profile, hardware=[m.hw for m in system])
         identities = {m.name: {"family": m.family.name, "target": m.url,
-                               **m.driver.identify()} for m in system.able("identify")}
+                               "simulated": m.simulated is not None, **m.driver.identify()} for m in system.able("identify")}
         with RecorderProcess(output, recorded, {
             "profile": {"name": recorded.name, "yaml": to_yaml(recorded)},
             "identify": {name: json.dumps(ident, default=str)

@@ -27,8 +27,10 @@ STATUS = "system/connection_status"  # 1 while every block's link is up
 class Member:
     """One block of the System: its driver, lifecycle and where it is."""
 
-    def __init__(self, hw: Hardware, family: Family, driver: Driver) -> None:
+    def __init__(self, hw: Hardware, family: Family, driver: Driver,
+                 simulated: str | None = None) -> None:
         self.hw, self.family, self.driver = hw, family, driver
+        self.simulated = simulated  # why it runs on a simulator ("--sim", a mock param)
         self.name = hw.name
         self.lifecycle = Lifecycle(hw.name)
         self.status_key = f"{hw.name}/connection_status"
@@ -55,6 +57,25 @@ def select_blocks(profile: Profile, names: list[str] | tuple[str, ...] = ()) -> 
     return [hw for hw in profile.hardware if hw.name in names]
 
 
+def mock_blocks(profile: Profile, names: list[str] | tuple[str, ...] = ()) -> dict[str, str]:
+    """The selected blocks whose plugin param asks for the plugin's own mock mode, each with
+    that param: they run on their family's emulator. A bus is simulated whole or not at all."""
+    mock: dict[str, str] = {}
+    for hw in select_blocks(profile, names):
+        family = registry.of_block(profile.family_of(hw), hw.plugin)
+        if family is not None and family.is_mock(hw.params):
+            mock[hw.name] = f"{family.mock_param}: {hw.params[family.mock_param or '']}"
+    for hw in select_blocks(profile, names):
+        sharing = [o.name for o in profile.hardware
+                   if o.bus == hw.bus and o.name != hw.name and o.name in mock]
+        if hw.bus and hw.name not in mock and sharing:
+            raise InvalidInput(f"{hw.name} is on bus {hw.bus!r} with {', '.join(sharing)}, "
+                               "which the profile simulates (mock hardware): a bus is "
+                               "simulated whole or not at all", hint="use --sim, or "
+                               "--hardware to leave one of them out")
+    return mock
+
+
 def parse_targets(profile: Profile, targets: list[str] | tuple[str, ...]) -> tuple[dict, list]:
     """``--target`` values: ``BUS=URL`` by bus name, and bare URLs."""
     named: dict[str, str] = {}
@@ -79,8 +100,10 @@ class System:
 
     def __init__(self, profile: Profile, targets: list[str] | tuple[str, ...] = (),
                  hardware: list[str] | tuple[str, ...] = (), *, probe: bool = False,
-                 allow_model_mismatch: bool = False) -> None:
-        """``probe``: a bus where nothing answers is still opened (for ``detect``)."""
+                 allow_model_mismatch: bool = False,
+                 simulated: dict[str, str] | None = None) -> None:
+        """``probe``: a bus where nothing answers is still opened (for ``detect``);
+        ``simulated``: the blocks served by an emulator, each with why."""
         self.profile = profile
         self.links = Links()
         self.members: list[Member] = []
@@ -101,7 +124,8 @@ class System:
             url = self._url(hw, family, named, bare)
             block = Block(profile, hw, family, url, probe, allow_model_mismatch, self.links,
                           self.values)
-            self.members.append(Member(hw, family, family.driver_class()(block)))
+            self.members.append(Member(hw, family, family.driver_class()(block),
+                                       (simulated or {}).get(hw.name)))
         if not self.members:
             raise InvalidInput(f"{profile.name}: no block deltoctl can drive "
                                f"({'; '.join(self.notes) or 'the profile has no blocks'})")

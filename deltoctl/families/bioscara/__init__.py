@@ -16,4 +16,5 @@ FAMILY = Family(
     address_format="#04x",
     capabilities=frozenset({"identify", "detect", "home", "jog", "config"}),
     serve_options=("missing", "stall"),
+    mock_param="use_mock_hardware",  # the plugin's MockJoint mode: "true" or "True"
 )
