@@ -24,9 +24,10 @@ test: $(BIN)/deltoctl
 
 bench: $(BIN)/deltoctl
 	$(BIN)/python bench/startup.py
-	$(BIN)/deltoctl bench loop
+	$(BIN)/deltoctl bench loop --foxglove
 	$(BIN)/deltoctl bench dynamixel
 	$(BIN)/deltoctl bench i2c
+	$(BIN)/python bench/fleet.py --stream
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info

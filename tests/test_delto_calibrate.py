@@ -50,5 +50,6 @@ def test_a_gripper_with_tactile_sensors_where_the_profile_says_ft(cli, tmp_path)
         result = cli("-p", "dg-5f-right", "-t", server.endpoint, "calibrate", "ft", "-n", "3",
                      "-o", str(tmp_path))
     assert result.exit_code == 1, result.stderr
-    assert "no F/T values" in result.stderr and "internal error" not in result.stderr
+    assert "reports tactile fingertips (TACTILE_M, 5×3 cells), not F/T sensors" in \
+        result.stderr and "internal error" not in result.stderr
     assert not list(tmp_path.glob("calibration-*.json"))

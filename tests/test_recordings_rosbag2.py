@@ -33,7 +33,7 @@ from deltoctl.record.ros2_msgs import (
 )
 from tests.conftest import REPO, ros2_messages
 
-FAMILIES = ["dg-5f-right", "mh5", "bioscara-arm", "rrbot-gpio", "dg-5f-bimanual"]
+FAMILIES = ["dg-5f-right", "mh5", "bioscara-arm", "rrbot-gpio", "dg-5f-bimanual", "dg-5f-s15-right"]
 
 # rosbag2_storage's yaml.hpp, convert<…>::encode: the keys, in the order it writes them
 BAG_KEYS = ["version", "storage_identifier", "duration", "starting_time", "message_count",

@@ -1,6 +1,7 @@
 """``bench loop``: the read+write cycle of 1, 2, 4 … simulated hands, each served by ``sim serve``
 in a process of its own, recording to MCAP through the cycle runner, the time per cycle split
-by stage; beside it, the same loop idle."""
+by stage; beside it, the same loop idle. With ``--foxglove``, the same run again while the live
+view serves every topic to a Foxglove WebSocket client (another process, subscribed to all)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from typing import Any
 
 from deltoctl.core.loop import LoopStats
 from deltoctl.core.runner import Sink
-from deltoctl.errors import DeviceError
+from deltoctl.errors import DeltoctlError, DeviceError
 from deltoctl.profile.model import Profile
 
 
@@ -96,8 +97,78 @@ class _Recording(Sink):
         self.recorder.close(stats.summary())
 
 
-def _run(system: Any, rate: float, duration: float, mcap_path: Path) -> dict:
-    """The cycle runner on every hand: read, zero efforts written, recorded."""
+class _Timed(Sink):
+    """Another sink's frames, timed as a stage of their own."""
+
+    def __init__(self, sink: Sink, timing: dict[str, float], stage: str) -> None:
+        self.sink, self.timing, self.stage = sink, timing, stage
+        timing[stage] = 0.0
+
+    def frame(self, t_ns: int, values: dict[str, float]) -> None:
+        t0 = time.perf_counter()
+        self.sink.frame(t_ns, values)
+        self.timing[self.stage] += time.perf_counter() - t0
+
+    def periodic(self, t_ns: int, stats: LoopStats, comm_loops: list) -> None:
+        self.sink.periodic(t_ns, stats, comm_loops)
+
+    def close(self, stats: LoopStats) -> None:
+        self.sink.close(stats)
+
+
+FOXGLOVE_CLIENT = """
+import asyncio, json, sys, time
+import websockets
+
+async def main(url):
+    counts = {}
+    async with websockets.connect(url, subprotocols=["foxglove.sdk.v1", "foxglove.websocket.v1"],
+                                  max_size=None) as ws:
+        channels = {}
+        while len(channels) < int(sys.argv[2]):
+            op = json.loads(await ws.recv())
+            if op["op"] == "advertise":
+                channels.update({c["id"]: c["topic"] for c in op["channels"]})
+        await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": cid, "channelId": cid} for cid in channels]}))
+        print("subscribed", flush=True)
+        first = last = None
+        try:
+            async for msg in ws:
+                if isinstance(msg, bytes) and msg[0] == 1:
+                    topic = channels[int.from_bytes(msg[1:5], "little")]
+                    counts[topic] = counts.get(topic, 0) + 1
+                    last = time.monotonic()
+                    first = first or last
+        except websockets.ConnectionClosed:
+            pass
+    print(json.dumps({"messages": counts, "seconds": (last - first) if first else 0,
+                      "cpu_seconds": time.process_time()}))
+
+asyncio.run(main(sys.argv[1]))
+"""
+
+
+def _foxglove_client(url: str, channels: int) -> subprocess.Popen:
+    """A Foxglove WebSocket client in a process of its own, subscribed to every channel
+    (returns once it is)."""
+    try:
+        import websockets  # noqa: F401
+    except ImportError:
+        raise DeltoctlError("bench loop --foxglove needs websockets for its client",
+                            "pip install websockets") from None
+    proc = subprocess.Popen([sys.executable, "-c", FOXGLOVE_CLIENT, url, str(channels)],
+                            stdout=subprocess.PIPE, text=True)
+    if not proc.stdout or proc.stdout.readline().strip() != "subscribed":
+        proc.kill()
+        raise DeviceError(f"the Foxglove client did not subscribe at {url}")
+    return proc
+
+
+def _run(system: Any, rate: float, duration: float, mcap_path: Path,
+         foxglove: bool = False) -> dict:
+    """The cycle runner on every hand: read, zero efforts written, recorded; with
+    ``foxglove``, served live to a subscribed client as well."""
     from deltoctl.core.runner import run_cycles
     from deltoctl.record.recorder_process import RecorderProcess
 
@@ -113,14 +184,29 @@ def _run(system: Any, rate: float, duration: float, mcap_path: Path) -> dict:
         timing["write"] += time.perf_counter() - t0
 
     recorded = dataclasses.replace(system.profile, hardware=[m.hw for m in system])
+    sinks: list[Sink] = []
+    live = client = None
+    if foxglove:
+        from deltoctl.record.foxglove_live import FoxgloveLive
+
+        live = FoxgloveLive("127.0.0.1", 0)
+        try:
+            live.begin(recorded, tuple(system.extra_states()))
+            client = _foxglove_client(live.url, len(live.recorder.channels))
+        except BaseException:
+            live.stop()
+            raise
+        sinks.append(_Timed(live, timing, "foxglove"))
     recorder = RecorderProcess(mcap_path, recorded, {})
     cpu0 = time.process_time()
     ticks = _cpu_ticks()
     try:
-        loop = run_cycles(system, rate, duration, [_Recording(recorder, timing)], write)
+        loop = run_cycles(system, rate, duration, [_Recording(recorder, timing), *sinks], write)
     finally:
         for driver, _ in hands:
             driver.timing = None
+        if live is not None:
+            live.stop()
     cpu = time.process_time() - cpu0
     steal = _steal_percent(ticks, _cpu_ticks())
     stats = loop.summary()
@@ -135,13 +221,31 @@ def _run(system: Any, rate: float, duration: float, mcap_path: Path) -> dict:
         "mcap_messages": sum(recorder.counts.values()),
         "cpu_steal_percent": steal,
         "errors": system.stats["errors"],
+        **({"foxglove": _foxglove_report(live, client)} if live and client else {}),
     }
 
 
+def _foxglove_report(live: Any, client: subprocess.Popen) -> dict:
+    """What the live view sent and the client received."""
+    import json
+
+    out, _ = client.communicate(timeout=60)
+    got = json.loads(out.splitlines()[-1]) if out.strip() else {"messages": {}, "seconds": 0}
+    received = got["messages"].get("/joint_states", 0)
+    return {"cycles_sent": live.sent, "cycles_dropped": live.dropped,
+            "client_messages": sum(got["messages"].values()),
+            "client_joint_states": received,
+            "client_joint_states_per_s": round(received / got["seconds"], 1)
+            if got["seconds"] else 0.0,
+            "client_cpu_percent": round(100 * got.get("cpu_seconds", 0) / got["seconds"], 1)
+            if got["seconds"] else None}
+
+
 def measure(prof: Profile, rate: float, duration: float, unpaced: float,
-            hands: tuple[int, ...] = (1,)) -> dict:
+            hands: tuple[int, ...] = (1,), foxglove: bool = False) -> dict:
     """The idle baseline, then for each number of hands (each served by its own process) the
-    paced run and (``unpaced`` > 0) the unpaced run, with the goals."""
+    paced run, (``foxglove``) the paced run with the live view and a subscribed client, and
+    (``unpaced`` > 0) the unpaced run, with the goals."""
     import contextlib
     import tempfile
 
@@ -164,6 +268,9 @@ def measure(prof: Profile, rate: float, duration: float, unpaced: float,
             with System(robot, targets) as system:
                 run = {"endpoints": endpoints[:n],
                        "paced": _run(system, rate, duration, tmp / f"paced-{n}.mcap")}
+                if foxglove:
+                    run["paced_foxglove"] = _run(system, rate, duration,
+                                                 tmp / f"foxglove-{n}.mcap", foxglove=True)
                 if unpaced > 0:
                     run["unpaced"] = _run(system, 0.0, unpaced, tmp / f"unpaced-{n}.mcap")
             results["hands"][str(n)] = run
@@ -184,6 +291,10 @@ def _goals(runs: dict[str, dict], hands: tuple[int, ...]) -> dict[str, bool]:
     most = runs[str(max(hands))]["paced"]
     goals = {f"{max(hands)}_hands_rate_ge_99_5_percent": most["achieved_fraction"] >= 0.995,
              f"{max(hands)}_hands_p99_lateness_le_0_5_ms": most["lateness_p99_ms"] <= 0.5}
+    live = runs[str(max(hands))].get("paced_foxglove")
+    if live is not None:
+        goals[f"{max(hands)}_hands_foxglove_rate_ge_99_5_percent"] = \
+            live["achieved_fraction"] >= 0.995
     unpaced = {n: r["unpaced"]["real_rate"] for n, r in runs.items() if "unpaced" in r}
     if "1" in unpaced:
         goals["unpaced_1_hand_ge_5_khz"] = unpaced["1"] >= 5000

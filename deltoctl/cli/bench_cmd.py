@@ -22,12 +22,16 @@ def bench_loop(
     hands: Annotated[str, typer.Option(
         "--hands", help="Numbers of simulated hands to run, e.g. 1,2,4 (each hand served by "
                         "its own process).")] = "1",
+    foxglove: Annotated[bool, typer.Option(
+        "--foxglove", help="Also the paced run with the live view (record --foxglove) serving "
+                           "every topic to a subscribed Foxglove client.")] = False,
 ) -> None:
     """The read+write cycle of N hands while recording, paced and unpaced.
 
     A gripper profile (default dg-5f-right: F/T and IO), N copies of its block, each against
     its own `sim serve` over loopback TCP, through the cycle runner, recording to MCAP; beside
-    it, the same loop idle (what this machine allows)."""
+    it, the same loop idle (what this machine allows). With --foxglove, the paced run again
+    while the live view serves it to a Foxglove WebSocket client in another process."""
     import math
     import os
 
@@ -44,7 +48,11 @@ def bench_loop(
     if not counts or not all(1 <= n <= 16 for n in counts):
         raise InvalidInput("--hands takes 1 to 16 hands")
     prof = opts.load_profile(opts.profile or "dg-5f-right")
-    results = measure(prof, rate, duration, unpaced, counts)
+    if foxglove:
+        from deltoctl.record.foxglove_live import load_foxglove
+
+        load_foxglove()  # the extra is there, before any device is started
+    results = measure(prof, rate, duration, unpaced, counts, foxglove)
     if opts.json:
         emit_json(results)
         return
@@ -56,11 +64,12 @@ def bench_loop(
         + (f", CPU steal {idle['cpu_steal_percent']} %"
            if idle["cpu_steal_percent"] is not None else ""))
     for n, run in results["hands"].items():
-        for name in ("paced", "unpaced"):
+        for name in ("paced", "paced_foxglove", "unpaced"):
             if name not in run:
                 continue
             r = run[name]
-            say(f"  {n} hand(s) {name:8} requested {r['requested_rate']:g} Hz, real "
+            label = "+foxglove" if name == "paced_foxglove" else name
+            say(f"  {n} hand(s) {label:9} requested {r['requested_rate']:g} Hz, real "
                 f"{r['real_rate']:.1f} Hz"
                 + (f" ({100 * r['achieved_fraction']:.2f} %)" if r["achieved_fraction"] else "")
                 + f", lateness p50 {r['lateness_p50_ms']:.3f} ms p99 "
@@ -72,6 +81,12 @@ def bench_loop(
             stages = ", ".join(f"{k} {v:.1f}" for k, v in r["stage_us_per_cycle"].items())
             say(f"      µs per cycle: {stages}; CPU {r['cpu_us_per_cycle']:.1f} in the loop, "
                 f"{r['recorder_process_cpu_us_per_cycle']:.1f} in the recorder process")
+            if "foxglove" in r:
+                f = r["foxglove"]
+                say(f"      Foxglove: {f['cycles_sent']} cycles sent, {f['cycles_dropped']} "
+                    f"dropped; the client got {f['client_messages']} messages, /joint_states "
+                    f"at {f['client_joint_states_per_s']:.1f} Hz (its process: "
+                    f"{f['client_cpu_percent']} % of a CPU)")
     say("  goals: " + ", ".join(f"{k}={'yes' if v else 'NO'}"
                                 for k, v in results["goals"].items()))
 

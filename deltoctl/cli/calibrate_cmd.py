@@ -88,6 +88,12 @@ def calibrate_ft(
             raise InvalidInput(f"{system.profile.name} has no F/T sensors to calibrate")
         unable = [m.name for m in system if m.name not in blocks
                   and any(s.state("force.x") for s in m.hw.sensors)]
+        for names in blocks.values():  # what a driver knows the device has, before sampling
+            driver = system.member(names[0]).driver
+            reason = getattr(driver, "no_ft_reason", lambda: None)()
+            if reason:
+                raise DeviceError(reason, hint="deltoctl detect shows the device's sensors; "
+                                  "use a profile that declares them")
         sensors = [s for names in blocks.values() for s in names]
         before = _collect(system, sensors, samples, 200.0)
         for name in blocks:

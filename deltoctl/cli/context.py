@@ -28,6 +28,8 @@ class Options:
         package_paths: dict[str, str] | None = None,
         hardware: list[str] | None = None,
         xacro: bool = False,
+        robot: str | None = None,
+        zenoh_config: str | None = None,
     ) -> None:
         self.profile = profile
         self.target = target or []
@@ -40,6 +42,8 @@ class Options:
         self.package_paths = package_paths or {}
         self.hardware = hardware or []  # --hardware: the blocks a verb works on (all if empty)
         self.xacro = xacro  # run xacro on a file not named .xacro
+        self.robot = robot  # --robot: the verb runs on that robot's agent, over Zenoh
+        self.zenoh_config = zenoh_config  # --zenoh-config: endpoints and TLS of the session
 
     def load_profile(self, spec: str | None = None) -> Profile:
         from deltoctl.profile.catalog import load_profile

@@ -309,16 +309,46 @@ DurationOpt = Annotated[float | None, typer.Option(
     "--duration", "-d", help="Stop after this many seconds (default: Ctrl-C or SIGTERM).")]
 
 
+def stream_grids(names: list[str]) -> dict[str, list[list[str]]]:
+    """The tactile grids among streamed interfaces: each part whose streamed interfaces are
+    all ``cell_<row>_<col>`` of a full grid → its interface names, row by row."""
+    from deltoctl.record.cdr import grid_cells
+
+    parts: dict[str, list[str]] = {}
+    for name in names:
+        part, _, interface = name.rpartition("/")
+        parts.setdefault(part, []).append(interface)
+    grids = {}
+    for part, interfaces in parts.items():
+        grid = grid_cells(interfaces) if interfaces[0].startswith("cell_") else None
+        if grid is not None:
+            rows, cols, cells = grid
+            grids[part] = [[f"{part}/{c}" for c in cells[r * cols:(r + 1) * cols]]
+                           for r in range(rows)]
+    return grids
+
+
+def _cell(value: float | None) -> float | int | None:
+    """A cell as JSON: an integer reading as an integer."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
 class LinesSink(Sink):
-    """NDJSON frames on stdout: ``{"t": ns, "values": {...}}``."""
+    """NDJSON frames on stdout: ``{"t": ns, "values": {...}}``, and with tactile sensors
+    ``"grids": {sensor: [[cell, ...], ...]}``, each grid as its rows (row 0 first)."""
 
     def __init__(self, names: list[str]) -> None:
         self.names = names
         self.samples = 0
+        self.grids = stream_grids(names)
 
     def frame(self, t_ns: int, values: dict[str, float]) -> None:
         self.samples += 1
-        emit_json_line({"t": t_ns, "values": {n: values.get(n) for n in self.names}})
+        line: dict[str, Any] = {"t": t_ns, "values": {n: values.get(n) for n in self.names}}
+        if self.grids:
+            line["grids"] = {part: [[_cell(values.get(n)) for n in row] for row in rows]
+                             for part, rows in self.grids.items()}
+        emit_json_line(line)
 
 
 class LiveSink(LinesSink):
@@ -353,19 +383,39 @@ def stream(
         "--interfaces", "-i", help="Glob(s) of interface names, e.g. 'rj_dg_1_*/position'.")]
         = None,
     allow_model_mismatch: AllowMismatch = False,
+    foxglove: Annotated[bool, typer.Option(
+        "--foxglove", help="Serve the values to Foxglove too (WebSocket, the topics and messages "
+                           "of a recording); needs pip install 'deltoctl\\[foxglove]'.")] = False,
+    foxglove_port: Annotated[int, typer.Option(
+        "--foxglove-port", metavar="PORT", help="The Foxglove WebSocket port (0: any free "
+                                                "one).")] = 8765,
+    foxglove_host: Annotated[str, typer.Option(
+        "--foxglove-host", metavar="ADDRESS", help="The address to serve Foxglove on; another "
+        "than loopback serves the robot's data to other machines.")] = "127.0.0.1",
 ) -> None:
     """Stream every block's state interfaces: a live table on a terminal, NDJSON with --json
-    or when piped. Exit 4 when a link is down at the end, 3 when one was lost and came back."""
+    or when piped; with --foxglove, to Foxglove as well (every interface, whatever -i picks).
+    Exit 4 when a link is down at the end, 3 when one was lost and came back."""
+    import dataclasses
+
+    from deltoctl.cli.record_cmd import foxglove_live, start_foxglove
     from deltoctl.core.runner import run_cycles
 
     opts = options(ctx)
     check_loop(rate, duration)
-    with open_system(opts, allow_model_mismatch) as system:
+    with foxglove_live(foxglove, foxglove_host, foxglove_port) as live, \
+            open_system(opts, allow_model_mismatch) as system:
         names = select(system.state_interfaces(), list(interfaces or []))
         sink = (LinesSink(names) if opts.json or not stdout_is_terminal()
                 else LiveSink(names, rate))
         links = LinkWatch(system)
-        run_cycles(system, rate, duration, [sink, links])
+        sinks: list[Sink] = [sink, links]
+        if live is not None:
+            start_foxglove(live, dataclasses.replace(system.profile,
+                                                     hardware=[m.hw for m in system]),
+                           tuple(system.extra_states()))
+            sinks.append(live)
+        run_cycles(system, rate, duration, sinks)
     info(f"{sink.samples} samples of {len(names)} interfaces")
     links.finish()
     finish(system)
@@ -400,21 +450,64 @@ class LinkWatch(Sink):
             self.system.notes.append(f"{name}: the link was lost {n} time(s) and came back")
 
 
+def heat_maps(sample: dict[str, Any], grids: dict[str, list[list[str]]]) -> Any:
+    """Each tactile grid as a small heat map (its cells' values on a dark → red → yellow
+    scale, the hottest cell of the sample at the top), side by side; the grids' common name
+    above them, each titled by the rest of its name."""
+    from rich.columns import Columns
+    from rich.style import Style
+    from rich.table import Table
+    from rich.text import Text
+
+    top = max([1.0] + [v for rows in grids.values() for row in rows for n in row
+                       if isinstance(v := sample.get(n), int | float) and v == v])
+    names = list(grids)
+    common = ""  # the names' common start, up to a _ (a string's, not a path's)
+    if len(names) > 1:
+        while len(common) < len(names[0]) and all(
+                n.startswith(common + names[0][len(common)]) for n in names[1:]):
+            common += names[0][len(common)]
+        common = common[:common.rfind("_") + 1]
+    maps = []
+    for part, rows in grids.items():
+        t = Table(title=part[len(common):] or part, show_header=False, box=None, padding=0,
+                  title_justify="left")
+        for _ in rows[0]:
+            t.add_column(justify="right", width=6, no_wrap=True)
+        for row in rows:
+            cells = []
+            for name in row:
+                v = sample.get(name)
+                if not isinstance(v, int | float) or v != v:
+                    cells.append(Text("     —"))
+                    continue
+                f = max(0.0, min(1.0, v / top))
+                red, green = min(255, 40 + int(430 * f)), max(0, min(255, int(510 * f) - 255))
+                style = Style(bgcolor=f"rgb({red},{green},{int(40 * (1 - f))})",
+                              color="black" if f > 0.6 else "white")
+                cells.append(Text(f"{v:6.0f}", style=style))
+            t.add_row(*cells)
+        maps.append(t)
+    return Columns(maps, padding=(1, 2), title=common.rstrip("_") or None)
+
+
 def live_tables(sample: dict[str, Any], title: str) -> Any:
     """One row per part and a column per interface: a table for each set of interfaces
     (joints, F/T sensors, GPIO), so a hand of 20 joints fits on a screen; the links' states in
-    the title. Laid out for the console it is drawn on: columns that do not fit its width go
-    to a table of their own below (the part's name repeated), so no value is ever cut."""
+    the title; each tactile grid as a heat map below. Laid out for the console it is drawn
+    on: columns that do not fit its width go to a table of their own below (the part's name
+    repeated), so no value is ever cut."""
     from rich import box
     from rich.table import Table
 
+    grids = stream_grids(list(sample))
     parts: dict[str, dict[str, Any]] = {}
     links: dict[str, Any] = {}
     for name, value in sample.items():
         part, _, interface = name.rpartition("/")
         if interface == "connection_status":
             links[part] = value
-        else:
+        elif part not in grids:
             parts.setdefault(part, {})[interface] = value
     overall = links.pop("system", None)
     if overall is not None:
@@ -454,5 +547,7 @@ def live_tables(sample: dict[str, Any], title: str) -> Any:
                     for part, cells in rows:
                         t.add_row(part, *(cells[i] for i in chunk))
                     yield t
+            if grids:
+                yield heat_maps(sample, grids)
 
     return Tables()

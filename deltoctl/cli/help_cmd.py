@@ -42,7 +42,7 @@ EXAMPLES = {
     "gpio get": "deltoctl -p dg-5f-right gpio get --json",
     "gpio set": "deltoctl -p rrbot-gpio gpio set flange_vacuum/vacuum on",
     "stream": "deltoctl -p dg-5f-right stream --rate 50 -i 'rj_dg_1_*/position'",
-    "record": "deltoctl -p mh5 record run.mcap --duration 60",
+    "record": "deltoctl -p mh5 record run.mcap --duration 60 --foxglove",
     "torque": "deltoctl -p mh5 torque off left_arm",
     "reboot": "deltoctl -p mh5 reboot head_y",
     "register": "deltoctl -p mh5 register get head_y present_temperature",
@@ -56,10 +56,15 @@ EXAMPLES = {
     "help": "deltoctl help exit-codes",
     "info": "deltoctl info run.mcap --json",
     "plot": "deltoctl plot run.mcap 'rj_dg_1_*/position' --out plot.png",
+    "replay": "deltoctl replay fault.mcap --tolerance 1deg --json",
     "config": "deltoctl -p mh5 config snapshot",
     "config snapshot": "deltoctl -p mh5 config snapshot -o mh5.yaml",
     "config diff": "deltoctl -p mh5 config diff mh5.yaml",
     "config restore": "deltoctl -p mh5 config restore mh5.yaml --allow torque-off",
+    "agent": "deltoctl -p dg-5f-right agent --name hand-1 --sim",
+    "fleet": "deltoctl fleet run --robots 'hand-*' identify",
+    "fleet list": "deltoctl --zenoh-config fleet.json5 fleet list --json",
+    "fleet run": "deltoctl fleet run --robots 'hand-*' identify --json",
 }
 GLOBAL_PANEL = "Global options (before or after the verb)"
 _NOT_GLOBAL = ("version", "help", "install_completion", "show_completion")

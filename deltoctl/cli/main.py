@@ -21,7 +21,7 @@ GLOBAL_OPTIONS: dict[str, bool] = {
     "--profile": True, "-p": True, "--target": True, "-t": True, "--arg": True,
     "--package-path": True, "--hardware": True, "--log-file": True, "--xacro": False,
     "--sim": False, "--json": False, "--yes": False, "-y": False, "--verbose": False,
-    "-v": False, "--quiet": False, "-q": False,
+    "-v": False, "--quiet": False, "-q": False, "--robot": True, "--zenoh-config": True,
 }
 # single letters of the global short options, for clusters such as -yq or -vvp NAME
 SHORT_FLAGS = frozenset("yqv")
@@ -99,16 +99,18 @@ VERBS = {
     "profile": "profile_cmd", "connect": "device_cmd", "identify": "device_cmd",
     "detect": "device_cmd", "home": "motion_cmd", "jog": "motion_cmd",
     "calibrate": "calibrate_cmd", "gpio": "device_cmd", "stream": "device_cmd",
-    "record": "record_cmd", "torque": "servo_cmd", "reboot": "servo_cmd",
+    "record": "record_cmd", "replay": "replay_cmd", "torque": "servo_cmd", "reboot": "servo_cmd",
     "register": "servo_cmd",
     "sim": "sim_cmd", "bench": "bench_cmd", "doctor": "doctor_cmd",
     "completion": "completion_cmd", "help": "help_cmd",
+    "agent": "agent_cmd", "fleet": "fleet_cmd",
 }
 
 EXIT_LINE = ("Exit codes: 0 ok · 1 failed · 2 usage or invalid input · 3 warnings · "
              "4 unreachable · 5 refused for safety · 130 interrupted")
 
 TEACH = "deltoctl.teach"  # ctx.meta key: this run shows help or completes, so verbs are taught
+ARGV = "deltoctl.argv"  # ctx.meta key: the command line, global options first
 
 
 class DeltoctlGroup(TyperGroup):
@@ -151,6 +153,7 @@ class DeltoctlGroup(TyperGroup):
         args = hoist_global_options(list(args))
         options_part = args[:args.index("--")] if "--" in args else args
         ctx.meta[TEACH] = "-h" in options_part or "--help" in options_part
+        ctx.meta[ARGV] = list(args)  # what --robot forwards to the robot's agent
         try:
             return super().parse_args(ctx, args)
         except click_exceptions.UsageError as exc:
@@ -287,6 +290,13 @@ def root(
     package_path: Annotated[list[str] | None, typer.Option(
         "--package-path", metavar="PKG=DIR",
         help="Where $(find PKG) points, for xacro files (repeatable).")] = None,
+    robot: Annotated[str | None, typer.Option(
+        "--robot", metavar="ROBOT",
+        help="Run the verb on this robot, through its 'deltoctl agent' over Zenoh.")] = None,
+    zenoh_config: Annotated[str | None, typer.Option(
+        "--zenoh-config", envvar="DELTOCTL_ZENOH_CONFIG", metavar="FILE",
+        help="Zenoh configuration (JSON5: endpoints, TLS) for --robot, agent and fleet.")]
+        = None,
     version: Annotated[bool, typer.Option(
         "--version", callback=_version, is_eager=True, help="Show the version and exit.")] = False,
 ) -> None:
@@ -304,7 +314,13 @@ def root(
         hardware=list(hardware or []),
         xacro=xacro,
         package_paths=parse_pairs(list(package_path or []), "=", "--package-path", "PKG=DIR"),
+        robot=robot,
+        zenoh_config=zenoh_config,
     )
+    if robot and not ctx.resilient_parsing:
+        from deltoctl.cli.fleet_cmd import forward
+
+        forward(ctx)  # runs the verb on the robot and exits with its code
 
 
 def _logging(verbose: int, log_file: str | None) -> None:

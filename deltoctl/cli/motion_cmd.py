@@ -3,6 +3,7 @@ outside limits or without confirmation; duty 0 on the way out, Ctrl-C included."
 
 import math
 import sys
+from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -207,38 +208,111 @@ def jog(
                                          help="The joint to move.")],
     delta: Annotated[str | None, typer.Argument(
         help="Relative move, e.g. 0.1, -5deg.")] = None,
+    more: Annotated[list[str] | None, typer.Argument(
+        metavar="[JOINT DELTA]...", show_default=False,
+        help="More joints to move at the same time, each with its delta.")] = None,
     to: Annotated[str | None, typer.Option("--to", help="Absolute target instead.")] = None,
     velocity: VelocityOpt = None,
+    record: Annotated[Path | None, typer.Option(
+        "--record", metavar="FILE.mcap",
+        help="Record the motion to MCAP: every block's states and each cycle's commands "
+             "(/joint_commands), for `deltoctl replay`.")] = None,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
-    """Move one joint by DELTA (or --to POS), within its limits and the profile's jog step."""
+    """Move one joint by DELTA (or --to POS), within its limits and the profile's jog step;
+    more JOINT DELTA pairs move at the same time (blocks on several links at once)."""
     from deltoctl.core.motion import check_target
 
     opts = options(ctx)
     profile = opts.load_profile()
-    comp = profile.component(joint)
-    if comp is None or comp.kind != "joint":
-        raise InvalidInput(f"{profile.name} has no joint {joint!r}"
-                           + _near(joint, [j.name for j in profile.joints()]))
-    if comp.command("effort") is None and comp.command("position") is None:
-        raise InvalidInput(f"{joint} has no effort or position command interface to move it")
     if (delta is None) == (to is None):
         raise InvalidInput("give either DELTA or --to POS")
+    pairs = [(joint, delta)]
+    if more:
+        if to is not None or len(more) % 2:
+            raise InvalidInput("more joints come as JOINT DELTA pairs (and not with --to)")
+        pairs += list(zip(more[0::2], more[1::2]))
+    comps = {}
+    for name, _ in pairs:
+        comp = profile.component(name)
+        if comp is None or comp.kind != "joint":
+            raise InvalidInput(f"{profile.name} has no joint {name!r}"
+                               + _near(name, [j.name for j in profile.joints()]))
+        if comp.command("effort") is None and comp.command("position") is None:
+            raise InvalidInput(f"{name} has no effort or position command interface to move "
+                               "it")
+        if name in comps:
+            raise InvalidInput(f"{name} is given twice")
+        comps[name] = comp
     speed = _speed(velocity)
+    if record is not None and not record.parent.is_dir():
+        raise InvalidInput(f"cannot write {record}: {record.parent} is not a directory")
     with open_system(opts, allow_model_mismatch, profile) as system:
-        m = system.member(joint)
-        if not m.can("jog"):
-            raise InvalidInput(f"{m.name} cannot move its joints")
-        m.driver.check_motion([joint])  # e.g. not homed: refused before asking
-        start = system.read()[f"{joint}/position"]
-        target = _quantity(to, "--to") if to is not None else start + _quantity(delta, "DELTA")
-        if not math.isfinite(target):
-            raise InvalidInput(f"the target of {joint} must be finite")
-        check_target(profile, comp, target, start)
-        confirm_motion(opts, f"jog {joint} ({m.name}) from {start:.4f} to {target:.4f} "
-                       f"({math.degrees(target - start):+.1f}°)")
-        report = _move(opts, system, {joint: target}, speed, f"jog {joint}")
+        for joints in system.by_block(list(comps)).values():
+            m = system.member(joints[0])
+            if not m.can("jog"):
+                raise InvalidInput(f"{m.name} cannot move its joints")
+            m.driver.check_motion(joints)  # e.g. not homed: refused before asking
+        values = system.read()
+        targets, moves = {}, []
+        for name, step in pairs:
+            start = values[f"{name}/position"]
+            target = _quantity(to, "--to") if to is not None else \
+                start + _quantity(step or "", "DELTA")
+            if not math.isfinite(target):
+                raise InvalidInput(f"the target of {name} must be finite")
+            check_target(profile, comps[name], target, start)
+            targets[name] = target
+            moves.append(f"{name} ({system.member(name).name}) from {start:.4f} to "
+                         f"{target:.4f} ({math.degrees(target - start):+.1f}°)")
+        confirm_motion(opts, "jog " + "; ".join(moves))
+        label = f"jog {', '.join(targets)}"
+        if record is None:
+            report = _move(opts, system, targets, speed, label)
+        else:
+            report = _recorded_move(opts, system, targets, speed, label, record)
     if opts.json:
         emit_json(report)
     _fail_unsettled(report)
     finish(system)
+
+
+def recording_metadata(system: Any) -> tuple[Any, dict[str, dict[str, str]]]:
+    """The profile of the blocks driven, and the metadata a recording of them carries: that
+    profile (YAML), each block's identity, deltoctl's version."""
+    import dataclasses
+    import json
+
+    from deltoctl import __version__
+    from deltoctl.profile.exporter import to_yaml
+
+    recorded = dataclasses.replace(system.profile, hardware=[m.hw for m in system])
+    identities = {m.name: {"family": m.family.name, "target": m.url,
+                           "simulated": m.simulated is not None, **m.driver.identify()}
+                  for m in system.able("identify")}
+    return recorded, {
+        "profile": {"name": recorded.name, "yaml": to_yaml(recorded)},
+        "identify": {name: json.dumps(ident, default=str) for name, ident in identities.items()},
+        "deltoctl": {"version": __version__},
+    }
+
+
+def _recorded_move(opts: Options, system: Any, targets: dict[str, float],
+                   velocity: float | None, label: str, output: Path) -> dict[str, Any]:
+    """``_move`` while every move loop's cycles (states and setpoints) go to ``output``."""
+    from deltoctl.core.replay import CommandLog
+    from deltoctl.record.recorder_process import RecorderProcess
+
+    profile, metadata = recording_metadata(system)
+    with RecorderProcess(output, profile, metadata, tuple(system.extra_states()),
+                         commands=True) as recorder:
+        with CommandLog(system, recorder) as log:
+            report = _move(opts, system, targets, velocity, label)
+        recorder.close()  # the move loops have no loop statistics of their own to write
+    if recorder.error:  # a write failed or the file was removed: the message says what is left
+        raise DeviceError(recorder.error)
+    report["recording"] = {"output": str(output), "cycles": log.rows,
+                           "messages": recorder.counts}
+    if not opts.json:
+        info(f"wrote {output}: {log.rows} cycles of states and commands")
+    return report

@@ -1,7 +1,9 @@
 """``deltoctl record OUT.mcap``: interface values to MCAP (ROS 2 encoding)."""
 
+import contextlib
 import json
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -17,7 +19,7 @@ from deltoctl.cli.device_cmd import (
     finish,
     open_system,
 )
-from deltoctl.cli.output import emit_json, info, progress
+from deltoctl.cli.output import emit_json, info, progress, warn
 from deltoctl.core.runner import Sink
 from deltoctl.errors import DeviceError, InvalidInput
 
@@ -36,6 +38,49 @@ def _create(path: Path) -> None:
         path.open("wb").close()
     except OSError as exc:
         raise InvalidInput(f"cannot write {path}: {exc.strerror}") from None
+
+
+FoxgloveOpt = Annotated[bool, typer.Option(
+    "--foxglove", help="Serve the live values to Foxglove too (WebSocket, the topics and "
+                       "messages of a recording); needs pip install 'deltoctl\\[foxglove]'.")]
+FoxglovePortOpt = Annotated[int, typer.Option(
+    "--foxglove-port", metavar="PORT", help="The Foxglove WebSocket port (0: any free one).")]
+FoxgloveHostOpt = Annotated[str, typer.Option(
+    "--foxglove-host", metavar="ADDRESS",
+    help="The address to serve Foxglove on; another than loopback serves the robot's data to "
+         "other machines.")]
+
+
+@contextlib.contextmanager
+def foxglove_live(enabled: bool, host: str, port: int) -> Iterator[Any]:
+    """With --foxglove, the Foxglove sink, its address and port checked before the devices
+    are opened (the server starts with ``start_foxglove``, and stops on the way out); else
+    None."""
+    if not enabled:
+        yield None
+        return
+    from deltoctl.record.foxglove_live import FoxgloveLive, is_local
+
+    with FoxgloveLive(host, port) as live:
+        if not is_local(host):
+            warn(f"--foxglove-host {host}: the robot's data is served beyond this machine, to "
+                 f"anyone who reaches port {port or 'chosen'} there")
+        yield live
+    if live.error:
+        warn(f"the live view stopped: {live.error}")
+    if live.dropped:
+        info(f"Foxglove: {live.dropped} cycles not sent (the live view fell behind)")
+
+
+def start_foxglove(live: Any, profile: Any, extra_states: tuple[str, ...],
+                   gpio_type: str = "group-values") -> None:
+    """The server, with the robot's topics; where it is said on stderr."""
+    live.begin(profile, extra_states, gpio_type)
+    info(f"Foxglove: connect to {live.url} (Open connection → Foxglove WebSocket)")
+
+
+def foxglove_result(live: Any) -> dict[str, Any]:
+    return {"url": live.url, "cycles_sent": live.sent, "cycles_dropped": live.dropped}
 
 
 class RecordSink(Sink):
@@ -85,6 +130,9 @@ def record(
         help="/gpio's type: group-values (control_msgs/DynamicInterfaceGroupValues, control_msgs "
              "4.7+ on Humble, 5.3+ on Jazzy) or joint-state (control_msgs/DynamicJointState, "
              "every control_msgs).")] = "group-values",
+    foxglove: FoxgloveOpt = False,
+    foxglove_port: FoxglovePortOpt = 8765,
+    foxglove_host: FoxgloveHostOpt = "127.0.0.1",
 ) -> None:
     """Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
     valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back, 1 when
@@ -106,11 +154,17 @@ def record(
         raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
     # the file is created once the devices answer: an unreachable one leaves no empty file;
     # SIGTERM and SIGHUP before the loop interrupt like Ctrl-C, so the file is finished too
-    with interrupted_by_signals(), open_system(opts, allow_model_mismatch) as system:
+    with interrupted_by_signals(), foxglove_live(foxglove, foxglove_host, foxglove_port) as live, \
+            open_system(opts, allow_model_mismatch) as system:
         _create(output)
         recorded = dataclasses.replace(system.profile, hardware=[m.hw for m in system])
+        sinks: list[Sink] = []
+        if live is not None:
+            start_foxglove(live, recorded, tuple(system.extra_states()), gpio_type)
+            sinks.append(live)
         identities = {m.name: {"family": m.family.name, "target": m.url,
-                               "simulated": m.simulated is not None, **m.driver.identify()} for m in system.able("identify")}
+                               "simulated": m.simulated is not None, **m.driver.identify()}
+                      for m in system.able("identify")}
         with RecorderProcess(output, recorded, {
             "profile": {"name": recorded.name, "yaml": to_yaml(recorded)},
             "identify": {name: json.dumps(ident, default=str)
@@ -119,12 +173,15 @@ def record(
         }, tuple(system.extra_states()), gpio_type=gpio_type) as recorder:
             links = LinkWatch(system)
             stats = run_cycles(system, rate, duration, [
-                RecordSink(recorder, output, duration, progress(opts, elapsed=True)), links])
+                RecordSink(recorder, output, duration, progress(opts, elapsed=True)), links,
+                *sinks])
     if recorder.error:  # a write failed or the file was removed: the message says what is left
         raise DeviceError(recorder.error)
     summary = stats.summary()
     result = {"output": str(output), "messages": recorder.counts,
               "link_losses": recorder.link_losses, "loop": summary}
+    if live is not None:
+        result["foxglove"] = foxglove_result(live)
     if opts.json:
         emit_json(result)
     else:

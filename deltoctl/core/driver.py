@@ -22,6 +22,12 @@ if TYPE_CHECKING:
 
 Progress = Callable[[float], None]
 HomeProgress = Callable[[str, str, float], None]
+# One joint's setpoint of a cycle: (position, velocity, effort), NaN where not commanded
+Setpoint = tuple[float, float, float]
+SETPOINT_FIELDS = ("position", "velocity", "effort")
+# Called by a move loop once a cycle, after its commands went out: (time.time_ns(), the state
+# read that cycle, joint → the setpoint sent)
+CycleHook = Callable[[int, dict[str, float], dict[str, Setpoint]], None]
 
 
 @dataclass
@@ -75,6 +81,10 @@ class Unsupported(InvalidInput):
 
 class Driver:
     extra_states: tuple[str, ...] = ()  # per-joint values beyond the profile's interfaces
+    # set by a verb that records the commands (``jog --record``): each move loop calls it
+    # once a cycle; None (the default) costs one attribute test a cycle
+    on_cycle: CycleHook | None = None
+    _follow_plan: dict[str, tuple[bool, ...]] | None = None  # per joint: fields it takes
 
     def __init__(self, block: Block) -> None:
         self.block = block
@@ -147,6 +157,22 @@ class Driver:
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:
         raise Unsupported(f"{self.hw.name} cannot move its joints")
+
+    def follow(self, setpoints: dict[str, Setpoint]) -> None:
+        """Send one cycle's recorded setpoints (``replay``) the way this family's move loop
+        sent them; the caller checked them against the profile's limits first. By default,
+        each field that is one of the joint's command interfaces goes to ``write`` (NaN: not
+        commanded); a family whose move sends goals rather than setpoints overrides it."""
+        commands = self._follow_plan
+        if commands is None:
+            commands = self._follow_plan = {
+                j.name: tuple(j.command(f) is not None for f in SETPOINT_FIELDS)
+                for j in self.hw.joints}
+        sent = {f"{joint}/{f}": v for joint, fields in setpoints.items()
+                for f, v, ok in zip(SETPOINT_FIELDS, fields, commands.get(joint, ()))
+                if ok and v == v}
+        if sent:
+            self.write(sent)
 
     def home(self, joints: list[str], force: bool = False,
              progress: HomeProgress | None = None) -> dict[str, str]:

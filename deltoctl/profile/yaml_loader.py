@@ -158,6 +158,9 @@ def check_yaml_bounds(text: str, source: str) -> None:
         for event in yaml.parse(text, Loader=_BaseLoader):
             bounds.event(event)
     except yaml.YAMLError as exc:
+        if "nesting depth" in str(exc):  # newer PyYAML scans far ahead in flow style
+            raise ProfileError(f"YAML nested deeper than {MAX_YAML_DEPTH} levels",
+                               source) from None
         raise _yaml_error(exc, source) from None
 
 

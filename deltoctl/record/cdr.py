@@ -5,15 +5,53 @@ lengths; only stamps and values change. ``CdrTemplate`` works out the layout and
 and compiles the whole message into one struct: every constant part is a byte string field,
 every changing one a named value (an interface name, or ``SEC``/``NANOSEC`` for the stamp).
 The recorder fills it with one ``itemgetter`` over a row of values and one ``pack``.
+Integer fields (an Image's packed cells) take their float values rounded and saturated.
 ``CdrWriter`` encodes free-form messages (diagnostics, once a second) field by field.
 """
 
 from __future__ import annotations
 
+import re
 import struct
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR, little-endian
 SEC, NANOSEC = "@sec", "@nanosec"  # the stamp's fields in a template
+_INT_RANGES = {"B": (0, 0xFF), "H": (0, 0xFFFF), "b": (-0x80, 0x7F), "h": (-0x8000, 0x7FFF)}
+_CELL = re.compile(r"^cell_(\d+)_(\d+)$")
+
+
+def grid_cells(interfaces: list[str]) -> tuple[int, int, list[str]] | None:
+    """A tactile grid's shape from its ``cell_<row>_<col>`` interfaces: (rows, cols, the
+    names row by row), or None unless they are exactly the cells of a full grid."""
+    cells = {}
+    for name in interfaces:
+        match = _CELL.match(name)
+        if match is None:
+            return None
+        cells[int(match[1]), int(match[2])] = name
+    if not cells:
+        return None
+    rows = max(r for r, _ in cells) + 1
+    cols = max(c for _, c in cells) + 1
+    if len(cells) != rows * cols or rows * cols > 1 << 16:
+        return None
+    return rows, cols, [cells[r, c] for r in range(rows) for c in range(cols)]
+
+
+class _IntFields(struct.Struct):
+    """A layout some of whose values are integers filled from floats: each is rounded and
+    saturated to its type's range (NaN, a missing value, gives 0)."""
+
+    def __init__(self, fmt: str, runs: list[tuple[int, int, int, int]]) -> None:
+        super().__init__(fmt)
+        self.runs = runs  # (first index among the values, end, lowest, highest)
+
+    def pack(self, *values: float) -> bytes:  # type: ignore[override]
+        v = list(values)
+        for start, end, lo, hi in self.runs:
+            v[start:end] = [0 if x != x else lo if x <= lo else hi if x >= hi else round(x)
+                            for x in v[start:end]]
+        return super().pack(*v)
 
 
 def _string(text: str) -> bytes:
@@ -29,6 +67,7 @@ class CdrTemplate:
         self.fields: list[bytes | str] = [ENCAPSULATION]
         self._tokens = ["4s"]
         self._pos = 0  # offset from the start of the payload, after the encapsulation
+        self._ints: list[tuple[int, int, int, int]] = []  # runs of integers from floats
         self.layout: struct.Struct | None = None
 
     def _const(self, data: bytes, align: int) -> CdrTemplate:
@@ -43,6 +82,9 @@ class CdrTemplate:
             self._tokens.append(f"{len(data)}s")
         self._pos += pad + len(data)
         return self
+
+    def const_u8(self, value: int) -> CdrTemplate:
+        return self._const(struct.pack("<B", value), 1)
 
     def const_u32(self, value: int) -> CdrTemplate:
         return self._const(struct.pack("<I", value), 4)
@@ -71,6 +113,17 @@ class CdrTemplate:
         self._pos += pad + size * len(names)
         return self
 
+    def var_packed(self, code: str, names: list[str]) -> CdrTemplate:
+        """A uint8[] (an Image's data) of a fixed length holding one little-endian value of
+        integer struct ``code`` (B, H, b, h) per name: rounded and saturated floats."""
+        size = struct.calcsize(code)
+        self.const_u32(size * len(names))
+        lo, hi = _INT_RANGES[code]
+        start = len(self.fields)
+        self._ints.append((start, start + len(names), lo, hi))
+        # after its length the data starts 4-aligned: var() adds no padding inside it
+        return self.var(code, names) if names else self
+
     def var_doubles(self, names: list[str]) -> CdrTemplate:
         """A float64[] of a fixed length: the count is constant, the values are not."""
         self.const_u32(len(names))
@@ -81,7 +134,8 @@ class CdrTemplate:
         return self.var("i", [SEC]).var("I", [NANOSEC]).const_string(frame_id)
 
     def done(self) -> CdrTemplate:
-        self.layout = struct.Struct("<" + "".join(self._tokens))
+        fmt = "<" + "".join(self._tokens)
+        self.layout = _IntFields(fmt, self._ints) if self._ints else struct.Struct(fmt)
         return self
 
 

@@ -3,7 +3,8 @@
 Topics: /joint_states (sensor_msgs/JointState), /dynamic_joint_states (every joint interface,
 temperatures included, as ros2_control's broadcaster publishes them), /<sensor>/wrench
 (geometry_msgs/WrenchStamped per F/T sensor), /<sensor>/data_raw (sensor_msgs/Imu without
-orientation, per IMU), /gpio (control_msgs/DynamicInterfaceGroupValues, or DynamicJointState
+orientation, per IMU), sensor_msgs/Image per tactile grid (its ``topic`` param, e.g.
+/tactile/finger_1), /gpio (control_msgs/DynamicInterfaceGroupValues, or DynamicJointState
 for an older control_msgs, with each block's and the system's connection_status),
 /diagnostics (link lost and restored, gaps between cycles, loop statistics).
 
@@ -27,7 +28,7 @@ from operator import itemgetter
 from typing import Any, BinaryIO
 
 from deltoctl.profile.model import Profile
-from deltoctl.record.cdr import NANOSEC, SEC, CdrTemplate, CdrWriter
+from deltoctl.record.cdr import NANOSEC, SEC, CdrTemplate, CdrWriter, grid_cells
 from deltoctl.record.ros2_msgs import GPIO_TYPES, MSGDEFS, QOS_PROFILES, type_hash
 
 FT_AXES = ("force.x", "force.y", "force.z", "torque.x", "torque.y", "torque.z")
@@ -52,20 +53,44 @@ def _imu_template(sensor: str, frame_id: str) -> CdrTemplate:
     return t.var("d", fields[7:]).const_doubles(UNKNOWN_COVARIANCE).done()
 
 
+def _image(sensor: Any, frame_id: str) -> tuple[str, CdrTemplate] | None:
+    """A tactile grid (``cell_<row>_<col>`` interfaces) as sensor_msgs/Image: mono8 (uint8
+    cells) or mono16 (little-endian uint16), on its ``topic`` param or /<sensor>/image."""
+    grid = grid_cells([i.name for i in sensor.state_interfaces])
+    if grid is None:
+        return None
+    rows, cols, cells = grid
+    wide = sensor.params.get("encoding", "mono16") != "mono8"
+    t = CdrTemplate().header(frame_id).const_u32(rows).const_u32(cols)
+    t.const_string("mono16" if wide else "mono8").const_u8(0).const_u32(cols * (1 + wide))
+    t.var_packed("H" if wide else "B", [f"{sensor.name}/{c}" for c in cells])
+    topic = sensor.params.get("topic", "").strip("/")
+    if not topic or not all(part.isidentifier() and part.isascii() for part in topic.split("/")):
+        topic = f"{sensor.name}/image"
+    return f"/{topic}", t.done()
+
+
 class McapRecorder:
-    def __init__(self, stream: BinaryIO, profile: Profile, metadata: dict[str, dict[str, str]],
-                 extra_states: tuple[str, ...] = (), gpio_type: str = "group-values"):
+    def __init__(self, stream: BinaryIO | None, profile: Profile,
+                 metadata: dict[str, dict[str, str]], extra_states: tuple[str, ...] = (),
+                 gpio_type: str = "group-values", writer: Any = None,
+                 commands: bool = False):
         """``extra_states``: values (``joint/name``) a driver reads beyond the profile's state
         interfaces (a Bioscara joint's flags), recorded in /dynamic_joint_states.
-        ``gpio_type``: /gpio's message type, a key of ``GPIO_TYPES``."""
-        from mcap.writer import CompressionType, Writer
-
+        ``gpio_type``: /gpio's message type, a key of ``GPIO_TYPES``. ``writer``: what takes
+        the records instead of mcap's Writer on ``stream`` (the same methods: the live view's
+        ``FoxgloveWriter``). ``commands``: a /joint_commands topic too, each cycle's
+        setpoints (``core.replay``: ``<joint>/position_command`` …)."""
         from deltoctl import __version__
 
         if gpio_type not in GPIO_TYPES:
             raise ValueError(f"gpio_type {gpio_type!r}: one of {', '.join(GPIO_TYPES)}")
         self.stream = stream
-        self.writer = Writer(stream, compression=CompressionType.LZ4)
+        if writer is None:
+            from mcap.writer import CompressionType, Writer
+
+            writer = Writer(stream, compression=CompressionType.LZ4)
+        self.writer = writer
         self.writer.start(profile="ros2", library=f"deltoctl {__version__}")
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, int] = {}
@@ -83,6 +108,8 @@ class McapRecorder:
         for name, data in _with_profile(metadata, profile).items():
             self.writer.add_metadata(name, data)
         self._plan()
+        if commands:
+            self._plan_commands()
         self.keys: list[str] = []
         self.set_keys([])
         self._previous_ns: int | None = None
@@ -114,6 +141,9 @@ class McapRecorder:
             if sensor.kind == "sensor" and sensor.state("angular_velocity.x"):
                 self._add(f"/{sensor.name}/data_raw", "sensor_msgs/msg/Imu",
                           _imu_template(sensor.name, frame_id))
+            image = _image(sensor, frame_id) if sensor.kind == "sensor" else None
+            if image is not None:
+                self._add(image[0], "sensor_msgs/msg/Image", image[1])
         groups = [(g.name, [i.name for i in g.state_interfaces])
                   for _, g in self.profile.components() if g.kind == "gpio"]
         groups += [(hw.name, ["connection_status"]) for hw in self.profile.hardware]
@@ -123,6 +153,16 @@ class McapRecorder:
         for group, itfs in groups:
             gpio.const_strings(itfs).var_doubles([f"{group}/{i}" for i in itfs])
         self._add("/gpio", self.gpio_type, gpio.done())
+
+    def _plan_commands(self) -> None:
+        """/joint_commands: a JointState of each joint's setpoints (NaN: not commanded)."""
+        from deltoctl.core.replay import COMMANDS_TOPIC, command_key, commanded_joints
+
+        names = [j.name for j in commanded_joints(self.profile)]
+        js = CdrTemplate().header().const_strings(names)
+        for kind in ("position", "velocity", "effort"):
+            js.var_doubles([command_key(j, kind) for j in names])
+        self._add(COMMANDS_TOPIC, "sensor_msgs/msg/JointState", js.done())
 
     def _add(self, topic: str, schema: str, template: CdrTemplate) -> None:
         self._channel(topic, schema)
@@ -202,6 +242,10 @@ class McapRecorder:
                             "link lost" if lost else "link restored",
                             {"blocks_down": ",".join(down)})
         self.connected = status
+
+    def skipped(self) -> None:
+        """Cycles left out on purpose (the live view's, with no client): not a gap."""
+        self._previous_ns = None
 
     def _watch_gap(self, t_ns: int) -> None:
         """A diagnostic when no cycle came for GAP_PERIODS usual periods (GAP_MIN_NS at

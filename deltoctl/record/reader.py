@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
+from deltoctl.core.replay import COMMAND_SUFFIX, COMMANDS_TOPIC
 from deltoctl.errors import InvalidInput
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -98,13 +99,16 @@ Layout = list[tuple[str, int]]
 
 
 def _joint_state(c: Cdr, topic: str) -> Layout:
+    """/joint_commands' fields are named ``<joint>/position_command`` …, apart from the
+    states'."""
     c.stamp()
     names = c.strings()
     layout = []
+    suffix = COMMAND_SUFFIX if topic == COMMANDS_TOPIC else ""
     for kind in ("position", "velocity", "effort"):
         count = c.u32()
         at = c.doubles(count)
-        layout += [(f"{n}/{kind}", at + 8 * i) for i, n in enumerate(names[:count])]
+        layout += [(f"{n}/{kind}{suffix}", at + 8 * i) for i, n in enumerate(names[:count])]
     return layout
 
 

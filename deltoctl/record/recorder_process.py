@@ -86,8 +86,10 @@ class RecorderProcess:
     reason. Use it as a context manager so the file is finished whatever happens."""
 
     def __init__(self, path: Path, profile: Profile, metadata: dict[str, dict[str, str]],
-                 extra_states: tuple[str, ...] = (), gpio_type: str = "group-values") -> None:
-        """``gpio_type``: /gpio's message type (``ros2_msgs.GPIO_TYPES``)."""
+                 extra_states: tuple[str, ...] = (), gpio_type: str = "group-values",
+                 commands: bool = False) -> None:
+        """``gpio_type``: /gpio's message type (``ros2_msgs.GPIO_TYPES``); ``commands``: a
+        /joint_commands topic of each cycle's setpoints too (``McapRecorder``)."""
         import deltoctl.record.mcap_recorder  # noqa: F401  (imported before a fork, not after)
         from deltoctl.record.ros2_msgs import GPIO_TYPES
 
@@ -100,7 +102,8 @@ class RecorderProcess:
         self.path = path
         self.proc = ctx.Process(target=_record, name="deltoctl-recorder", daemon=True,
                                 args=(values_in, self._pipe, results_out, str(path), profile,
-                                      metadata, extra_states, gpio_type, os.getpid()))
+                                      metadata, extra_states, gpio_type, os.getpid(),
+                                      commands))
         _widen(self._pipe)
         with _signals_held():  # the child starts with them blocked and ignores them
             self.proc.start()
@@ -191,7 +194,7 @@ class RecorderProcess:
 
 def _record(pipe, parent_end, results, path: str, profile: Profile,  # type: ignore[no-untyped-def]
             metadata: dict, extra_states: tuple[str, ...], gpio_type: str,
-            parent_pid: int) -> None:
+            parent_pid: int, commands: bool = False) -> None:
     """The child: values in, MCAP out, until told to close or the parent is gone."""
     parent_end.close()  # else the pipe would never close while this process holds its end
     if _context().get_start_method() == "fork":  # spawn passes only the pipes
@@ -208,7 +211,8 @@ def _record(pipe, parent_end, results, path: str, profile: Profile,  # type: ign
     summary = None
     try:
         out = McapFile(path)
-        recorder = McapRecorder(out, profile, metadata, extra_states, gpio_type)
+        recorder = McapRecorder(out, profile, metadata, extra_states, gpio_type,
+                                commands=commands)
         summary = _receive(pipe, recorder, out, parent_pid)
     except Exception as exc:  # the file failed (OSError), or a bug: finish what was recorded
         error = exc

@@ -62,6 +62,9 @@ MSGDEFS = {
     "control_msgs/msg/DynamicInterfaceGroupValues": _join(
         "std_msgs/Header header\nstring[] interface_groups\n"
         "control_msgs/InterfaceValue[] interface_values\n", INTERFACE_VALUE, HEADER, TIME),
+    "sensor_msgs/msg/Image": _join(
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\n"
+        "uint8 is_bigendian\nuint32 step\nuint8[] data\n", HEADER, TIME),
     "diagnostic_msgs/msg/DiagnosticArray": _join(
         "std_msgs/Header header\ndiagnostic_msgs/DiagnosticStatus[] status\n",
         STATUS, KEY_VALUE, HEADER, TIME),

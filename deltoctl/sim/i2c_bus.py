@@ -55,6 +55,7 @@ class I2CSocketServer:
         host, port = self.listener.getsockname()[:2]
         self.url = f"i2c+tcp://{host}:{port}"
         self._stop = threading.Event()
+        self.listener.settimeout(0.2)  # here, not in the thread: a close may come first
         self._thread = threading.Thread(target=self._accept, name="i2c-sim", daemon=True)
 
     def start(self) -> I2CSocketServer:
@@ -62,7 +63,6 @@ class I2CSocketServer:
         return self
 
     def _accept(self) -> None:
-        self.listener.settimeout(0.2)
         while not self._stop.is_set():
             try:
                 conn, _ = self.listener.accept()

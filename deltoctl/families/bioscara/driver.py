@@ -9,6 +9,7 @@ hardware interface does on deactivate.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -22,6 +23,7 @@ POLL_HOMING = 0.1  # s between flag polls while homing, as the Bioscara driver d
 POLL_MOVE = 0.02
 TOLERANCE = 1e-3  # rad or m: the closed-loop steppers settle far closer than this
 SCAN = range(0x08, 0x78)  # the addresses i2cdetect scans
+NAN = float("nan")
 
 
 class Joint:
@@ -171,6 +173,7 @@ class BioscaraDriver(Driver):
         self.joints: dict[str, Joint] = {}
         self.present: list[Joint] = []
         self.touched: set[str] = set()  # joints this session commanded, stopped at the end
+        self._followed: dict[str, tuple[float, float]] = {}  # replayed goals and speeds
 
     @property
     def stats(self) -> dict[str, int]:
@@ -348,17 +351,21 @@ class BioscaraDriver(Driver):
         first = max((abs(t - start[f"{j}/position"]) for j, t in targets.items()),
                     default=0.0) or 1.0
         for name, target in targets.items():
-            joint = self.joint(name)
-            self.touched.add(name)
-            joint.activate()
-            if velocity:
-                joint.set_limits(joint.max_acceleration, min(velocity, joint.max_velocity))
-            joint.set_position(target)
+            self._goal(name, target, min(velocity, self.joint(name).max_velocity)
+                       if velocity else None)
+        hook = self.on_cycle
+        # the setpoint each cycle: the goal, and the speed limit of its profile
+        setpoints = {j: (t, min(velocity or math.inf, self.joints[j].max_velocity), NAN)
+                     for j, t in targets.items()} if hook is not None else {}
+        if hook is not None:  # the state the goals were sent from
+            hook(time.time_ns(), start, setpoints)
         began = time.monotonic()
         timeout = profile.safety.home_timeout or 30.0
         errors: dict[str, float] = {}
         while True:
             values = self.read()
+            if hook is not None:
+                hook(time.time_ns(), values, setpoints)
             for name in targets:
                 if self.joints[name].stalled:
                     self._stalled(name)
@@ -372,6 +379,29 @@ class BioscaraDriver(Driver):
             time.sleep(POLL_MOVE)
         unsettled = [j for j, e in errors.items() if e > tolerance]
         return MoveResult(not unsettled, elapsed, errors, unsettled)
+
+    def _goal(self, name: str, target: float, speed: float | None) -> None:
+        """Enable the joint, its speed limit (None: the profile's), then the position goal."""
+        joint = self.joint(name)
+        self.touched.add(name)
+        joint.activate()
+        if speed is not None:
+            joint.set_limits(joint.max_acceleration, speed)
+        joint.set_position(target)
+
+    def follow(self, setpoints: dict[str, tuple[float, float, float]]) -> None:
+        """A recorded position goal and speed limit each, sent when they differ from the ones
+        sent before (the joints run their own profiles, as in the move that was recorded);
+        refused for a joint that is not homed, as a move is."""
+        sent = self._followed
+        goals = {j: sp for j, sp in setpoints.items()
+                 if sp[0] == sp[0] and sent.get(j) != sp[:2]}
+        self.check_motion(list(goals))
+        for name, (target, speed, _) in goals.items():
+            joint = self.joint(name)
+            ok = speed == speed and speed > 0
+            self._goal(name, target, min(speed, joint.max_velocity) if ok else None)
+            sent[name] = (target, speed)
 
     def _stalled(self, name: str) -> None:
         joint = self.joints[name]

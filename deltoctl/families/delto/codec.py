@@ -18,8 +18,7 @@ from deltoctl.errors import ProtocolError
 from deltoctl.families.delto.models import (
     FT_TYPES,
     MODELS,
-    TACTILE_M,
-    TACTILE_S,
+    TACTILE_GRIDS,
     DeltoModel,
 )
 
@@ -148,14 +147,20 @@ class DataRecord:
     temperature: list[float] = field(default_factory=list)  # °C
     velocity: list[float] = field(default_factory=list)  # rad/s
     ft: list[tuple[float, ...]] = field(default_factory=list)  # per finger: F N, T N·m
-    tactile: list[tuple[int, ...]] = field(default_factory=list)
+    tactile: list[tuple[int, ...]] = field(default_factory=list)  # per finger, wire order
     gpio: tuple[bool, bool, bool, bool] | None = None  # output 1..3, input 1
 
 
 # Each fingertip's block per sensor type: its struct format and how many values it holds.
 # A type the gripper reports beyond these has no block (the vendor's parser reads none).
-SENSOR_BLOCKS = {**dict.fromkeys(FT_TYPES, ("6h", 6)), TACTILE_M: ("15B", 15),
-                 TACTILE_S: ("18H", 18)}
+SENSOR_BLOCKS = {**dict.fromkeys(FT_TYPES, ("6h", 6)),
+                 **{t: (f"{g.cells}{g.code}", g.cells) for t, g in TACTILE_GRIDS.items()}}
+
+
+def tactile_rows(cells: tuple[int, ...] | list[int], sensor_type: int) -> list[list[int]]:
+    """One finger's cells (wire order) as its grid's rows (models.TactileGrid)."""
+    cols = TACTILE_GRIDS[sensor_type].cols
+    return [list(cells[r:r + cols]) for r in range(0, len(cells), cols)]
 
 
 def sensor_block(model: DeltoModel, codes: tuple[int, ...],

@@ -8,10 +8,12 @@ the last values and writes are skipped, so a loop keeps its rate and a recording
 
 from __future__ import annotations
 
+import re
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from math import isfinite
 from operator import itemgetter, mul
 from typing import Any
 
@@ -20,13 +22,17 @@ from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Unreachabl
 from deltoctl.families.delto import codec
 from deltoctl.families.delto.models import (
     DUTY_WIRE_LIMIT,
+    FT_6AXIS,
     FT_TYPES,
     MODELS,
     SENSOR_NAMES,
+    SENSOR_NONE,
+    TACTILE_GRIDS,
     CurrentLimiter,
     DeltoModel,
     effort_to_duty_percent,
     model_label,
+    sensor_label,
 )
 from deltoctl.transport.tcp import LinkLost, TcpLink, parse_tcp_url
 
@@ -93,12 +99,22 @@ class DeltoDriver(Driver):
         joints = [j.name for j in hw.joints]
         self._effort_keys = frozenset(f"{j}/effort" for j in joints)
         gpio = hw.gpios[0].name if hw.gpios else "gpio"
+        # fingertip sensors, finger by finger in the profile's order: F/T, or tactile grids
+        self.ft_sensors = [s for s in hw.sensors if s.state("force.x")]
+        self.tactile_sensors = [s for s in hw.sensors
+                                if any(i.name.startswith("cell_") for i in s.state_interfaces)]
+        for s in self.tactile_sensors:
+            _check_tactile_params(s)
+        if (self.ft_sensors or self.tactile_sensors) and not self.fingertip_sensor:
+            self.warnings.append(f"{hw.name}: the profile declares fingertip sensors but "
+                                 "fingertip_sensor is not true: the gripper sends no values "
+                                 "for them")
         self._keys = {  # interface names, built once: the cycle only zips values in
             **{k: [f"{j}/{k}" for j in joints]
                for k in ("position", "velocity", "effort", "temperature")},
             "ft": [[f"{s.name}/{axis}" for axis in ("force.x", "force.y", "force.z",
                                                     "torque.x", "torque.y", "torque.z")]
-                   for s in hw.sensors],
+                   for s in self.ft_sensors],
             "gpio": [f"{gpio}/{n}" for n in ("output_1", "output_2", "output_3", "input_1")],
         }
         self.timing: dict[str, float] | None = None  # seconds per stage, when benchmarking
@@ -140,10 +156,11 @@ class DeltoDriver(Driver):
                 self.warnings.append(message + " (allowed; using the reported model)")
         sensor = info.sensor_type
         short = sensor is None
-        if short:  # old firmware: assume 6-axis F/T when the profile has fingertip sensors
-            from deltoctl.families.delto.models import FT_6AXIS, SENSOR_NONE
-
+        mask = info.finger_mask
+        if short:  # old firmware: 6-axis F/T on every finger when the profile has fingertip
+            # sensors, else none (the vendor's fallback, mask included)
             sensor = FT_6AXIS if self.fingertip_sensor else SENSOR_NONE
+            mask = (1 << actual.fingers) - 1 if self.fingertip_sensor else 0
         direction = actual.direction(info.firmware)
         revised = all(d == 1 for d in direction) or actual.revised_from is None
         with self._lock:
@@ -153,10 +170,8 @@ class DeltoDriver(Driver):
             self._request = codec.encode_data_request(self.codes)
             self._plan_reply(actual, sensor)
             self.identity = Identity(
-                self.configured_model, info.model_id, info.firmware, sensor,
-                info.finger_mask if info.finger_mask is not None
-                else (1 << actual.fingers) - 1, short, direction,
-                "revised" if revised else "legacy")
+                self.configured_model, info.model_id, info.firmware, sensor, mask, short,
+                direction, "revised" if revised else "legacy")
             self.connected = True
 
     def detect(self) -> dict:
@@ -166,21 +181,39 @@ class DeltoDriver(Driver):
         assert ident is not None and model is not None
         fingers = [f + 1 for f in range(model.fingers) if (ident.finger_mask or 0) >> f & 1]
         reported_ft = ident.sensor_type in FT_TYPES
+        grid = TACTILE_GRIDS.get(ident.sensor_type or 0)
+        declared = {_grid_label(s) for s in self.tactile_sensors}
         checks = [
-            {"what": "fingertip F/T sensors", "profile": len(self.hw.sensors),
+            {"what": "fingertip F/T sensors", "profile": len(self.ft_sensors),
              "device": model.fingers if reported_ft else 0},
+            {"what": "fingertip tactile grids", "profile": len(self.tactile_sensors),
+             "device": model.fingers if grid else 0},
             {"what": "GPIO", "profile": bool(self.hw.gpios),
              "device": self._keys["gpio"][3] in values},
         ]
+        if self.tactile_sensors or grid:
+            checks.insert(2, {"what": "tactile grid (rows×cols)",
+                              "profile": ", ".join(sorted(declared)) or "none",
+                              "device": grid.label if grid else "none"})
         for c in checks:
             c["match"] = c["profile"] == c["device"]
         sensor = SENSOR_NAMES.get(ident.sensor_type or 0, "unknown")
+        tactile = None
+        if grid is not None:
+            tactile = {"type": sensor, "rows": grid.rows, "cols": grid.cols,
+                       "cells": grid.cells, "cell_bits": 8 if grid.code == "B" else 16,
+                       "encoding": grid.encoding}
+        what = sensor.upper() + (f" ({grid.label} cells per finger)" if grid else "")
+        if grid and not self.tactile_sensors:
+            what += (f"; the profile declares no tactile grids (a sensor per finger with "
+                     f"cell_<row>_<col> interfaces, {grid.label})")
         return {
             "sensor_type": sensor,
             "fingers_with_sensor": fingers,
+            "tactile": tactile,
             "gpio": {k.split("/")[1]: values[k] for k in self._keys["gpio"] if k in values},
             "checks": checks,
-            "summary": f"{self.hw.name}: sensor type {sensor}, fingers with a sensor: "
+            "summary": f"{self.hw.name}: sensor type {what}, fingers with a sensor: "
                        f"{', '.join(map(str, fingers)) or 'none'}",
         }
 
@@ -267,6 +300,14 @@ class DeltoDriver(Driver):
                                    (self._keys["temperature"], "temperature"),
                                    (self._keys["velocity"], "velocity"), (ft_keys, "ft"))
                 for key, field in zip(keys, fields.get(name, ()))]
+        grid = TACTILE_GRIDS.get(sensor_type)
+        if grid is not None and "tactile" in fields:  # cells by name: a declared grid of
+            cells = fields["tactile"]  # another size gets the cells both have
+            for f, sensor in enumerate(self.tactile_sensors[: model.fingers]):
+                for k in range(grid.cells):
+                    name = f"cell_{k // grid.cols}_{k % grid.cols}"
+                    if sensor.state(name):
+                        plan.append((f"{sensor.name}/{name}", cells[f * grid.cells + k]))
         self._reply_plan = (model, sensor_type, [key for key, _ in plan],
                             itemgetter(*(i for _, (i, _) in plan)),
                             [scale for _, (_, scale) in plan],
@@ -363,7 +404,7 @@ class DeltoDriver(Driver):
         duties = []
         for plan in self._duty_plan[1]:
             target = get(plan[by])
-            if not target:
+            if not target or not isfinite(target):  # NaN would clamp to full duty: stop
                 duties.append(0)
                 continue
             _, effort_key, limiter, direction = plan
@@ -382,6 +423,15 @@ class DeltoDriver(Driver):
         from deltoctl.families.delto.motion import move_to
 
         return move_to(self, targets, velocity=velocity, progress=progress)
+
+    def follow(self, setpoints: dict[str, tuple[float, float, float]]) -> None:
+        """Recorded efforts (``replay``), clamped to the current cap as a move's are; a joint
+        without one (NaN) gets duty 0."""
+        from deltoctl.families.delto.motion import effort_cap
+
+        cap = effort_cap(self)
+        self.write_efforts({j: max(-cap, min(cap, sp[2])) for j, sp in setpoints.items()
+                            if isfinite(sp[2])})
 
     def stop(self) -> None:
         """The safe state: duty 0 on every motor. With the link down (a gripper keeps its
@@ -405,9 +455,27 @@ class DeltoDriver(Driver):
         self._send(codec.encode_gpio(outputs))
 
     def tare_ft(self) -> None:
-        if self.identity is None or self.identity.sensor_type not in FT_TYPES:
-            raise DeviceError("this gripper reports no F/T fingertip sensors")
+        ident = self.identity
+        if ident is None or ident.sensor_type not in FT_TYPES or not self.fingertip_sensor:
+            raise DeviceError(self.no_ft_reason(), hint="deltoctl detect shows what it has")
         self._send(codec.encode_ft_offset())
+
+    def no_ft_reason(self) -> str | None:
+        """Why this gripper has no F/T values to tare (None: it has them)."""
+        ident = self.identity
+        where = f"{self.hw.name} ({self.host}:{self.port})"
+        if ident is None:
+            return f"{where}: no version reply yet (the link is down)"
+        if not self.fingertip_sensor:
+            return (f"{where}: fingertip_sensor is false in the profile, so the gripper "
+                    "sends no fingertip values")
+        if ident.sensor_type in FT_TYPES:
+            return None
+        if ident.sensor_type in TACTILE_GRIDS:
+            return (f"{where} reports tactile fingertips ({sensor_label(ident.sensor_type)}),"
+                    " not F/T sensors")
+        return (f"{where} reports no fingertip sensors (sensor type "
+                f"{sensor_label(ident.sensor_type)})")
 
     def _send(self, data: bytes) -> None:
         with self._lock:
@@ -453,3 +521,28 @@ class DeltoDriver(Driver):
                     return
         finally:
             self._reconnecting = False
+
+
+TOPIC_PART = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def _check_tactile_params(sensor: Any) -> None:
+    """A tactile sensor's params, from an untrusted profile: the Image's encoding and topic."""
+    encoding = sensor.params.get("encoding", "mono16")
+    if encoding not in ("mono8", "mono16"):
+        raise InvalidInput(f"sensor {sensor.name!r}: encoding {encoding!r} is not mono8 or "
+                           "mono16")
+    topic = sensor.params.get("topic")
+    if topic is not None and not all(TOPIC_PART.fullmatch(p) for p in topic.strip("/").split("/")):
+        raise InvalidInput(f"sensor {sensor.name!r}: topic {topic!r} is not a ROS topic name "
+                           "(parts of letters, digits and _, joined by /)")
+
+
+def _grid_label(sensor: Any) -> str:
+    """A declared grid's rows×cols, from its ``cell_<row>_<col>`` interfaces."""
+    cells = [i.name.split("_")[1:] for i in sensor.state_interfaces
+             if i.name.startswith("cell_")]
+    try:
+        return f"{max(int(r) for r, _ in cells) + 1}×{max(int(c) for _, c in cells) + 1}"
+    except ValueError:
+        return "?"

@@ -3,7 +3,9 @@
 The firmware model answers GET_VERSION and GET_DATA and obeys SET_DUTY, SET_GPIO and
 SET_FT_SENSOR_OFFSET. Joints are driven by duty through simple dynamics (URDF limits stop
 them), temperatures follow current, fingertip F/T read gravity plus noise plus a drifting
-offset that the tare removes. Faults: dropped connection, stalled joint, delay, truncated frame.
+offset that the tare removes; tactile fingertips read a pressure blob that grows with the
+torque a finger's motors push against a stop or an object (a stalled joint), and nothing while
+the finger moves freely. Faults: dropped connection, stalled joint, delay, truncated frame.
 """
 
 from __future__ import annotations
@@ -26,12 +28,13 @@ from deltoctl.families.delto.models import (
     FT_TYPES,
     KT,
     MAX_VOLTAGE,
+    MODEL_SENSORS,
     MODELS,
     RM,
     SENSOR_NONE,
-    TACTILE_M,
-    TACTILE_S,
+    TACTILE_GRIDS,
     DeltoModel,
+    TactileGrid,
 )
 
 if TYPE_CHECKING:
@@ -46,6 +49,10 @@ FT_DRIFT = 0.005  # N/s, random walk of the sensor offset
 GRAVITY = (0.0, 0.0, -0.49)  # N on each fingertip (50 g)
 FT_OFFSET_FROM = (2, 3)  # firmware that added SET_FT_SENSOR_OFFSET
 TICK = 0.001  # s: the model moves in 1 ms steps, however often it is asked
+# Tactile contact: a finger pressing with this much torque (summed over its blocked joints)
+# fills its blob's peak; the peak's full scale per cell type (uint8; a 12-bit reading in uint16)
+TACTILE_FULL_TORQUE = 0.5  # N·m
+TACTILE_FULL_SCALE = {"B": 255, "H": 4095}
 MAX_STEPS = 1000
 
 
@@ -65,8 +72,8 @@ class DeltoFirmware:
         self.model = model
         self.firmware = firmware
         if sensor_type is None:  # what the model ships with
-            sensor_type = SENSOR_NONE if model.legacy else (
-                TACTILE_S if model.motors == 15 else FT_6AXIS)
+            sensor_type = SENSOR_NONE if model.legacy else MODEL_SENSORS.get(
+                model.id, (FT_6AXIS,))[0]
         self.sensor_type = sensor_type
         self.short_version = short_version
         n = model.motors
@@ -76,6 +83,8 @@ class DeltoFirmware:
         self.current = [0.0] * n  # mA
         self.temperature = [28.0] * n
         self.duty = [0] * n  # as received, 0.1 %
+        self.pressing = [0.0] * n  # N·m a blocked joint pushes against its stop or object
+        self.finger_of = finger_of_motors(model)
         self.gpio_out = [False, False, False]
         self.input_1 = False
         self.rng = random.Random(seed)
@@ -114,6 +123,7 @@ class DeltoFirmware:
 
     def step(self, dt: float) -> None:
         for i in range(self.model.motors):
+            self.pressing[i] = 0.0
             if not self.duty[i] and not self.velocity[i]:
                 self.current[i] = 0.0
                 self.temperature[i] -= 0.01 * (self.temperature[i] - 25.0) * dt
@@ -121,8 +131,9 @@ class DeltoFirmware:
             duty_pct = self.duty[i] / 10.0 * self.direction[i]
             torque = duty_pct / 100.0 * MAX_VOLTAGE * KT / RM
             self.current[i] = torque / KT * 1000.0
-            if i in self.faults.stalled:
+            if i in self.faults.stalled:  # held by an object: it takes the whole torque
                 self.velocity[i] = 0.0
+                self.pressing[i] = abs(torque)
             else:
                 v = self.velocity[i]
                 drag = DAMPING * v + (math.copysign(FRICTION, v) if v else 0.0)
@@ -134,6 +145,8 @@ class DeltoFirmware:
                 if self.position[i] <= lo or self.position[i] >= hi:
                     self.position[i] = min(hi, max(lo, self.position[i]))
                     self.velocity[i] = 0.0
+                    if (torque > 0) == (self.position[i] >= hi):  # pushing into the stop
+                        self.pressing[i] = abs(torque)
             amps = self.current[i] / 1000.0
             self.temperature[i] += (2.0 * amps * amps - 0.01 * (self.temperature[i] - 25.0)) * dt
         self._drift_dt += dt
@@ -194,14 +207,54 @@ class DeltoFirmware:
         ft, tactile = [], []
         if self.sensor_type in FT_TYPES:
             ft = [tuple(map(sub, self._ft_raw(f), self.ft_tare[f])) for f in fingers]
-        elif self.sensor_type == TACTILE_M:
-            tactile = [tuple(self.rng.randrange(0, 8) for _ in range(15)) for _ in fingers]
-        elif self.sensor_type == TACTILE_S:
-            tactile = [tuple(self.rng.randrange(0, 64) for _ in range(18)) for _ in fingers]
+        elif self.sensor_type in TACTILE_GRIDS:
+            grid = TACTILE_GRIDS[self.sensor_type]
+            press = [0.0] * self.model.fingers
+            for i, torque in enumerate(self.pressing):
+                press[self.finger_of[i]] += torque
+            tactile = [contact_cells(grid, f, press[f]) for f in fingers]
         return codec.DataRecord(
             position=list(self.position), current=list(self.current),
             temperature=list(self.temperature), velocity=list(self.velocity), ft=ft,
             tactile=tactile, gpio=(*self.gpio_out, self.input_1))
+
+
+def finger_of_motors(model: DeltoModel) -> list[int]:
+    """The finger (0-based) each motor moves: the motors go finger by finger; the DG-4F's two
+    last ones are the inner joints of fingers 1 and 4."""
+    per = max(1, model.motors // model.fingers)
+    extra = {0x4F02: (0, 3)}.get(model.id, ())
+    return [min(i // per, model.fingers - 1) if i < per * model.fingers
+            else extra[i - per * model.fingers] if i - per * model.fingers < len(extra)
+            else model.fingers - 1 for i in range(model.motors)]
+
+
+def contact_cells(grid: TactileGrid, finger: int, torque: float) -> tuple[int, ...]:
+    """One fingertip's cells (wire order) for a finger pressing with ``torque`` N·m: zero
+    without contact, else a round blob whose peak and width grow with the torque. Its centre
+    sits a row apart from finger to finger, so the fingers' maps differ."""
+    level = min(1.0, torque / TACTILE_FULL_TORQUE)
+    if level <= 0.0:
+        return (0,) * grid.cells
+    peak = TACTILE_FULL_SCALE[grid.code] * level
+    sigma = 0.5 + 1.5 * level  # cells
+    row0 = grid.rows // 2 + finger % 3 - 1  # on a cell: the peak is read whole
+    col0 = grid.cols // 2
+    return tuple(int(peak * math.exp(-((r - row0) ** 2 + (c - col0) ** 2) / (2 * sigma ** 2)))
+                 for r in range(grid.rows) for c in range(grid.cols))
+
+
+def profile_sensor_type(hw: Hardware) -> int | None:
+    """The fingertip sensor a block's profile declares: tactile grids by their size, F/T, or
+    None (the model's own)."""
+    for sensor in hw.sensors:
+        cells = [i.name for i in sensor.state_interfaces if i.name.startswith("cell_")]
+        for kind, grid in TACTILE_GRIDS.items():
+            if len(cells) == grid.cells and f"cell_{grid.rows - 1}_{grid.cols - 1}" in cells:
+                return kind
+        if sensor.state("force.x"):
+            return FT_6AXIS
+    return None
 
 
 class _Handler(socketserver.BaseRequestHandler):
@@ -293,6 +346,8 @@ def firmware_for_block(hw: Hardware, model_id: int | None = None,
         hi = lim.upper if lim and lim.upper is not None else math.pi
         limits.append((lo, hi))
     limits += [(-math.pi, math.pi)] * (model.motors - len(limits))
+    if kwargs.get("sensor_type") is None and not model.legacy:
+        kwargs["sensor_type"] = profile_sensor_type(hw)
     return DeltoFirmware(model, limits=limits[: model.motors], **kwargs)
 
 

@@ -14,6 +14,40 @@ SENSOR_NONE, FT_6AXIS, FT_3AXIS, TACTILE_M, FT_4AXIS, TACTILE_S = 0, 1, 2, 3, 4,
 SENSOR_NAMES = {SENSOR_NONE: "none", FT_6AXIS: "ft_6axis", FT_3AXIS: "ft_3axis",
                 TACTILE_M: "tactile_m", FT_4AXIS: "ft_4axis", TACTILE_S: "tactile_s"}
 FT_TYPES = (FT_6AXIS, FT_3AXIS, FT_4AXIS)
+TACTILE_TYPES = (TACTILE_M, TACTILE_S)
+
+# Radians per position count, exact as the vendor computes them (π/1800, π/18000), not
+# math.radians(0.1), which rounds differently in the last bit.
+DECI_DEGREE = math.pi / 1800  # 0.1° (every model but the S hands)
+CENTI_DEGREE = math.pi / 18000  # 0.01° (DG-5F-S, DG-5F-S15)
+
+
+@dataclass(frozen=True)
+class TactileGrid:
+    """One fingertip's tactile grid: its cells on the wire, in the Image the vendor publishes.
+
+    Wire order: row by row, ``cols`` cells a row (``cell_<row>_<col>``); the vendor copies the
+    cells into its sensor_msgs/Image in that order, ``height`` = rows, ``width`` = cols.
+    Unverified against hardware: which row is the fingertip's distal end and which column
+    the thumb side (no drawing of the pad is public); every consumer takes it from here.
+    """
+
+    rows: int
+    cols: int
+    code: str  # struct code of one cell on the wire (big-endian)
+    encoding: str  # sensor_msgs/Image encoding (mono16: little-endian in the Image)
+
+    @property
+    def cells(self) -> int:
+        return self.rows * self.cols
+
+    @property
+    def label(self) -> str:
+        return f"{self.rows}×{self.cols}"
+
+
+TACTILE_GRIDS = {TACTILE_M: TactileGrid(5, 3, "B", "mono8"),
+                 TACTILE_S: TactileGrid(6, 3, "H", "mono16")}
 
 # Effort (N·m) → duty, and the current limiter (derived from the helper library; verify).
 RM = 13.875  # winding resistance, ohm
@@ -36,7 +70,7 @@ class DeltoModel:
     motors: int
     fingers: int
     bytes_per_motor: int = 8
-    position_unit_deg: float = 0.1  # one position count on the wire
+    position_per_count: float = DECI_DEGREE  # rad
     gpio: bool = True
     revised_from: tuple[int, int] | None = None  # firmware from which every direction is +1
     legacy_direction: tuple[int, ...] | int = 1  # per motor, or one sign for all
@@ -55,7 +89,7 @@ class DeltoModel:
 
     def position_scale(self) -> float:
         """Radians per position count."""
-        return math.radians(self.position_unit_deg)
+        return self.position_per_count
 
 
 MODELS: dict[int, DeltoModel] = {
@@ -73,12 +107,30 @@ MODELS: dict[int, DeltoModel] = {
                    legacy_direction=DG5F_LEFT_DIR),
         DeltoModel(0x5F22, "DG-5F-R", 20, 5, revised_from=(2, 8),
                    legacy_direction=DG5F_RIGHT_DIR),
-        DeltoModel(0x5F14, "DG-5F-S-L", 20, 5, position_unit_deg=0.01, gpio=False),
-        DeltoModel(0x5F24, "DG-5F-S-R", 20, 5, position_unit_deg=0.01, gpio=False),
-        DeltoModel(0x5F34, "DG-5F-S15-L", 15, 5, position_unit_deg=0.01, gpio=False),
-        DeltoModel(0x5F44, "DG-5F-S15-R", 15, 5, position_unit_deg=0.01, gpio=False),
+        DeltoModel(0x5F14, "DG-5F-S-L", 20, 5, position_per_count=CENTI_DEGREE, gpio=False),
+        DeltoModel(0x5F24, "DG-5F-S-R", 20, 5, position_per_count=CENTI_DEGREE, gpio=False),
+        DeltoModel(0x5F34, "DG-5F-S15-L", 15, 5, position_per_count=CENTI_DEGREE, gpio=False),
+        DeltoModel(0x5F44, "DG-5F-S15-R", 15, 5, position_per_count=CENTI_DEGREE, gpio=False),
     )
 }
+
+
+# The fingertip sensors each model is sold with (TCP README's table; the first is what the
+# emulator fits when a profile declares none). The README lists no F/T for the S15, though the
+# vendor's driver allows it; the GET_VERSION reply says what a given gripper has.
+MODEL_SENSORS: dict[int, tuple[int, ...]] = {
+    0x3F02: (FT_6AXIS, TACTILE_M), 0x4F02: (FT_6AXIS, TACTILE_M),
+    0x5F12: (FT_6AXIS, TACTILE_M), 0x5F22: (FT_6AXIS, TACTILE_M),
+    0x5F14: (TACTILE_S, FT_6AXIS), 0x5F24: (TACTILE_S, FT_6AXIS),
+    0x5F34: (TACTILE_S,), 0x5F44: (TACTILE_S,),
+}
+
+
+def sensor_label(sensor_type: int | None) -> str:
+    """``TACTILE_S, 6×3 cells``, ``FT_6AXIS``, ``NONE``."""
+    name = SENSOR_NAMES.get(sensor_type or 0, f"unknown {sensor_type}").upper()
+    grid = TACTILE_GRIDS.get(sensor_type or 0)
+    return f"{name}, {grid.label} cells" if grid else name
 
 
 def model_label(model_id: int) -> str:

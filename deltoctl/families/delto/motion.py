@@ -3,6 +3,8 @@
 A PD loop turns position error into an effort command, clamped to the profile's current cap;
 the setpoint ramps at the requested velocity. The move settles when every joint stays within
 tolerance, or fails naming the joints that did not. The caller's System sets duty 0 after.
+Each cycle's setpoints (the ramped position, the effort sent) go to the driver's ``on_cycle``
+hook when a verb set one (``jog --record``); ``replay`` sends the recorded efforts again.
 """
 
 from __future__ import annotations
@@ -23,12 +25,17 @@ DEFAULT_CURRENT_CAP = 150.0  # mA
 SETTLE_CYCLES = 10
 SETTLE_SPEED = 0.05  # rad/s: slower than this counts as still
 RATE = 200.0  # Hz
+NAN = float("nan")
+
+
+def effort_cap(driver: DeltoDriver) -> float:
+    """The effort (N·m) the profile's current cap allows a motion command."""
+    return (driver.profile.safety.current_cap or DEFAULT_CURRENT_CAP) / 1000.0 * KT
 
 
 def move_to(driver: DeltoDriver, targets: dict[str, float], velocity: float | None = None,
             timeout: float | None = None, progress: Progress | None = None) -> MoveResult:
-    cap = driver.profile.safety.current_cap or DEFAULT_CURRENT_CAP
-    max_effort = cap / 1000.0 * KT  # N·m the current cap allows
+    max_effort = effort_cap(driver)
     tolerance = driver.profile.safety.home_tolerance or DEFAULT_TOLERANCE
     speed = velocity or DEFAULT_VELOCITY
     kp = max_effort / tolerance  # full effort at one tolerance of error
@@ -67,6 +74,9 @@ def move_to(driver: DeltoDriver, targets: dict[str, float], velocity: float | No
             errors[joint] = abs(target - pos)
             moving = moving or abs(vel) > SETTLE_SPEED
         driver.write_efforts(efforts)
+        hook = driver.on_cycle
+        if hook is not None:
+            hook(time.time_ns(), values, {j: (setpoints[j], NAN, efforts[j]) for j in targets})
         worst = max(errors.values(), default=0.0)
         if progress:
             progress(max(0.0, 1.0 - worst / first_error))

@@ -32,6 +32,7 @@ RETRIES = 3
 REGISTER_TRIES = 5  # as the MH5's register helpers
 SCAN_BAUDS = sorted(BAUD_RATES.values(), key=lambda b: (b < 57600, b))  # 9600 last: slowest
 REOPEN_PERIOD = 1.0  # s between attempts to reopen a lost port
+NAN = float("nan")
 LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}  # default Hz
 
 
@@ -53,6 +54,7 @@ class DynamixelDriver(Driver):
         self._stale = False
         self._inflight: tuple[int, list[int], Any] | None = None  # a sync read sent
         self._retry_at = 0.0  # when a lost port is next reopened (0: not lost)
+        self._followed: dict[str, tuple[float, float]] = {}  # replayed goals and speeds
         self.loops = {}
         for name, default in LOOPS.items():
             try:
@@ -450,10 +452,18 @@ class DynamixelDriver(Driver):
                        default=0.0)
         seconds = max(0.1, distance / (velocity or DEFAULT_VELOCITY))
         self.send_goals(targets, seconds)
+        hook = self.on_cycle
+        # the setpoint each cycle: the goal, and the speed of its profile
+        setpoints = {j: (t, abs(t - values.get(f"{j}/position", t)) / seconds, NAN)
+                     for j, t in targets.items()} if hook is not None else {}
+        if hook is not None:  # the state the goals were sent from
+            hook(time.time_ns(), values, setpoints)
         start = time.monotonic()
         errors: dict[str, float] = {}
         while time.monotonic() - start < seconds + timeout and not self.halted.is_set():
             values = self.read()
+            if hook is not None:
+                hook(time.time_ns(), values, setpoints)
             errors = {j: abs(t - values.get(f"{j}/position", float("inf")))
                       for j, t in targets.items()}
             worst = max(errors.values(), default=0.0)
@@ -465,6 +475,23 @@ class DynamixelDriver(Driver):
             time.sleep(0.02)
         return MoveResult(False, time.monotonic() - start, errors,
                           [j for j, e in errors.items() if e > tolerance])
+
+    def follow(self, setpoints: dict[str, tuple[float, float, float]]) -> None:
+        """A recorded goal (position) and its profile's speed (velocity) each, sent when they
+        differ from the goal sent before: the servos run their own profile to it, as in the
+        move that was recorded."""
+        sent = self._followed
+        goals = {j: sp for j, sp in setpoints.items()
+                 if sp[0] == sp[0] and sent.get(j) != sp[:2]}
+        if not goals:
+            return
+        seconds = 0.1
+        for j, (goal, speed, _) in goals.items():
+            if speed == speed and speed > 0:
+                here = self.values.get(f"{j}/position", goal)
+                seconds = max(seconds, abs(goal - here) / speed)
+        self.send_goals({j: sp[0] for j, sp in goals.items()}, seconds)
+        sent.update({j: sp[:2] for j, sp in goals.items()})
 
     # -- registers -------------------------------------------------------------------------------
     def servo(self, joint: str) -> int:

@@ -84,9 +84,17 @@ class GenericDriver(Driver):
 
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:
-        """Position commands, mirrored to the states at once."""
+        """Position commands, mirrored to the states at once: one cycle, reported to the
+        ``on_cycle`` hook with the state before the commands and after them."""
+        hook = self.on_cycle
+        if hook is not None:
+            nan = float("nan")
+            setpoints = {j: (t, nan, nan) for j, t in targets.items()}
+            hook(time.time_ns(), dict(self.values), setpoints)
         for joint, value in targets.items():
             self.set_command(f"{joint}/position", value)
+        if hook is not None:
+            hook(time.time_ns(), self.values, setpoints)
         return MoveResult(True, 0.0, {j: 0.0 for j in targets}, [])
 
     def detect(self) -> dict:

@@ -1,0 +1,199 @@
+"""``deltoctl agent``: serve this computer's robot over Zenoh, so that any verb runs from
+another computer (``deltoctl --robot ROBOT VERB …``, ``deltoctl fleet …``)."""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+from typing import Annotated
+
+import typer
+
+from deltoctl.cli.context import Options, options
+from deltoctl.errors import InvalidInput
+
+SPARE = "import sys; from deltoctl.cli.agent_cmd import spare; spare(sys.argv[1])"
+ZYGOTE = ("import sys; from deltoctl.cli.agent_cmd import zygote; "
+          "zygote(sys.argv[1], int(sys.argv[2]))")
+
+
+def register(root: typer.Typer) -> None:
+    root.command("agent")(agent)
+
+
+def _links(opts: Options, spec: str) -> list[str]:
+    """The global options that point a verb at the robot: its profile, its links."""
+    links = ["-p", spec, *(f"--target={t}" for t in opts.target)]
+    links += [f"--arg={k}:={v}" for k, v in opts.xacro_args.items()]
+    links += [f"--package-path={k}={v}" for k, v in opts.package_paths.items()]
+    links += [f"--hardware={h}" for h in opts.hardware]
+    return links + (["--xacro"] if opts.xacro else [])
+
+
+def _default_name() -> str:
+    import re
+    import socket
+
+    name = re.sub(r"[^A-Za-z0-9_.-]", "-", socket.gethostname().split(".")[0])
+    return name.strip("-.")[:63] or "robot"
+
+
+def agent(
+    ctx: typer.Context,
+    name: Annotated[str | None, typer.Option(
+        "--name", help="The robot's name on the network (default: this computer's).")] = None,
+    listen: Annotated[list[str] | None, typer.Option(
+        "--listen", metavar="ENDPOINT",
+        help="Zenoh endpoint to listen on (repeatable; default tcp/127.0.0.1:7447, or the "
+             "config file's).")] = None,
+    connect: Annotated[list[str] | None, typer.Option(
+        "--connect", metavar="ENDPOINT",
+        help="Zenoh endpoint to connect to, e.g. a router (repeatable).")] = None,
+    deadline: Annotated[float, typer.Option(
+        "--deadline", help="Seconds without the caller's heartbeat before a verb is "
+                           "interrupted (motion stops).")] = 0.2,
+    allow_unauthenticated_motion: Annotated[bool, typer.Option(
+        "--allow-unauthenticated-motion",
+        help="Lab bench: allow motion and outputs without mutual TLS; only when every "
+             "endpoint is on loopback.")] = False,
+    workdir: Annotated[str, typer.Option(
+        "--workdir", metavar="DIR",
+        help="Where remote verbs run (their reports and recordings go there).")] = ".",
+) -> None:
+    """Serve the robot of --profile (its links from --target, or --sim) over Zenoh until
+    Ctrl-C or SIGTERM: every verb as a queryable, a liveliness token, a deadman on motion.
+
+    Motion and outputs are served only to authenticated callers: when every link of the
+    agent is mutual TLS (see the README, Remote robots)."""
+    from deltoctl.fleet import check_robot
+    from deltoctl.fleet import config as zconfig
+    from deltoctl.fleet.agent import Agent, log, signals_stop, start_simulator, stop_process
+
+    opts = options(ctx)
+    if opts.robot:
+        raise InvalidInput("the agent serves this computer's robot: drop --robot")
+    robot = check_robot(name or _default_name())
+    if not (math.isfinite(deadline) and 0.1 <= deadline <= 10):
+        raise InvalidInput(f"--deadline must be 0.1 to 10 seconds, got {deadline:g}")
+    if not os.path.isdir(workdir):
+        raise InvalidInput(f"--workdir {workdir}: no such directory")
+    profile = opts.load_profile()  # a bad profile stops here, with its file:line
+    spec = opts.profile or profile.name
+    if os.path.exists(spec):
+        spec = os.path.abspath(spec)
+    config = zconfig.load(zconfig.config_file(opts.zenoh_config), "agent", listen, connect)
+    motion, why_not = _motion_rule(config, allow_unauthenticated_motion)
+    links = _links(opts, spec)
+    python = [sys.executable, "-m", "deltoctl"]
+    simulator = None
+    try:
+        if opts.sim:
+            simulator, served = start_simulator(
+                [*python, *links, "sim", "serve", "--json"],
+                env={k: v for k, v in os.environ.items() if not k.startswith("DELTOCTL_")})
+            links = [a for a in links if not a.startswith("--target=")]
+            links += [f"--target={bus}={url}" for bus, url in served["buses"].items()]
+        children = ([sys.executable, "-c", ZYGOTE, spec], [sys.executable, "-c", SPARE, spec])
+        from deltoctl.profile.exporter import to_yaml
+
+        node = Agent(robot, spec, profile.name, links, children, config, motion, why_not,
+                     deadline, os.path.abspath(workdir), simulated=opts.sim,
+                     profile_yaml=to_yaml(profile))
+        signals_stop(node.stop)
+        try:
+            node.start()
+            log(f"robot {robot}: serving {profile.name} on Zenoh ({zconfig.describe(config)});"
+                f" motion {'allowed' if motion else 'refused: ' + why_not}")
+            node.serve()
+            log(f"robot {robot}: stopping")
+        finally:
+            node.close()
+    finally:
+        if simulator is not None:
+            stop_process(simulator)
+
+
+def _motion_rule(config: object, allow_unauthenticated: bool) -> tuple[bool, str]:
+    """(motion allowed, why not): only over mutual TLS, or on a loopback-only lab bench
+    with --allow-unauthenticated-motion."""
+    from deltoctl.fleet import config as zconfig
+
+    if zconfig.mutual_tls(config):
+        return True, ""
+    if allow_unauthenticated:
+        if not zconfig.loopback_only(config):
+            raise InvalidInput("--allow-unauthenticated-motion takes loopback endpoints only "
+                               f"(tcp/127.0.0.1:PORT); this agent is {zconfig.describe(config)}",
+                               "configure mutual TLS to allow motion over a network")
+        return True, ""
+    return False, ("motion and outputs need an authenticated caller, and this agent's Zenoh "
+                   "links are not all mutual TLS")
+
+
+def _warm(spec: str) -> None:
+    """What every verb imports, and the robot's profile and drivers: loaded once."""
+    import contextlib
+    import importlib
+
+    for module in ("deltoctl.cli.main", "deltoctl.cli.device_cmd", "deltoctl.cli.motion_cmd",
+                   "deltoctl.cli.output", "deltoctl.profile.catalog", "deltoctl.core.system",
+                   "deltoctl.core.runner"):
+        importlib.import_module(module)
+    with contextlib.suppress(Exception):  # only a head start: the verb reports any problem
+        from deltoctl import registry
+        from deltoctl.profile.catalog import load_profile
+
+        prof = load_profile(spec)
+        for hw in prof.hardware:
+            family = registry.of_block(prof.family_of(hw), hw.plugin)
+            if family is not None:
+                family.driver_class()
+
+
+def _run(argv: list[str]) -> int:
+    """One command line, as ``deltoctl`` runs it; its exit code."""
+    from deltoctl.cli import main as cli
+
+    sys.argv = ["deltoctl", *argv]
+    try:
+        cli.main()
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    except KeyboardInterrupt:  # interrupted before the verb ran (or after): nothing moved
+        cli.emit_error("interrupted", None, 130, "--json" in argv)
+        return 130
+    return 0
+
+
+def zygote(spec: str, sock_fd: int) -> None:
+    """The agent's warm process: forks one child per verb (deltoctl/fleet/forks.py)."""
+    from deltoctl.fleet.forks import serve
+
+    _warm(spec)
+    serve(sock_fd, _run)
+
+
+def spare(spec: str = "") -> None:
+    """A deltoctl process started ahead by the agent (when it has no zygote): warm, it waits
+    for its command line (one JSON list) on stdin, then runs it as ``deltoctl`` would."""
+    import json
+    import signal
+    import threading
+    import time
+
+    _warm(spec)
+    parent = os.getppid()
+    line = sys.stdin.readline()
+    if not line:
+        return
+
+    def orphaned() -> None:  # the agent is gone: stop as on Ctrl-C (motion stops)
+        while os.getppid() == parent:
+            time.sleep(0.05)
+        os.kill(os.getpid(), signal.SIGINT)
+
+    threading.Thread(target=orphaned, daemon=True).start()
+    null = os.open(os.devnull, os.O_RDONLY)
+    os.dup2(null, 0)
+    sys.exit(_run(json.loads(line)))

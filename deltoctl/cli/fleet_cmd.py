@@ -1,0 +1,490 @@
+"""``--robot ROBOT`` (any verb on one robot's agent) and ``deltoctl fleet``: the robots found,
+and one verb (or a bring-up script's verbs) on many robots at once."""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+import time
+from typing import Annotated, Any, NoReturn
+
+import typer
+
+from deltoctl.cli.context import Options, options
+from deltoctl.errors import DeltoctlError, InvalidInput
+
+app = typer.Typer(help="The robots whose agents answer over Zenoh, and verbs on many at once.",
+                  no_args_is_help=True)
+
+# exit codes from best to worst: the fleet's code is the worst of its robots'
+SEVERITY = (0, 3, 1, 4, 2, 5, 130)
+FORWARDED = {"json": "--json", "yes": "--yes", "quiet": "--quiet"}
+
+
+def register(root: typer.Typer) -> None:
+    root.add_typer(app, name="fleet")
+
+
+def worst(codes: list[int]) -> int:
+    rank = {c: i for i, c in enumerate(SEVERITY)}
+    return max(codes, key=lambda c: rank.get(c, len(SEVERITY)), default=0)
+
+
+# -- --robot ---------------------------------------------------------------------------------
+
+def strip_remote(argv: list[str]) -> list[str]:
+    """The command line without ``--robot R`` and ``--zenoh-config FILE``."""
+    out: list[str] = []
+    skip = False
+    for arg in argv:
+        if skip:
+            skip = False
+        elif arg in ("--robot", "--zenoh-config"):
+            skip = True
+        elif not arg.startswith(("--robot=", "--zenoh-config=")):
+            out.append(arg)
+    return out
+
+
+def _check(argv: list[str], robot: str) -> str:
+    from deltoctl.fleet.argv import check_argv
+
+    try:
+        return check_argv(argv)
+    except InvalidInput as exc:
+        raise InvalidInput(f"robot {robot}: {exc.message}", exc.hint) from None
+
+
+def _confirmed(opts: Options, verb: str, what: str) -> list[str]:
+    """``["--yes"]`` when motion is confirmed here (``--yes``, or yes on a terminal); else
+    nothing, and the robot refuses (exit 5) as a local run would."""
+    from deltoctl.fleet import MOTION
+
+    if opts.yes or verb not in MOTION or not sys.stdin.isatty():
+        return []
+    if typer.confirm(f"{what}. Move?", default=False, err=True):
+        return ["--yes"]
+    from deltoctl.errors import Refused
+
+    raise Refused("not confirmed; nothing moved")
+
+
+def _write_out(data: bytes) -> None:
+    buffer = getattr(sys.stdout, "buffer", None)
+    if buffer is not None:
+        sys.stdout.flush()
+        buffer.write(data)
+        buffer.flush()
+    else:
+        sys.stdout.write(data.decode(errors="replace"))
+        sys.stdout.flush()
+
+
+def _write_err(text: str) -> None:
+    sys.stderr.write(text)
+    sys.stderr.flush()
+
+
+def forward(ctx: typer.Context) -> NoReturn:
+    """Run the command line on ``--robot``'s agent: its stdout, stderr (errors naming the
+    robot) and exit code, as if run there."""
+    from deltoctl.cli.main import ARGV
+    from deltoctl.fleet import check_robot
+    from deltoctl.fleet.client import ErrorLines, RemoteCall, caller_session
+
+    opts = options(ctx)
+    robot = check_robot(opts.robot or "")
+    argv = strip_remote(list(ctx.find_root().meta.get(ARGV, [])))
+    errors = ErrorLines(robot, opts.json, _write_err)
+    try:
+        verb = _check(argv, robot)
+        if verb == "record" and not {"--help", "-h"} & set(argv):
+            code = _remote_record(opts, robot, argv, errors.feed)
+            raise typer.Exit(code)
+        argv = _confirmed(opts, verb, f"robot {robot}: {' '.join(argv)}") + argv
+        with caller_session(opts.zenoh_config, f"robot {robot}") as session:
+            code = RemoteCall(session, robot, argv, _write_out, errors.feed).run()
+    except DeltoctlError as exc:  # this side failed (nothing answers): the robot named too
+        if not opts.json:
+            raise
+        import json
+
+        error = {"message": exc.message, "hint": exc.hint, "exit_code": exc.exit_code,
+                 "robot": robot}
+        _write_err(json.dumps({"error": error}) + "\n")
+        raise typer.Exit(exc.exit_code) from None
+    finally:
+        errors.close()
+    raise typer.Exit(code)
+
+
+# -- --robot R record: the file on this computer -----------------------------------------------
+
+def _verb_args(argv: list[str]) -> list[str]:
+    """The arguments after the verb (global options come first, hoisted)."""
+    from deltoctl.cli.main import GLOBAL_OPTIONS, split_cluster
+
+    i = 0
+    while i < len(argv) and argv[i].startswith("-"):
+        arg = argv[i]
+        takes = GLOBAL_OPTIONS.get(arg, False) if arg.startswith("--") else split_cluster(arg)[2]
+        i += 2 if takes else 1
+    return argv[i + 1:]
+
+
+def _record_params(args: list[str], robot: str) -> dict[str, Any]:
+    """The record's own options, parsed as ``deltoctl record`` parses them, and checked as
+    it checks them; those that make no sense remotely refused."""
+    from typer.main import get_command
+
+    from deltoctl.cli import record_cmd
+    from deltoctl.cli.device_cmd import check_loop
+    from deltoctl.cli.main import click_exceptions
+    from deltoctl.record.ros2_msgs import GPIO_TYPES
+
+    holder = typer.Typer()
+    record_cmd.register(holder)
+    try:
+        params = get_command(holder).make_context("record", list(args)).params
+    except click_exceptions.ClickException as exc:
+        raise InvalidInput(f"record: {exc.format_message()}") from None
+    if params["foxglove"]:
+        raise InvalidInput(f"robot {robot}: record --foxglove is not taken with --robot",
+                           "serve the live view where the robot is: 'deltoctl stream "
+                           "--foxglove' on its computer")
+    check_loop(params["rate"], params["duration"])
+    if params["gpio_type"] not in GPIO_TYPES:
+        raise InvalidInput(f"--gpio-type {params['gpio_type']!r}: one of "
+                           f"{', '.join(GPIO_TYPES)}")
+    from pathlib import Path
+
+    output = params["output"] = Path(params["output"])
+    if not output.parent.is_dir():
+        raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
+    return params
+
+
+def _remote_record(opts: Options, robot: str, argv: list[str],
+                   err: Any) -> int:
+    """``--robot R record FILE``: the robot streams its cycles, FILE is written here (with the
+    robot's profile, identity and cycle times). The exit code of the stream on the robot
+    (4 when its link was down at the end, 3 when lost and back), 3 when cycles it ran did not
+    arrive, 4 when the robot was lost (the file finished), 130 when interrupted before the
+    stream started."""
+    from deltoctl.cli.output import emit_json, info, warn
+    from deltoctl.errors import WARNINGS
+    from deltoctl.fleet.client import caller_session
+    from deltoctl.fleet.remote_record import RemoteRecord, cancelled_by_signals
+
+    params = _record_params(_verb_args(argv), robot)
+    failure: DeltoctlError | None = None
+    with caller_session(opts.zenoh_config, f"robot {robot}") as session:
+        rec = RemoteRecord(session, robot, params["output"], params["rate"],
+                           params["duration"], [f"--hardware={h}" for h in opts.hardware],
+                           params["gpio_type"], params["allow_model_mismatch"], err,
+                           opened=lambda: info(f"recording {params['output']} from robot "
+                                               f"{robot} (its cycle times; Ctrl-C ends it)"))
+        with cancelled_by_signals(rec.cancel):
+            try:
+                code = rec.run()
+            except DeltoctlError as exc:
+                failure, code = exc, exc.exit_code
+    from deltoctl.errors import Unreachable
+
+    if rec.result and (failure is None or isinstance(failure, Unreachable)):
+        loop = rec.result["loop"]
+        if opts.json:
+            emit_json(rec.result)
+        else:
+            info(f"wrote {params['output']}: {sum(rec.result['messages'].values())} messages "
+                 f"on {len(rec.result['messages'])} topics, {loop['cycles']} cycles of robot "
+                 f"{robot} at {loop['real_rate']} Hz (its cycle times)")
+        if rec.result["link_losses"]:
+            info("the gaps are marked on /diagnostics")
+        if loop["cycles_not_received"]:
+            warn(f"robot {robot}: {loop['cycles_not_received']} of its {loop['robot_cycles']} "
+                 "cycles did not arrive (the gaps are marked on /diagnostics)")
+            code = code or WARNINGS
+    if failure is not None:
+        raise failure
+    return code
+
+
+# -- fleet list ------------------------------------------------------------------------------
+
+def _identity_text(identity: dict[str, Any]) -> str:
+    if "error" in identity:
+        return f"identify failed: {identity['error']}"
+    parts = []
+    for block, fields in identity.items():
+        model = (fields.get("reported_model") or fields.get("model") or fields.get("chip")
+                 or fields.get("family"))
+        text = f"{block}: {model}".split(" (0x")[0]
+        if fields.get("firmware"):
+            text += f" fw {fields['firmware']}"
+        counts = [f"{v} {k}" for k, v in fields.items() if k in ("joints", "servos")]
+        parts.append(text + (f" ({', '.join(counts)})" if counts else ""))
+    return "; ".join(parts)
+
+
+@app.command("list")
+def list_cmd(
+    ctx: typer.Context,
+    wait: Annotated[float, typer.Option(help="Seconds to wait for the agents' answers.")]
+        = 2.0,
+) -> None:
+    """The robots whose agents answer (their liveliness tokens), with profile, identity and
+    state."""
+    from deltoctl.cli.output import emit_json, info, table
+    from deltoctl.fleet.client import agents, caller_session, infos
+
+    opts = options(ctx)
+    if not 0 < wait <= 60:
+        raise InvalidInput(f"--wait must be 0 to 60 seconds, got {wait:g}")
+    with caller_session(opts.zenoh_config, "fleet") as session:
+        found = agents(session, wait=wait)
+        details = infos(session, wait=wait) if found else {}
+    robots = [{"robot": name, "profile": profile, **{
+        k: v for k, v in details.get(name, {"state": "unknown"}).items() if k != "robot"}}
+        for name, profile in sorted(found.items())]
+    if opts.json:
+        emit_json(robots)
+    elif robots:
+        table(None, ["robot", "profile", "identity", "state", "motion"],
+              [[r["robot"], r["profile"], _identity_text(r.get("identity", {})), r["state"],
+                r.get("motion", "?")] for r in robots])
+    if not robots:
+        info("no robot found: no agent answers on this Zenoh network")
+
+
+# -- fleet run -------------------------------------------------------------------------------
+
+class Job:
+    """One robot's part of a fleet run: its command lines, run one after the other."""
+
+    def __init__(self, robot: str, profile: str, lines: list[list[str]]) -> None:
+        self.robot, self.profile, self.lines = robot, profile, lines
+        self.state = "waiting"
+        self.done = 0
+        self.codes: list[int] = []
+        self.out: list[bytes] = []
+        self.err: list[bytes] = []
+        self.started = self.ended = 0.0
+        self.call: Any = None
+
+    @property
+    def code(self) -> int:
+        return worst(self.codes)
+
+    def last_error(self) -> str:
+        """The verb's error message (text or --json), else its last line on stderr."""
+        import json
+
+        lines = b"".join(self.err).decode(errors="replace").strip().splitlines()
+        for line in reversed(lines):
+            if line.startswith("deltoctl: error: "):
+                return line.removeprefix("deltoctl: error: ")
+            if line.startswith('{"error"'):
+                with contextlib.suppress(ValueError, KeyError, TypeError):
+                    return str(json.loads(line)["error"]["message"])
+        return lines[-1] if lines else ""
+
+    def run(self, session: Any) -> None:
+        from deltoctl.errors import DeltoctlError
+        from deltoctl.fleet.client import RemoteCall
+
+        self.started = time.monotonic()
+        for argv in self.lines:
+            self.state = " ".join(a for a in argv if not a.startswith("--"))[:40]
+            self.out, self.err = [], []
+            try:
+                self.call = RemoteCall(session, self.robot, argv, self.out.append,
+                                       self.err.append)
+                code = self.call.run()
+            except DeltoctlError as exc:
+                self.err.append(f"deltoctl: error: {exc.message}\n".encode())
+                code = exc.exit_code
+            except Exception as exc:  # a broken session: this robot's part only
+                self.err.append(f"deltoctl: error: {exc}\n".encode())
+                code = 1
+            self.codes.append(code)
+            self.done += 1
+            if code not in (0, 3):
+                break
+        self.ended = time.monotonic()
+        self.state = "ok" if self.code == 0 else f"exit {self.code}"
+
+    def seconds(self) -> float:
+        return (self.ended or time.monotonic()) - self.started if self.started else 0.0
+
+    def report(self) -> dict[str, Any]:
+        import json
+
+        text = b"".join(self.out).decode(errors="replace")
+        try:
+            output: Any = json.loads(text) if text.strip() else None
+        except ValueError:
+            output = text
+        return {"robot": self.robot, "profile": self.profile, "exit_code": self.code,
+                "seconds": round(self.seconds(), 3), "lines_run": self.done,
+                "lines": len(self.lines), "output": output,
+                "error": self.last_error() if self.code not in (0, 3) else None}
+
+
+def script_lines(path: str, opts: Options) -> tuple[list[list[str]], list[str]]:
+    """The deltoctl command lines of a bring-up script (``deltoctl VERB …`` or
+    ``"$deltoctl" VERB …``; a pipe or redirection ends one), and the lines skipped: shell
+    lines, verbs that do not run remotely, arguments with shell variables."""
+    import shlex
+
+    from deltoctl.cli.main import hoist_global_options
+
+    try:
+        with open(path, encoding="utf-8") as f:
+            text = f.read(1 << 20)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InvalidInput(f"{path}: cannot read the script: {exc}") from None
+    lines: list[list[str]] = []
+    skipped: list[str] = []
+    for n, line in enumerate(text.splitlines(), start=1):
+        lexer = shlex.shlex(line, posix=True, punctuation_chars=True)
+        lexer.whitespace_split, lexer.commenters = True, "#"
+        try:
+            words = list(lexer)
+        except ValueError as exc:
+            skipped.append(f"{path}:{n}: {exc}")
+            continue
+        if not words or words[0] not in ("deltoctl", "$deltoctl", "${deltoctl}"):
+            if words and not words[0].endswith("=") and "=" not in words[0]:
+                skipped.append(f"{path}:{n}: not a deltoctl command line")
+            continue
+        ends = [i for i, w in enumerate(words) if w in ("|", "||", "&&", ";", ">", ">>", "&")]
+        argv = hoist_global_options(words[1:ends[0] if ends else len(words)])
+        if any("$" in w for w in argv):
+            skipped.append(f"{path}:{n}: uses shell variables")
+            continue
+        try:
+            _check(argv, "")
+        except InvalidInput as exc:
+            skipped.append(f"{path}:{n}: {exc.message.removeprefix('robot : ')}")
+            continue
+        lines.append(_globals(opts) + argv)
+    if not lines:
+        raise InvalidInput(f"{path}: no deltoctl command line to run remotely",
+                           "a line of the script is: deltoctl VERB [ARGS]")
+    return lines, skipped
+
+
+def _globals(opts: Options) -> list[str]:
+    return [flag for name, flag in FORWARDED.items() if getattr(opts, name)] + \
+        [f"--hardware={h}" for h in opts.hardware]
+
+
+def _live(jobs: list[Job]) -> Any:
+    from rich.table import Table
+
+    t = Table(title="fleet run", title_justify="left")
+    for column in ("robot", "profile", "now", "lines", "seconds"):
+        t.add_column(column)
+    for j in jobs:
+        t.add_row(j.robot, j.profile, j.state, f"{j.done}/{len(j.lines)}", f"{j.seconds():.1f}")
+    return t
+
+
+@app.command("run", context_settings={"ignore_unknown_options": True,
+                                      "allow_interspersed_args": False})
+def run_cmd(
+    ctx: typer.Context,
+    command: Annotated[list[str], typer.Argument(
+        metavar="VERB [ARGS]... | SCRIPT",
+        help="A verb and its arguments, or a bring-up script whose deltoctl lines run in "
+             "order on each robot.")],
+    robots: Annotated[str, typer.Option(
+        "--robots", help="Glob of robot names (default: every robot found).")] = "*",
+    wait: Annotated[float, typer.Option(help="Seconds to wait for the agents to answer.")]
+        = 2.0,
+) -> None:
+    """Run one verb (or a script's verbs) on many robots in parallel: a live table while they
+    run, one report at the end; the exit code is the worst of the robots'."""
+    import fnmatch
+    import os
+    import threading
+
+    from deltoctl.cli.main import VERBS, hoist_global_options
+    from deltoctl.cli.output import emit_json, info, table
+    from deltoctl.fleet import MOTION
+    from deltoctl.fleet.client import agents, caller_session
+
+    opts = options(ctx)
+    skipped: list[str] = []
+    if command[0] not in VERBS and os.path.isfile(command[0]) and len(command) == 1:
+        lines, skipped = script_lines(command[0], opts)
+    else:
+        argv = hoist_global_options(list(command))
+        _check(argv, "*")
+        lines = [_globals(opts) + argv]
+    for note in skipped:
+        info(f"skipped {note}")
+    with caller_session(opts.zenoh_config, "fleet") as session:
+        found = agents(session, wait=wait)
+        chosen = {r: p for r, p in found.items() if fnmatch.fnmatchcase(r, robots)}
+        if not chosen:
+            from deltoctl.errors import Unreachable
+
+            raise Unreachable(f"no robot matches {robots!r}"
+                              + (f" (found: {', '.join(sorted(found))})" if found else
+                                 ": no agent answers on this Zenoh network"))
+        moving = [ln for ln in lines if _verb(ln) in MOTION]
+        if moving and not opts.yes and sys.stdin.isatty():
+            names = ", ".join(sorted(chosen))
+            if not typer.confirm(f"motion on {len(chosen)} robots ({names}). Move?",
+                                 default=False, err=True):
+                from deltoctl.errors import Refused
+
+                raise Refused("not confirmed; nothing moved")
+            lines = [["--yes", *ln] if _verb(ln) in MOTION else ln for ln in lines]
+        jobs = [Job(r, chosen[r], lines) for r in sorted(chosen)]
+        threads = [threading.Thread(target=j.run, args=(session,), daemon=True) for j in jobs]
+        for t in threads:
+            t.start()
+        _watch(jobs, threads, opts)
+    code = worst([j.code for j in jobs])
+    if opts.json:
+        emit_json({"command": lines[0] if len(lines) == 1 else lines, "skipped": skipped,
+                   "exit_code": code, "robots": [j.report() for j in jobs]})
+    else:
+        table(None, ["robot", "profile", "exit", "seconds", "lines", "result"],
+              [[j.robot, j.profile, j.code, f"{j.seconds():.2f}", f"{j.done}/{len(j.lines)}",
+                "ok" if j.code == 0 else j.last_error()] for j in jobs])
+    raise typer.Exit(code)
+
+
+def _verb(argv: list[str]) -> str:
+    from deltoctl.fleet.argv import check_argv
+
+    return check_argv(argv)
+
+
+def _watch(jobs: list[Job], threads: list[Any], opts: Options) -> None:
+    """Wait for every robot, with a live table on a terminal; Ctrl-C interrupts them all."""
+    live = None
+    if not (opts.json or opts.quiet) and sys.stderr.isatty():
+        from rich.console import Console
+        from rich.live import Live
+
+        live = Live(_live(jobs), console=Console(stderr=True), auto_refresh=False)
+        live.start()
+    try:
+        while any(t.is_alive() for t in threads):
+            try:
+                for t in threads:
+                    t.join(0.1)
+                    if live is not None:
+                        live.update(_live(jobs), refresh=True)
+            except KeyboardInterrupt:
+                for j in jobs:
+                    if j.call is not None:
+                        j.call.cancel()
+    finally:
+        if live is not None:
+            live.stop()

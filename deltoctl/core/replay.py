@@ -1,0 +1,362 @@
+"""Recorded commands, and playing them back.
+
+Recording (``jog --record``): every driver's move loop calls its ``on_cycle`` hook once a cycle
+with the state it read and the setpoints it sent; ``CommandLog`` turns each call into one row
+of the recording: every state of the System, and each joint's setpoint as
+``<joint>/position_command``, ``<joint>/velocity_command``, ``<joint>/effort_command`` (NaN
+where not commanded, and for the joints of the other blocks), on the /joint_commands topic.
+
+Replaying (``replay``): ``read_recording_commands`` reads the rows back; ``check_commands``
+refuses, before anything moves, a command outside the profile's limits; ``Replay`` sends each
+row at its recorded time to the blocks it commands, reading them first, and compares what
+they report with what was recorded (RMS and max per joint).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from deltoctl.core.driver import SETPOINT_FIELDS, Setpoint
+from deltoctl.errors import DeviceError, InvalidInput, Refused
+
+if TYPE_CHECKING:
+    from deltoctl.core.driver import Driver
+    from deltoctl.core.system import System
+    from deltoctl.profile.model import Component, Profile
+
+COMMANDS_TOPIC = "/joint_commands"
+STATES_TOPIC = "/joint_states"
+COMMAND_SUFFIX = "_command"
+NAN = float("nan")
+
+
+def command_key(joint: str, field: str) -> str:
+    """The interface name a setpoint is recorded under: ``j1/position_command``."""
+    return f"{joint}/{field}{COMMAND_SUFFIX}"
+
+
+def commanded_joints(profile: Profile) -> list[Component]:
+    """The joints /joint_commands carries: a position state and a position, velocity or
+    effort command interface (mimic joints follow another one: never commanded)."""
+    return [j for j in profile.joints() if j.state("position") and j.mimic is None
+            and any(j.command(f) for f in SETPOINT_FIELDS)]
+
+
+# -- recording -----------------------------------------------------------------------------------
+
+class CommandLog:
+    """Sets the ``on_cycle`` hook of every block's driver; each call is one row for
+    ``recorder`` (a RecorderProcess made with ``commands=True``). Blocks on several links move
+    in threads of their own: rows are written one at a time, in time order."""
+
+    def __init__(self, system: System, recorder: Any) -> None:
+        self.system, self.recorder = system, recorder
+        joints = [j.name for j in commanded_joints(system.profile)]
+        self.keys = {j: tuple(command_key(j, f) for f in SETPOINT_FIELDS) for j in joints}
+        self.blank = dict.fromkeys([k for keys in self.keys.values() for k in keys], NAN)
+        self.lock = threading.Lock()
+        self.rows = 0
+        self.last_ns = 0
+
+    def __enter__(self) -> CommandLog:
+        for m in self.system:
+            m.driver.on_cycle = self.cycle
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for m in self.system:
+            m.driver.on_cycle = None
+
+    def cycle(self, t_ns: int, values: dict[str, float], setpoints: dict[str, Setpoint]) -> None:
+        row = {**values, **self.blank}
+        for joint, fields in setpoints.items():
+            keys = self.keys.get(joint)
+            if keys is not None:
+                row.update(zip(keys, fields))
+        with self.lock:
+            self.last_ns = max(t_ns, self.last_ns + 1)
+            self.recorder.write(row, self.last_ns)
+            self.rows += 1
+
+
+# -- reading -------------------------------------------------------------------------------------
+
+@dataclass
+class Recorded:
+    """The commands of a recording: per row its time and each commanded joint's setpoint,
+    and the positions recorded with it."""
+
+    path: Path
+    profile_yaml: str | None
+    times: list[int] = field(default_factory=list)
+    setpoints: list[dict[str, Setpoint]] = field(default_factory=list)
+    positions: list[dict[str, float]] = field(default_factory=list)
+
+    @property
+    def joints(self) -> list[str]:
+        """The joints commanded at least once, in order of first command."""
+        seen: dict[str, None] = {}
+        for row in self.setpoints:
+            seen.update(dict.fromkeys(row))
+        return list(seen)
+
+    @property
+    def seconds(self) -> float:
+        return (self.times[-1] - self.times[0]) / 1e9 if self.times else 0.0
+
+    def start_pose(self) -> dict[str, float]:
+        """Each commanded joint's first recorded position."""
+        pose: dict[str, float] = {}
+        for row in self.positions:
+            for joint, value in row.items():
+                if joint not in pose and value == value:
+                    pose[joint] = value
+        return {j: pose[j] for j in self.joints if j in pose}
+
+
+def _rows(rec: Any, topic: str) -> list[tuple[int, dict[str, float]]]:
+    """(time, interface → value) for each JointState message of ``topic``."""
+    import struct
+
+    from deltoctl.record.reader import Cdr, _damaged, _joint_state
+
+    channel = rec.channel(topic)
+    if channel is None:
+        return []
+    rows = []
+    for t, data in rec.read(channel.id):
+        try:
+            layout = _joint_state(Cdr(data), topic)
+            rows.append((t, {name: struct.unpack_from("<d", data, at)[0]
+                             for name, at in layout}))
+        except (struct.error, IndexError, ValueError):
+            raise _damaged(rec.path, f"a {topic} message at {t} ns is not a "
+                                     "sensor_msgs/JointState") from None
+    return rows
+
+
+def read_recording_commands(path: Path) -> Recorded:
+    """The commands, positions and profile (YAML text) of a recording made with commands."""
+    from deltoctl.record.reader import read_recording
+
+    rec = read_recording(path, keep=(COMMANDS_TOPIC, STATES_TOPIC))
+    channel = rec.channel(COMMANDS_TOPIC)
+    if channel is None or channel.type != "sensor_msgs/msg/JointState":
+        raise InvalidInput(f"{path} holds no recorded commands (no {COMMANDS_TOPIC} topic): it "
+                           "was recorded without them",
+                           "record a motion with its commands: deltoctl jog JOINT DELTA "
+                           "--record FILE.mcap")
+    recorded = Recorded(rec.path, rec.metadata.get("profile", {}).get("yaml"))
+    states = dict(_rows(rec, STATES_TOPIC))
+    fields = [(f, COMMAND_SUFFIX) for f in SETPOINT_FIELDS]
+    for t, values in sorted(_rows(rec, COMMANDS_TOPIC), key=lambda r: r[0]):
+        row: dict[str, Setpoint] = {}
+        joints = dict.fromkeys(k.rpartition("/")[0] for k in values)
+        for joint in joints:
+            sp = tuple(values.get(f"{joint}/{f}{s}", NAN) for f, s in fields)
+            if any(v == v for v in sp):
+                row[joint] = (sp[0], sp[1], sp[2])
+        if not row:
+            continue
+        state = states.get(t, {})
+        recorded.times.append(t)
+        recorded.setpoints.append(row)
+        recorded.positions.append({j: state.get(f"{j}/position", NAN) for j in row})
+    if not recorded.times:
+        raise InvalidInput(f"{path}: its {COMMANDS_TOPIC} topic holds no command to replay")
+    return recorded
+
+
+def recorded_profile(recorded: Recorded) -> Profile:
+    """The profile the recording was made with, from its ``profile`` metadata: untrusted
+    text, loaded as a profile file is (size and YAML bounds, validation)."""
+    from deltoctl.errors import ProfileError
+    from deltoctl.profile.catalog import MAX_PROFILE_BYTES, merge_interface_limits
+    from deltoctl.profile.validate import validate
+    from deltoctl.profile.yaml_loader import load_data, profile_from_data
+
+    text = recorded.profile_yaml
+    source = f"{recorded.path} (profile metadata)"
+    if not text:
+        raise InvalidInput(f"{recorded.path} holds no profile (no 'profile' metadata with "
+                           "YAML)", "pass the profile it was recorded with: -p PROFILE")
+    if len(text.encode()) > MAX_PROFILE_BYTES:
+        raise ProfileError(f"larger than {MAX_PROFILE_BYTES >> 20} MiB, the limit for a "
+                           "profile", source)
+    data = load_data(text, source)
+    if data is None:
+        raise ProfileError("empty (expected a YAML profile)", source)
+    return validate(merge_interface_limits(profile_from_data(data, source)))
+
+
+# -- checks --------------------------------------------------------------------------------------
+
+def _bounded(joint: Component, what: str, value: float, bound: float | None, at: str) -> None:
+    if not math.isfinite(value) or (bound is not None and abs(value) > bound + 1e-9):
+        limit = "" if bound is None else f" (its limit: {bound:.4f})"
+        raise Refused(f"{at}: {joint.name} {what} command {value:.4f} is beyond its "
+                      f"limits{limit}; nothing moved")
+
+
+def check_commands(profile: Profile, recorded: Recorded) -> None:
+    """Refuse (exit 5) before anything moves: a start pose or a position command outside a
+    joint's limits or soft limits, a position step larger than max_jog_step (from the one
+    before, the first from the start pose), a velocity or effort beyond the joint's limit.
+    A joint the profile lacks is invalid input (exit 2)."""
+    from deltoctl.core.motion import check_target
+
+    comps: dict[str, Component] = {}
+    for name in recorded.joints:
+        comp = profile.component(name)
+        if comp is None or comp.kind != "joint":
+            raise InvalidInput(f"{recorded.path} commands {name!r}, which is no joint of "
+                               f"{profile.name}", "replay takes the recording's own profile "
+                               "unless -p PROFILE (or DELTOCTL_PROFILE) names another")
+        comps[name] = comp
+    last = recorded.start_pose()
+    for joint, position in last.items():
+        try:
+            check_target(profile, comps[joint], position, None)
+        except Refused as exc:
+            raise Refused(f"the recorded start pose: {exc.message}; nothing moved") from None
+    t0 = recorded.times[0]
+    for t, row in zip(recorded.times, recorded.setpoints):
+        at = f"at {(t - t0) / 1e9:.3f} s"
+        for joint, (position, velocity, effort) in row.items():
+            comp = comps[joint]
+            lim = comp.limits
+            if position == position:
+                if not math.isfinite(position):
+                    _bounded(comp, "position", position, None, at)
+                try:
+                    check_target(profile, comp, position, last.get(joint))
+                except Refused as exc:
+                    raise Refused(f"{at}: {exc.message}; nothing moved", exc.hint) from None
+                last[joint] = position
+            if velocity == velocity:
+                _bounded(comp, "velocity", velocity, lim.velocity if lim else None, at)
+            if effort == effort:
+                _bounded(comp, "effort", effort, lim.effort if lim else None, at)
+
+
+# -- playing back --------------------------------------------------------------------------------
+
+@dataclass
+class Difference:
+    """Recorded against replayed position of one joint."""
+
+    block: str
+    samples: int = 0
+    squares: float = 0.0
+    largest: float = 0.0
+
+    def add(self, recorded: float, replayed: float) -> None:
+        if recorded != recorded or replayed != replayed:
+            return
+        d = abs(replayed - recorded)
+        self.samples += 1
+        self.squares += d * d
+        self.largest = max(self.largest, d)
+
+    @property
+    def rms(self) -> float:
+        return math.sqrt(self.squares / self.samples) if self.samples else 0.0
+
+
+@dataclass
+class ReplayResult:
+    rows: int = 0
+    seconds: float = 0.0
+    late_max_ms: float = 0.0  # the latest a row went out after its recorded time
+    joints: dict[str, Difference] = field(default_factory=dict)
+
+
+class Track:
+    """One joint's recorded positions over time (the rows that command it: its block's
+    cycles), read at any time by linear interpolation."""
+
+    def __init__(self) -> None:
+        self.times: list[int] = []
+        self.positions: list[float] = []
+
+    def add(self, t_ns: int, position: float) -> None:
+        if position == position:
+            self.times.append(t_ns)
+            self.positions.append(position)
+
+    def at(self, t_ns: int) -> float:
+        import bisect
+
+        times, positions = self.times, self.positions
+        if not times:
+            return NAN
+        i = bisect.bisect_right(times, t_ns)
+        if i == 0:
+            return positions[0]
+        if i == len(times):
+            return positions[-1]
+        t1, t2 = times[i - 1], times[i]
+        f = (t_ns - t1) / (t2 - t1)
+        return positions[i - 1] + f * (positions[i] - positions[i - 1])
+
+
+class Replay:
+    """The recording's rows on ``system``: each at its recorded time (from the first), to the
+    blocks whose joints it commands, each block read first. What a block reads is compared
+    with what was recorded at the same time since the start (a row sent late is compared
+    with the recording as late)."""
+
+    def __init__(self, system: System, recorded: Recorded) -> None:
+        self.system, self.recorded = system, recorded
+        self.result = ReplayResult(joints={
+            j: Difference(system.member(j).name) for j in recorded.joints})
+        # per row: (driver, its joints' setpoints) for each block it commands
+        self.plan: list[list[tuple[Driver, dict[str, Setpoint]]]] = []
+        for row in recorded.setpoints:
+            by_driver: dict[int, tuple[Driver, dict[str, Setpoint]]] = {}
+            for joint, sp in row.items():
+                driver = system.member(joint).driver
+                by_driver.setdefault(id(driver), (driver, {}))[1][joint] = sp
+            self.plan.append(list(by_driver.values()))
+        self.tracks = {j: Track() for j in recorded.joints}
+        for t, row in zip(recorded.times, recorded.positions):
+            for joint, position in row.items():
+                self.tracks[joint].add(t, position)
+
+    def run(self, progress: Any = None) -> ReplayResult:
+        """Play every row (the caller stops the System after, whatever happens)."""
+        recorded, result = self.recorded, self.result
+        t0 = recorded.times[0]
+        started = time.monotonic()
+        total = len(recorded.times) or 1
+        tracks = self.tracks
+        for i, (t, blocks) in enumerate(zip(recorded.times, self.plan)):
+            due = started + (t - t0) / 1e9
+            wait = due - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+            else:
+                result.late_max_ms = max(result.late_max_ms, -wait * 1e3)
+            now_ns = t0 + int((time.monotonic() - started) * 1e9)
+            for driver, _ in blocks:
+                driver.start_read()
+            for driver, setpoints in blocks:
+                values = driver.read()
+                if not driver.connected:
+                    raise DeviceError(f"the link to {driver.hw.name} was lost during the "
+                                      "replay; every block was stopped")
+                for joint in setpoints:
+                    result.joints[joint].add(tracks[joint].at(now_ns),
+                                             values.get(f"{joint}/position", NAN))
+            for driver, setpoints in blocks:
+                driver.follow(setpoints)
+            result.rows = i + 1
+            if progress is not None:
+                progress((i + 1) / total)
+        result.seconds = time.monotonic() - started
+        return result
