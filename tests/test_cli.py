@@ -11,7 +11,7 @@ import pytest
 
 from deltoctl import __version__
 from deltoctl.cli.completion_cmd import SCRIPT_FILES, completion_script
-from deltoctl.cli.main import hoist_global_options
+from deltoctl.cmdline import hoist_global_options
 from tests.conftest import REPO
 
 

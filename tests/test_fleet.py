@@ -15,6 +15,7 @@ import pytest
 pytest.importorskip("zenoh")
 
 from deltoctl.fleet import lab
+from deltoctl.fleet.client import RemoteCall
 from tests.conftest import REPO, eventually
 
 JOINT = "rj_dg_2_2"
@@ -301,6 +302,45 @@ def test_a_killed_agent_stops_the_joint(tmp_path):
         b.close()
 
 
+def _children(pid):
+    """The processes whose parent is ``pid`` (Linux /proc)."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    stat = f.read()
+            except OSError:
+                continue
+            if int(stat.rpartition(")")[2].split()[1]) == pid:
+                found.append(int(entry))
+    return found
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_a_motion_verb_that_will_not_stop_is_killed_and_its_blocks_set_safe(tmp_path):
+    """A verb frozen (SIGSTOP: it cannot take SIGINT or SIGTERM) is killed by the deadman's
+    escalation; the agent then sets the robot's blocks safe itself (a gripper keeps its last
+    duty otherwise)."""
+    b = Bench(tmp_path, "hand-f", "dg-5f-right", "--allow-unauthenticated-motion", "--deadline", "0.5")
+    try:
+        client, probe = _start_slow_jog(b)
+        try:
+            verbs = [c for z in _children(b.agent.proc.pid) for c in _children(z)]
+            assert len(verbs) == 1, verbs  # the jog, forked by the agent's warm process
+            os.kill(verbs[0], signal.SIGSTOP)
+            client.send_signal(signal.SIGINT)  # the deadman's SIGINT, then SIGTERM, then KILL
+            assert eventually(lambda: "set safe by connect (exit 0)" in b.agent.text(),
+                              timeout=30)
+            assert eventually(lambda: probe.still(0.1), timeout=5)
+        finally:
+            probe.close()
+            if client.poll() is None:
+                client.kill()
+    finally:
+        b.close()
+
+
 def test_stopping_the_agent_stops_the_joint(tmp_path):
     b = Bench(tmp_path, "hand-2", "dg-5f-right", "--allow-unauthenticated-motion", "--deadline", "0.5")
     try:
@@ -329,6 +369,18 @@ def test_an_agent_open_to_unauthenticated_peers_moves_nothing(tmp_path):
             assert result.returncode == 5, args
             assert "robot hand-3" in result.stderr and "authenticated" in result.stderr
         assert "refused" in b.info["motion"]
+        # a raw request, global options after the verb as the CLI takes them, is judged as
+        # the CLI would parse it; `calibrate ft` is of the actuating group `calibrate`
+        outside = str(tmp_path.parent / f"{tmp_path.name}-outside.yaml")  # beside its workdir
+        for argv, code in ((["gpio", "--hardware", "DG5FRightHardware", "set", "output_2",
+                             "on", "--yes"], 5), (["calibrate", "ft", "--yes"], 5),
+                           (["config", "snapshot", f"--output={outside}"], 2),
+                           (["config", "snapshot", f"-o{outside}"], 2),
+                           (["stream", "--duration", "0.1", "--foxglove"], 2)):
+            call = RemoteCall(b.session, "hand-3", argv, lambda _: None, lambda _: None)
+            assert call.run() == code, argv
+        assert not os.path.exists(outside)
+        assert json.loads(b.local("gpio", "get", "--json").stdout)["gpio/output_2"] == 0.0
     finally:
         b.close()
     # and the flag is for a loopback bench only
@@ -425,7 +477,7 @@ def test_fleet_run_a_bring_up_script(fleet, tmp_path):
         "deltoctl connect -n 3\n"
         '"$deltoctl" identify  # what is there\n'
         "deltoctl home --yes\n"
-        "deltoctl gpio get\n"
+        "deltoctl gpio get && echo done\n"
         "deltoctl stream --duration 0.2 --interfaces '*_dg_2_*/position' | tail -n 1\n"
         'deltoctl record "$out/x.mcap" --duration 1\n')
     result = fleet.run("fleet", "run", "--robots", "hand-[rl]", str(script), "--json")
@@ -433,7 +485,8 @@ def test_fleet_run_a_bring_up_script(fleet, tmp_path):
     report = json.loads(result.stdout)
     assert [r["robot"] for r in report["robots"]] == ["hand-l", "hand-r"]
     assert all(r["lines_run"] == r["lines"] == 5 for r in report["robots"])
-    assert len(report["skipped"]) == 3  # sim serve, set -e, the shell variable
+    # sim serve, set -e, the shell variable, and what follows && (never dropped silently)
+    assert len(report["skipped"]) == 4 and "'&&'" in report["skipped"][2]
     assert "skipped" in result.stderr
 
 

@@ -178,7 +178,7 @@ def test_a_robot_lost_mid_recording_leaves_a_valid_file_and_exit_4(tmp_path):
 
 
 def test_remote_record_options_are_checked_here(hand, tmp_path):
-    for args, words in ((["--foxglove"], "--foxglove is not taken with --robot"),
+    for args, words in ((["--foxglove"], "--foxglove is not taken remotely"),
                         (["--rate", "-5"], "--rate"), (["--gpio-type", "x"], "--gpio-type"),
                         (["--bogus"], "--bogus")):
         result = hand.remote("record", "x.mcap", *args, cwd=tmp_path)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import pathlib
 import signal
 import subprocess
 import sys
@@ -278,3 +279,156 @@ def test_delto_efforts_replayed_are_clamped_to_the_current_cap(cli, gripper, tmp
     assert result.exit_code in (0, 3), result.stderr
     assert max(seen) > 0
     assert max(seen) <= int(effort_to_duty_percent(cap) * 10) + 1
+
+
+def _held_effort(profile, seconds, effort=7.0):
+    """Rows every 5 ms for ``seconds``, each the effort ``effort`` on j_dg_1_2 (its limit is
+    7.5) and every position recorded at rest: a joint that moves strays from its recording."""
+    base, command = _at_rest(profile)
+    t0 = time.time_ns()
+    return [(t0 + i * 5_000_000, {**base, **command, "j_dg_1_2/effort_command": effort})
+            for i in range(int(seconds / 0.005))]
+
+
+def test_a_joint_straying_from_its_recording_stops_every_block(cli, gripper, tmp_path):
+    """Efforts sent as recorded have no position loop behind them: a joint further from its
+    recorded position than --max-deviation stops the replay at once (exit 5)."""
+    profile = load_profile("dg-3f-m")
+    rows = _held_effort(profile, 10.0)
+    out = tmp_path / "pushing.mcap"
+    _recording_with(out, profile, rows)
+    result = cli("replay", str(out), "--device", "-t", gripper.endpoint, "--yes", "--json")
+    assert result.exit_code == 5, result.stderr
+    assert "j_dg_1_2 at" in result.stderr and "from its recorded position" in result.stderr
+    assert "--max-deviation" in result.stderr and "every block was stopped" in result.stderr
+    report = json.loads(result.stdout)  # the replay until it was stopped
+    assert 0 < report["commands"] < len(rows) and report["stopped"]
+    assert report["max_deviation"] == 0.2
+    assert report["joints"]["j_dg_1_2"]["max"] > 0.2
+    assert eventually(lambda: gripper.firmware.duty == [0] * 12)
+    assert abs(gripper.firmware.position[1]) < 1.0  # stopped well before 10 s of effort
+    assert cli("replay", str(out), "--max-deviation", "-1").exit_code == 2
+
+
+def test_a_joint_leaving_its_limits_stops_the_replay(cli, gripper, tmp_path):
+    """The same push on a gripper that goes to ±90°, replayed with a profile whose j_dg_1_2
+    spans ±5°: those limits stop it, whatever --max-deviation allows."""
+    source = load_profile("dg-3f-m").source
+    text = pathlib.Path(source).read_text()
+    wide = "{name: j_dg_1_2, limits: {lower: -90deg, upper: 90deg"
+    assert wide in text
+    narrow = tmp_path / "dg-3f-m-narrow.yaml"
+    narrow.write_text(text.replace(wide, "{name: j_dg_1_2, limits: {lower: -5deg, upper: 5deg"))
+    out = tmp_path / "pushing.mcap"
+    _recording_with(out, load_profile("dg-3f-m"), _held_effort(load_profile("dg-3f-m"), 10.0))
+    result = cli("-p", str(narrow), "replay", str(out), "--max-deviation", "100", "--device",
+                 "-t", gripper.endpoint, "--yes")
+    assert result.exit_code == 5, result.stderr
+    assert "j_dg_1_2 at" in result.stderr and "outside its limits [-0.0873, 0.0873]" \
+        in result.stderr
+    assert "Traceback" not in result.stderr
+    assert eventually(lambda: gripper.firmware.duty == [0] * 12)
+
+
+def test_a_setpoint_held_longer_than_recorded_is_refused_before_anything_moves(
+        cli, gripper, tmp_path):
+    profile = load_profile("dg-3f-m")
+    rows = _held_effort(profile, 0.05, 0.1)
+    t_last, last = rows[-1]
+    rows.append((t_last + 800_000_000, last))  # 0.8 s without a command
+    out = tmp_path / "gap.mcap"
+    _recording_with(out, profile, rows)
+    result = cli("replay", str(out), "--device", "-t", gripper.endpoint, "--yes")
+    assert result.exit_code == 5, result.stderr
+    assert "no command for" in result.stderr and "0.800 s" in result.stderr
+    assert "nothing moved" in result.stderr
+    assert gripper.firmware.duty == [0] * 12 and gripper.firmware.position[1] == 0.0
+
+
+def test_a_recording_with_too_many_commands_is_refused_before_they_are_read(
+        cli, tmp_path, monkeypatch):
+    """The count comes from the file's summary: not one command row is read (the bound is
+    lowered here; the real one, millions of rows, would take a test minutes to write)."""
+    import deltoctl.core.replay as replay
+
+    out = tmp_path / "jog.mcap"
+    run_json(cli, "-p", "dg-3f-m", "--sim", "jog", "j_dg_1_2", "10deg", "--yes", "--record",
+             str(out))
+
+    def never(rec, topic):
+        raise AssertionError(f"{topic} read")
+
+    monkeypatch.setattr(replay, "MAX_COMMAND_ROWS", 10)
+    monkeypatch.setattr(replay, "_rows", never)
+    result = cli("replay", str(out))
+    assert result.exit_code == 2, result.stderr
+    assert "recorded commands, more than the 10 a replay takes" in result.stderr
+
+
+def test_jog_record_to_a_file_that_cannot_be_written_is_refused_before_anything_opens(
+        cli, tmp_path):
+    unreachable = ("-p", "dg-3f-m", "-t", "tcp://127.0.0.1:9", "jog", "j_dg_1_2", "1deg",
+                   "--yes", "--record")
+    result = cli(*unreachable, str(tmp_path))  # a directory: refused, nothing reached
+    assert result.exit_code == 2, result.stderr
+    assert "cannot write" in result.stderr and "Traceback" not in result.stderr
+    result = cli(*unreachable, str(tmp_path / "none" / "jog.mcap"))
+    assert result.exit_code == 2 and "cannot write" in result.stderr
+    # a file that can be written, then a device that cannot be reached: no empty file left
+    out = tmp_path / "jog.mcap"
+    result = cli(*unreachable, str(out))
+    assert result.exit_code == 4, result.stderr
+    assert not out.exists()
+
+
+def test_record_and_jog_record_write_the_same_metadata(cli, tmp_path):
+    from deltoctl.record.reader import read_recording
+
+    plain, jogged = tmp_path / "plain.mcap", tmp_path / "jog.mcap"
+    assert cli("-p", "dg-3f-m", "--sim", "record", str(plain), "--duration", "0.1"
+               ).exit_code == 0
+    run_json(cli, "-p", "dg-3f-m", "--sim", "jog", "j_dg_1_2", "1deg", "--yes", "--record",
+             str(jogged))
+    a, b = (read_recording(p).metadata for p in (plain, jogged))
+    assert a["profile"] == b["profile"] and a["deltoctl"] == b["deltoctl"]
+    assert set(a["identify"]) == set(b["identify"]) == {"dg3f_m_driver"}
+
+
+def test_a_block_whose_commands_end_first_stops_then_not_at_the_end(cli, gripper, tmp_path):
+    """The gripper's commands end after 0.05 s, the arm's go on for 2 s: the gripper's last
+    effort is not held for those 2 s (its recorded move loop stopped it)."""
+    from deltoctl.sim.serve import ServeOptions, serve_profile
+
+    profile = load_profile("bioscara-dg-3f-m")
+    nan = float("nan")
+    base = {f"{j.name}/{k}": 0.0 for j in profile.joints() for k in ("position", "velocity")}
+    blank = {f"{j}/{k}_command": nan for j in ("j4", "j_dg_1_2")
+             for k in ("position", "velocity", "effort")}
+    t0 = time.time_ns()
+    rows = [(t0 + i * 5_000_000, {**base, **blank, "j_dg_1_2/effort_command": 0.5})
+            for i in range(10)]
+    rows += [(t0 + i * 5_000_000, {**base, **blank, "j4/position_command": 0.0})
+             for i in range(10, 410)]
+    out = tmp_path / "cell.mcap"
+    _recording_with(out, profile, rows)
+    writes = []  # (time, largest duty) of each message the gripper handles
+    handle = gripper.firmware.handle
+
+    def watch(data):
+        reply = handle(data)
+        writes.append((time.monotonic(), max(map(abs, gripper.firmware.duty))))
+        return reply
+
+    with contextlib.ExitStack() as stack:
+        buses = serve_profile(stack, load_profile("bioscara-arm"), ServeOptions())["buses"]
+        targets = ["-t", f"i2c={buses['i2c']}", "-t", f"gripper={gripper.endpoint}"]
+        cell = ("-p", "bioscara-dg-3f-m", *targets)
+        assert cli(*cell, "home", "-j", "j4", "--yes").exit_code == 0
+        gripper.firmware.handle = watch
+        result = cli(*cell, "replay", str(out), "--device", "--yes", "--json")
+    assert result.exit_code == 0, result.stderr
+    pushed = [t for t, duty in writes if duty > 0]
+    assert pushed, "the gripper was never pushed"
+    stopped = next(t for t, duty in writes if t > pushed[-1] and duty == 0)
+    # stopped with the next row, not after the arm's 2 s (a wide margin for a loaded machine)
+    assert stopped - pushed[-1] < 1.0

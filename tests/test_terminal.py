@@ -12,7 +12,8 @@ import sys
 
 import pytest
 
-from deltoctl.cli.main import VERBS, hoist_global_options, split_cluster
+from deltoctl.cli.main import VERBS
+from deltoctl.cmdline import hoist_global_options, split_cluster
 from deltoctl.errors import InvalidInput
 from deltoctl.suggest import close_matches
 from tests.conftest import REPO

@@ -122,13 +122,11 @@ def forward(ctx: typer.Context) -> NoReturn:
 
 def _verb_args(argv: list[str]) -> list[str]:
     """The arguments after the verb (global options come first, hoisted)."""
-    from deltoctl.cli.main import GLOBAL_OPTIONS, split_cluster
+    from deltoctl.cmdline import needs_value
 
     i = 0
     while i < len(argv) and argv[i].startswith("-"):
-        arg = argv[i]
-        takes = GLOBAL_OPTIONS.get(arg, False) if arg.startswith("--") else split_cluster(arg)[2]
-        i += 2 if takes else 1
+        i += 2 if needs_value(argv[i]) else 1
     return argv[i + 1:]
 
 
@@ -148,10 +146,6 @@ def _record_params(args: list[str], robot: str) -> dict[str, Any]:
         params = get_command(holder).make_context("record", list(args)).params
     except click_exceptions.ClickException as exc:
         raise InvalidInput(f"record: {exc.format_message()}") from None
-    if params["foxglove"]:
-        raise InvalidInput(f"robot {robot}: record --foxglove is not taken with --robot",
-                           "serve the live view where the robot is: 'deltoctl stream "
-                           "--foxglove' on its computer")
     check_loop(params["rate"], params["duration"])
     if params["gpio_type"] not in GPIO_TYPES:
         raise InvalidInput(f"--gpio-type {params['gpio_type']!r}: one of "
@@ -337,7 +331,7 @@ def script_lines(path: str, opts: Options) -> tuple[list[list[str]], list[str]]:
     lines, verbs that do not run remotely, arguments with shell variables."""
     import shlex
 
-    from deltoctl.cli.main import hoist_global_options
+    from deltoctl.cmdline import hoist_global_options
 
     try:
         with open(path, encoding="utf-8") as f:
@@ -359,6 +353,9 @@ def script_lines(path: str, opts: Options) -> tuple[list[list[str]], list[str]]:
                 skipped.append(f"{path}:{n}: not a deltoctl command line")
             continue
         ends = [i for i, w in enumerate(words) if w in ("|", "||", "&&", ";", ">", ">>", "&")]
+        if ends and words[ends[0]] in ("||", "&&", ";", "&"):
+            skipped.append(f"{path}:{n}: what follows '{words[ends[0]]}' (one deltoctl "
+                           "command a line runs remotely)")
         argv = hoist_global_options(words[1:ends[0] if ends else len(words)])
         if any("$" in w for w in argv):
             skipped.append(f"{path}:{n}: uses shell variables")
@@ -410,8 +407,9 @@ def run_cmd(
     import os
     import threading
 
-    from deltoctl.cli.main import VERBS, hoist_global_options
+    from deltoctl.cli.main import VERBS
     from deltoctl.cli.output import emit_json, info, table
+    from deltoctl.cmdline import hoist_global_options
     from deltoctl.fleet import MOTION
     from deltoctl.fleet.client import agents, caller_session
 

@@ -14,83 +14,8 @@ from typer.core import TyperGroup
 
 from deltoctl import __version__
 from deltoctl.cli.context import Options, parse_pairs
+from deltoctl.cmdline import GLOBAL_OPTIONS, hoist_global_options
 from deltoctl.errors import DeltoctlError
-
-# option spellings → whether they take a value
-GLOBAL_OPTIONS: dict[str, bool] = {
-    "--profile": True, "-p": True, "--target": True, "-t": True, "--arg": True,
-    "--package-path": True, "--hardware": True, "--log-file": True, "--xacro": False,
-    "--sim": False, "--json": False, "--yes": False, "-y": False, "--verbose": False,
-    "-v": False, "--quiet": False, "-q": False, "--robot": True, "--zenoh-config": True,
-}
-# single letters of the global short options, for clusters such as -yq or -vvp NAME
-SHORT_FLAGS = frozenset("yqv")
-SHORT_VALUED = frozenset("pt")
-
-
-def split_cluster(arg: str) -> tuple[str, str, bool]:
-    """A short-option cluster (``-yq``, ``-yn5``, ``-5deg``) → (its global options, the rest,
-    whether the global part still needs the next argument as its value).
-
-    The global part runs from the start up to the first letter that is not a global short
-    option; a global option that takes a value ends it, its value attached or next."""
-    if len(arg) < 2 or arg[0] != "-" or arg[1] == "-":
-        return "", arg, False
-    for i, letter in enumerate(arg[1:], start=1):
-        if letter in SHORT_VALUED:
-            return arg, "", i == len(arg) - 1
-        if letter not in SHORT_FLAGS:
-            return (arg[:i] if i > 1 else ""), "-" + arg[i:], False
-    return arg, "", False
-
-
-def _needs_value(arg: str) -> bool:
-    """Whether a global option before the verb takes the next argument (``-p NAME``,
-    ``-yp NAME``, not ``--profile=NAME``)."""
-    if arg.startswith("--"):
-        return GLOBAL_OPTIONS.get(arg, False)
-    return split_cluster(arg)[2]
-
-
-def hoist_global_options(args: list[str]) -> list[str]:
-    """Move global options found after the verb to just before it."""
-    head: list[str] = []  # options before the verb
-    hoisted: list[str] = []  # global options after it
-    tail: list[str] = []  # the verb and everything else
-    i = 0
-    while i < len(args):
-        arg = args[i]
-        if tail and arg == "--":
-            tail.extend(args[i:])
-            break
-        if not tail and not arg.startswith("-"):
-            tail.append(arg)  # the verb
-        elif not tail:
-            head.append(arg)
-            if _needs_value(arg) and i + 1 < len(args):
-                head.append(args[i + 1])
-                i += 1
-        elif arg.startswith("--"):
-            name = arg.split("=", 1)[0]
-            if name not in GLOBAL_OPTIONS:
-                tail.append(arg)
-            else:
-                hoisted.append(arg)
-                if GLOBAL_OPTIONS[name] and "=" not in arg and i + 1 < len(args):
-                    hoisted.append(args[i + 1])
-                    i += 1
-        else:
-            ours, rest, needs_value = split_cluster(arg)
-            if ours:
-                hoisted.append(ours)
-                if needs_value and i + 1 < len(args):
-                    hoisted.append(args[i + 1])
-                    i += 1
-            if rest:
-                tail.append(rest)
-        i += 1
-    return head + hoisted + tail
-
 
 # verb → the module of deltoctl.cli whose register(app) adds it. A module is imported only
 # when one of its verbs runs: every line of a bring-up script pays for what it imports.

@@ -1,6 +1,7 @@
 """Motion verbs: home and jog. Confirmation on a terminal unless --yes; refused (exit 5)
 outside limits or without confirmation; duty 0 on the way out, Ctrl-C included."""
 
+import contextlib
 import math
 import sys
 from pathlib import Path
@@ -245,9 +246,11 @@ def jog(
             raise InvalidInput(f"{name} is given twice")
         comps[name] = comp
     speed = _speed(velocity)
-    if record is not None and not record.parent.is_dir():
-        raise InvalidInput(f"cannot write {record}: {record.parent} is not a directory")
-    with open_system(opts, allow_model_mismatch, profile) as system:
+    from deltoctl.cli.record_cmd import new_output
+
+    # a file that cannot be written is refused (exit 2) before anything opens
+    with new_output(record) if record else contextlib.nullcontext(), \
+            open_system(opts, allow_model_mismatch, profile) as system:
         for joints in system.by_block(list(comps)).values():
             m = system.member(joints[0])
             if not m.can("jog"):
@@ -277,29 +280,10 @@ def jog(
     finish(system)
 
 
-def recording_metadata(system: Any) -> tuple[Any, dict[str, dict[str, str]]]:
-    """The profile of the blocks driven, and the metadata a recording of them carries: that
-    profile (YAML), each block's identity, deltoctl's version."""
-    import dataclasses
-    import json
-
-    from deltoctl import __version__
-    from deltoctl.profile.exporter import to_yaml
-
-    recorded = dataclasses.replace(system.profile, hardware=[m.hw for m in system])
-    identities = {m.name: {"family": m.family.name, "target": m.url,
-                           "simulated": m.simulated is not None, **m.driver.identify()}
-                  for m in system.able("identify")}
-    return recorded, {
-        "profile": {"name": recorded.name, "yaml": to_yaml(recorded)},
-        "identify": {name: json.dumps(ident, default=str) for name, ident in identities.items()},
-        "deltoctl": {"version": __version__},
-    }
-
-
 def _recorded_move(opts: Options, system: Any, targets: dict[str, float],
                    velocity: float | None, label: str, output: Path) -> dict[str, Any]:
     """``_move`` while every move loop's cycles (states and setpoints) go to ``output``."""
+    from deltoctl.cli.record_cmd import recording_metadata
     from deltoctl.core.replay import CommandLog
     from deltoctl.record.recorder_process import RecorderProcess
 

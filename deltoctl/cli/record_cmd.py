@@ -33,11 +33,45 @@ def _status(output: Path, cycles: int, link: float | None) -> str:
     return f"recording {output.name}: {cycles} cycles, {size / 1e6:.1f} MB{state}"
 
 
-def _create(path: Path) -> None:
+def create_output(path: Path) -> None:
+    """The file a recording goes to, created empty; one that cannot be is invalid input."""
     try:
         path.open("wb").close()
     except OSError as exc:
         raise InvalidInput(f"cannot write {path}: {exc.strerror}") from None
+
+
+@contextlib.contextmanager
+def new_output(path: Path) -> Iterator[None]:
+    """``create_output`` before anything opens; the file is removed again when what follows
+    fails before writing to it (an unreachable device, a refused move)."""
+    create_output(path)
+    try:
+        yield
+    except BaseException:
+        with contextlib.suppress(OSError):
+            if path.stat().st_size == 0:
+                path.unlink()
+        raise
+
+
+def recording_metadata(system: Any) -> tuple[Any, dict[str, dict[str, str]]]:
+    """The profile of the blocks driven, and the metadata a recording of them carries: that
+    profile (YAML), each block's identity, deltoctl's version."""
+    import dataclasses
+
+    from deltoctl import __version__
+    from deltoctl.profile.exporter import to_yaml
+
+    recorded = dataclasses.replace(system.profile, hardware=[m.hw for m in system])
+    identities = {m.name: {"family": m.family.name, "target": m.url,
+                           "simulated": m.simulated is not None, **m.driver.identify()}
+                  for m in system.able("identify")}
+    return recorded, {
+        "profile": {"name": recorded.name, "yaml": to_yaml(recorded)},
+        "identify": {name: json.dumps(ident, default=str) for name, ident in identities.items()},
+        "deltoctl": {"version": __version__},
+    }
 
 
 FoxgloveOpt = Annotated[bool, typer.Option(
@@ -137,11 +171,7 @@ def record(
     """Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
     valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back, 1 when
     the file could not be written to the end (disk full, file too large, removed)."""
-    import dataclasses
-
-    from deltoctl import __version__
     from deltoctl.core.runner import interrupted_by_signals, run_cycles
-    from deltoctl.profile.exporter import to_yaml
     from deltoctl.record.recorder_process import RecorderProcess
 
     opts = options(ctx)
@@ -156,21 +186,14 @@ def record(
     # SIGTERM and SIGHUP before the loop interrupt like Ctrl-C, so the file is finished too
     with interrupted_by_signals(), foxglove_live(foxglove, foxglove_host, foxglove_port) as live, \
             open_system(opts, allow_model_mismatch) as system:
-        _create(output)
-        recorded = dataclasses.replace(system.profile, hardware=[m.hw for m in system])
+        create_output(output)
+        recorded, metadata = recording_metadata(system)
         sinks: list[Sink] = []
         if live is not None:
             start_foxglove(live, recorded, tuple(system.extra_states()), gpio_type)
             sinks.append(live)
-        identities = {m.name: {"family": m.family.name, "target": m.url,
-                               "simulated": m.simulated is not None, **m.driver.identify()}
-                      for m in system.able("identify")}
-        with RecorderProcess(output, recorded, {
-            "profile": {"name": recorded.name, "yaml": to_yaml(recorded)},
-            "identify": {name: json.dumps(ident, default=str)
-                         for name, ident in identities.items()},
-            "deltoctl": {"version": __version__},
-        }, tuple(system.extra_states()), gpio_type=gpio_type) as recorder:
+        with RecorderProcess(output, recorded, metadata, tuple(system.extra_states()),
+                             gpio_type=gpio_type) as recorder:
             links = LinkWatch(system)
             stats = run_cycles(system, rate, duration, [
                 RecordSink(recorder, output, duration, progress(opts, elapsed=True)), links,

@@ -2,7 +2,8 @@
 
 On the profile's simulators unless --device says otherwise (then confirmed as any motion);
 every command is checked against the profile's limits before anything moves (exit 5); a safe
-move to the recorded start pose first; Ctrl-C, SIGTERM or SIGHUP stop every block. The
+move to the recorded start pose first; Ctrl-C, SIGTERM or SIGHUP stop every block, and so
+does a joint outside its limits or beyond --max-deviation from the recording (exit 5). The
 report: per joint, RMS and max of replayed against recorded position; --tolerance makes a
 larger difference exit 3.
 """
@@ -17,12 +18,14 @@ from deltoctl.cli.device_cmd import AllowMismatch, finish, open_system
 from deltoctl.cli.output import emit_json, info, progress, say, table, warn
 from deltoctl.errors import WARNINGS, DeviceError, InvalidInput, Refused
 
+MAX_DEVIATION = 0.2  # rad or m: a replayed joint further than this from its recording stops
+
 
 def register(app: typer.Typer) -> None:
     app.command("replay")(replay)
 
 
-def _tolerance(text: str | None) -> float | None:
+def _tolerance(text: str | None, option: str = "--tolerance") -> float | None:
     if text is None:
         return None
     import math
@@ -32,9 +35,9 @@ def _tolerance(text: str | None) -> float | None:
     try:
         value = parse_quantity(text)
     except ValueError as exc:
-        raise InvalidInput(f"--tolerance: {exc}") from None
+        raise InvalidInput(f"{option}: {exc}") from None
     if not math.isfinite(value) or value < 0:
-        raise InvalidInput(f"--tolerance must be a finite number ≥ 0, got {text!r}")
+        raise InvalidInput(f"{option} must be a finite number ≥ 0, got {text!r}")
     return value
 
 
@@ -91,6 +94,10 @@ def replay(
         "--tolerance", metavar="X", help="The largest difference allowed between recorded "
                                          "and replayed position (rad or m, e.g. 0.01 or "
                                          "1deg); beyond it, exit 3.")] = None,
+    max_deviation: Annotated[str | None, typer.Option(
+        "--max-deviation", metavar="X",
+        help="While replaying, a joint further than this from its recorded position (rad or "
+             f"m) stops every block, exit 5 (default {MAX_DEVIATION:g}).")] = None,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Play a recording's commands back at their recorded timing, then report per joint the
@@ -98,10 +105,13 @@ def replay(
 
     The profile is the recording's own (its metadata), or -p PROFILE. Every command is
     checked against the profile's limits and jog step before anything moves; then the
-    joints go to the recorded start pose; then the commands follow. Runs on the profile's
-    simulators unless --device (with --yes, or confirmed on a terminal)."""
+    joints go to the recorded start pose; then the commands follow, and a joint that leaves
+    its limits or strays beyond --max-deviation from the recording stops every block
+    (exit 5). Runs on the profile's simulators unless --device (with --yes, or confirmed on
+    a terminal)."""
     from deltoctl.cli.motion_cmd import confirm_motion
     from deltoctl.core.replay import (
+        Deviated,
         Replay,
         check_commands,
         read_recording_commands,
@@ -111,6 +121,8 @@ def replay(
 
     opts = options(ctx)
     limit = _tolerance(tolerance)
+    deviation = _tolerance(max_deviation, "--max-deviation")
+    deviation = MAX_DEVIATION if deviation is None else deviation
     recorded = read_recording_commands(recording)
     profile = opts.load_profile() if opts.profile else recorded_profile(recorded)
     run_opts = _where(opts, device)
@@ -134,7 +146,8 @@ def replay(
             if not m.can("jog"):
                 raise InvalidInput(f"{block} cannot move its joints")
         start = recorded.start_pose()
-        player = Replay(system, recorded)
+        player = Replay(system, recorded, deviation)
+        stopped: Deviated | None = None
         bar = progress(opts)
         task = bar.add_task(f"replay {recording.name}", total=1.0) if bar else None
         try:
@@ -148,13 +161,22 @@ def replay(
                     if not moved.settled:
                         raise DeviceError("the recorded start pose was not reached: "
                                           f"{', '.join(moved.unsettled)}; nothing replayed")
-                result = player.run(None if bar is None else
-                                    lambda f: bar.update(task, completed=f))
+                try:
+                    result = player.run(None if bar is None else
+                                        lambda f: bar.update(task, completed=f))
+                except Deviated as exc:  # the finally below stops every block first
+                    stopped, result = exc, exc.result
         finally:
             system.stop()
             if bar is not None:
                 bar.stop()
     report = _report(recording, system, recorded, result, limit, device)
+    report["max_deviation"] = deviation
+    report["stopped"] = stopped.message if stopped else None
+    if stopped is not None:
+        if opts.json:
+            emit_json(report)  # the replay until it was stopped
+        raise stopped
     _show(opts, report)
     if report["exceeded"]:
         warn(f"{', '.join(report['exceeded'])}: replayed more than {limit:g} from the "

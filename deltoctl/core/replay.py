@@ -7,9 +7,11 @@ of the recording: every state of the System, and each joint's setpoint as
 where not commanded, and for the joints of the other blocks), on the /joint_commands topic.
 
 Replaying (``replay``): ``read_recording_commands`` reads the rows back; ``check_commands``
-refuses, before anything moves, a command outside the profile's limits; ``Replay`` sends each
-row at its recorded time to the blocks it commands, reading them first, and compares what
-they report with what was recorded (RMS and max per joint).
+refuses, before anything moves, a command outside the profile's limits or a setpoint held
+longer than ``MAX_HOLD_S``; ``Replay`` sends each row at its recorded time to the blocks it
+commands, reading them first, and compares what they report with what was recorded (RMS and
+max per joint): a joint outside its limits or further than ``max_deviation`` from the
+recording stops the replay.
 """
 
 from __future__ import annotations
@@ -33,6 +35,8 @@ COMMANDS_TOPIC = "/joint_commands"
 STATES_TOPIC = "/joint_states"
 COMMAND_SUFFIX = "_command"
 NAN = float("nan")
+MAX_COMMAND_ROWS = 2_000_000  # a replay is of a fault: minutes at most, read whole
+MAX_HOLD_S = 0.5  # s: the longest a recording may leave one setpoint to stand
 
 
 def command_key(joint: str, field: str) -> str:
@@ -151,6 +155,10 @@ def read_recording_commands(path: Path) -> Recorded:
                            "was recorded without them",
                            "record a motion with its commands: deltoctl jog JOINT DELTA "
                            "--record FILE.mcap")
+    if channel.count > MAX_COMMAND_ROWS:  # the summary's count: known before reading any
+        raise InvalidInput(f"{path}: {channel.count} recorded commands, more than the "
+                           f"{MAX_COMMAND_ROWS} a replay takes",
+                           "replay a shorter recording of the fault (`deltoctl jog --record`)")
     recorded = Recorded(rec.path, rec.metadata.get("profile", {}).get("yaml"))
     states = dict(_rows(rec, STATES_TOPIC))
     fields = [(f, COMMAND_SUFFIX) for f in SETPOINT_FIELDS]
@@ -207,7 +215,9 @@ def check_commands(profile: Profile, recorded: Recorded) -> None:
     """Refuse (exit 5) before anything moves: a start pose or a position command outside a
     joint's limits or soft limits, a position step larger than max_jog_step (from the one
     before, the first from the start pose), a velocity or effort beyond the joint's limit.
-    A joint the profile lacks is invalid input (exit 2)."""
+    A gap longer than ``MAX_HOLD_S`` between two rows, or between two commands of one joint,
+    is refused too: a replay never holds a setpoint longer than the recording did, plus a
+    little. A joint the profile lacks is invalid input (exit 2)."""
     from deltoctl.core.motion import check_target
 
     comps: dict[str, Component] = {}
@@ -225,8 +235,17 @@ def check_commands(profile: Profile, recorded: Recorded) -> None:
         except Refused as exc:
             raise Refused(f"the recorded start pose: {exc.message}; nothing moved") from None
     t0 = recorded.times[0]
+    held: dict[str, int] = {"": t0}  # the last row (""), and each joint's last command
     for t, row in zip(recorded.times, recorded.setpoints):
         at = f"at {(t - t0) / 1e9:.3f} s"
+        for joint in ("", *row):
+            gap = (t - held.get(joint, t)) / 1e9
+            if gap > MAX_HOLD_S:
+                raise Refused(f"{at}: no command for {joint or 'any joint'} in the {gap:.3f} s "
+                              f"before (more "
+                              f"than {MAX_HOLD_S} s): a replay would hold its setpoint that "
+                              "long; nothing moved")
+            held[joint] = t
         for joint, (position, velocity, effort) in row.items():
             comp = comps[joint]
             lim = comp.limits
@@ -276,6 +295,15 @@ class ReplayResult:
     joints: dict[str, Difference] = field(default_factory=dict)
 
 
+class Deviated(Refused):
+    """A replayed joint outside its limits or too far from its recording (exit 5): every
+    block was stopped; ``result`` is the replay so far."""
+
+    def __init__(self, message: str, result: ReplayResult) -> None:
+        super().__init__(message)
+        self.result = result
+
+
 class Track:
     """One joint's recorded positions over time (the rows that command it: its block's
     cycles), read at any time by linear interpolation."""
@@ -309,10 +337,12 @@ class Replay:
     """The recording's rows on ``system``: each at its recorded time (from the first), to the
     blocks whose joints it commands, each block read first. What a block reads is compared
     with what was recorded at the same time since the start (a row sent late is compared
-    with the recording as late)."""
+    with the recording as late); a joint outside its limits or soft limits, or further than
+    ``max_deviation`` from the recording, raises ``Deviated`` before the row goes out. A
+    block whose rows have ended stops at the next row."""
 
-    def __init__(self, system: System, recorded: Recorded) -> None:
-        self.system, self.recorded = system, recorded
+    def __init__(self, system: System, recorded: Recorded, max_deviation: float) -> None:
+        self.system, self.recorded, self.max_deviation = system, recorded, max_deviation
         self.result = ReplayResult(joints={
             j: Difference(system.member(j).name) for j in recorded.joints})
         # per row: (driver, its joints' setpoints) for each block it commands
@@ -323,6 +353,16 @@ class Replay:
                 driver = system.member(joint).driver
                 by_driver.setdefault(id(driver), (driver, {}))[1][joint] = sp
             self.plan.append(list(by_driver.values()))
+        # per row: the blocks whose last row was the one before (their move had ended: they
+        # stop there, as the recorded move loop stopped them, not at the end of the replay)
+        last = {id(d): (i, d) for i, blocks in enumerate(self.plan) for d, _ in blocks}
+        self.ended: list[list[Driver]] = [[] for _ in self.plan]
+        for i, driver in last.values():
+            if i + 1 < len(self.plan):
+                self.ended[i + 1].append(driver)
+        comps = {j: system.profile.component(j) for j in recorded.joints}
+        self.bounds = {j: (c.limits, c.soft_limits) if c else (None, None)
+                       for j, c in comps.items()}
         self.tracks = {j: Track() for j in recorded.joints}
         for t, row in zip(recorded.times, recorded.positions):
             for joint, position in row.items():
@@ -342,7 +382,10 @@ class Replay:
                 time.sleep(wait)
             else:
                 result.late_max_ms = max(result.late_max_ms, -wait * 1e3)
-            now_ns = t0 + int((time.monotonic() - started) * 1e9)
+            elapsed = time.monotonic() - started
+            now_ns = t0 + int(elapsed * 1e9)
+            for driver in self.ended[i]:
+                driver.stop()
             for driver, _ in blocks:
                 driver.start_read()
             for driver, setpoints in blocks:
@@ -351,8 +394,14 @@ class Replay:
                     raise DeviceError(f"the link to {driver.hw.name} was lost during the "
                                       "replay; every block was stopped")
                 for joint in setpoints:
-                    result.joints[joint].add(tracks[joint].at(now_ns),
-                                             values.get(f"{joint}/position", NAN))
+                    expected = tracks[joint].at(now_ns)
+                    position = values.get(f"{joint}/position", NAN)
+                    result.joints[joint].add(expected, position)
+                    problem = self.problem(joint, position, expected)
+                    if problem:
+                        result.seconds = elapsed
+                        raise Deviated(f"at {elapsed:.3f} s: {joint} at {position:.4f} "
+                                       f"{problem}; every block was stopped", result)
             for driver, setpoints in blocks:
                 driver.follow(setpoints)
             result.rows = i + 1
@@ -360,3 +409,18 @@ class Replay:
                 progress((i + 1) / total)
         result.seconds = time.monotonic() - started
         return result
+
+    def problem(self, joint: str, position: float, expected: float) -> str | None:
+        """Why a joint read at ``position`` must not go on (None: it may)."""
+        lim, soft = self.bounds[joint]
+        if lim is not None and position == position and not lim.contains(position):
+            lower = "-inf" if lim.lower is None else f"{lim.lower:.4f}"
+            upper = "inf" if lim.upper is None else f"{lim.upper:.4f}"
+            return f"is outside its limits [{lower}, {upper}]"
+        if soft is not None and position == position and not soft.contains(position):
+            return f"is outside its soft limits [{soft.lower:.4f}, {soft.upper:.4f}]"
+        if abs(position - expected) > self.max_deviation:  # False where either is NaN
+            return (f"is {abs(position - expected):.4f} from its recorded position "
+                    f"{expected:.4f}, more than the {self.max_deviation:g} allowed "
+                    "(--max-deviation)")
+        return None

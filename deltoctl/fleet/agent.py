@@ -48,6 +48,7 @@ class Running:
         self.caller_gone = False
         self.interrupted_at: float | None = None
         self.why = ""
+        self.made_safe = False  # killed, then its blocks set safe by the agent
 
     def interrupt(self, why: str) -> None:
         if self.interrupted_at is None and self.proc.poll() is None:
@@ -314,7 +315,8 @@ class Agent:
             query.drop()
             return
         t = threading.Thread(target=self._serve_query, args=(query,), daemon=True)
-        self._threads.append(t)
+        with self.lock:
+            self._threads.append(t)
         t.start()
 
     # -- one verb --------------------------------------------------------------------------
@@ -330,7 +332,7 @@ class Agent:
             if not (0 < len(rid) <= 32 and set(rid) <= _RID):
                 raise InvalidInput("a run request needs an id of hex digits")
             as_json = isinstance(argv, list) and "--json" in argv
-            verb = check_argv(argv)
+            verb = check_argv(argv, self.workdir)
             running = self._launch(rid, verb, argv)
         except DeltoctlError as exc:
             query.reply(run_key, ERR + _error_line(exc, as_json))
@@ -342,14 +344,15 @@ class Agent:
         finally:
             with self.lock:
                 self.running.pop(running.rid, None)
+                self._gone.discard(running.rid)
+                self._threads = [t for t in self._threads if t.is_alive()
+                                 and t is not threading.current_thread()]
             self._set_state()
             self.launcher.refill()
             query.drop()
-            self._threads = [t for t in self._threads if t.is_alive()
-                             and t is not threading.current_thread()]
 
     def _launch(self, rid: str, verb: str, argv: list[str]) -> Running:
-        if verb in ACTUATING and not self.motion_allowed:
+        if {verb, verb.split(" ")[0]} & ACTUATING and not self.motion_allowed:  # calibrate ft
             raise Refused(f"'{verb}' refused: {self.why_not}",
                                 "see the README (Remote robots: security)")
         with self.lock:
@@ -364,7 +367,7 @@ class Agent:
                 running.caller_gone = True
             self.running[rid] = running
         self._set_state()
-        log(f"robot {self.robot}: {rid}: {verb}: {' '.join(argv)}")
+        log(f"robot {self.robot}: {rid}: {verb}: {json.dumps(argv)}")
         return running
 
     def _pump(self, query: Any, run_key: str, r: Running) -> None:
@@ -410,6 +413,15 @@ class Agent:
     # -- the deadman ---------------------------------------------------------------------
 
     def _watch(self) -> None:
+        """The deadman's loop; should it ever fail, the agent stops (its verbs interrupted)
+        rather than serve on without a deadman."""
+        try:
+            self._watching()
+        except Exception as exc:
+            log(f"robot {self.robot}: the deadman failed ({exc!r}): stopping the agent")
+            self.stop()
+
+    def _watching(self) -> None:
         while not self.stopping.is_set():
             now = time.monotonic()
             with self.lock:
@@ -427,7 +439,24 @@ class Agent:
                     if sig is not None:
                         with contextlib.suppress(ProcessLookupError):
                             r.proc.send_signal(sig)
+                    if sig == signal.SIGKILL and r.verb in MOTION and not r.made_safe:
+                        r.made_safe = True
+                        threading.Thread(target=self._make_safe, args=(r,), daemon=True).start()
             time.sleep(WATCH_PERIOD)
+
+    def _make_safe(self, r: Running) -> None:
+        """A motion verb killed had no time for its safe stop (a gripper keeps its last
+        duty): once it is gone, a ``connect`` of the robot's links leaves every block in its
+        safe state as every verb does on its way out."""
+        r.proc.wait()
+        proc = self.launcher.take([*self.links, "connect", "--json"])
+        try:
+            collect(proc, 30)
+        except subprocess.TimeoutExpired:
+            proc.send_signal(signal.SIGKILL)
+        self.launcher.refill()
+        log(f"robot {self.robot}: {r.rid}: {r.verb} killed; its blocks set safe by connect "
+            f"(exit {proc.returncode})")
 
 
 def _error_line(exc: DeltoctlError, as_json: bool) -> bytes:
@@ -448,7 +477,8 @@ def start_simulator(command: list[str], env: dict[str, str] | None = None,
 
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             stdin=subprocess.DEVNULL, env=env, start_new_session=True,
-                            preexec_fn=lambda: die_with_parent(signal.SIGTERM))
+                            # SIGKILL: a simulator keeps nothing, and must not outlive its agent
+                            preexec_fn=lambda: die_with_parent(signal.SIGKILL))
     assert proc.stdout is not None
     line = _readline(proc, timeout)
     try:

@@ -11,7 +11,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from deltoctl.errors import DeltoctlError, Unreachable
+from deltoctl.errors import DeltoctlError, DeviceError, Unreachable
 from deltoctl.fleet import ERR, EXIT, HEARTBEAT, OUT, check_robot, key, zenoh_module
 
 FOUND_WAIT = 2.0  # s to wait for agents to answer a look-up
@@ -152,7 +152,11 @@ class RemoteCall:
             elif tag == ERR:
                 self.err(body)
             elif tag == EXIT:
-                code = int(body)
+                try:
+                    code = int(body)
+                except ValueError:
+                    raise DeviceError(f"robot {self.robot}: a malformed reply from its agent "
+                                      f"(exit code {body[:20]!r})") from None
         if code is None:
             raise Unreachable(f"robot {self.robot}: the agent went away before the verb "
                               "finished (the agent interrupts its verbs when it stops)")

@@ -16,7 +16,6 @@ from deltoctl.fleet import zenoh_module
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 ENV = "DELTOCTL_ZENOH_CONFIG"
-LOOPBACK = ("127.", "[::1]", "localhost")
 
 
 def config_file(option: str | None) -> str | None:
@@ -88,7 +87,22 @@ def mutual_tls(config: Any) -> bool:
 def loopback_only(config: Any) -> bool:
     """Every endpoint is on this computer (and the node listens somewhere explicit)."""
     ends = endpoints(config, "listen") + endpoints(config, "connect")
-    return bool(ends) and all(e.split("/", 1)[-1].startswith(LOOPBACK) for e in ends)
+    return bool(ends) and all(_on_loopback(e) for e in ends)
+
+
+def _on_loopback(endpoint: str) -> bool:
+    """``tcp/127.0.0.1:7447``, ``tls/[::1]:7447``, ``tcp/localhost:7447`` (options after
+    ``#`` or ``?`` ignored): the host, exactly, is a loopback address or ``localhost``."""
+    import ipaddress
+
+    address = re.split(r"[#?]", endpoint.split("/", 1)[-1], maxsplit=1)[0]
+    host = address.rpartition(":")[0].strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 def describe(config: Any) -> str:
