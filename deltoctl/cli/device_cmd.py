@@ -454,6 +454,8 @@ def heat_maps(sample: dict[str, Any], grids: dict[str, list[list[str]]]) -> Any:
     """Each tactile grid as a small heat map (its cells' values on a dark → red → yellow
     scale, the hottest cell of the sample at the top), side by side; the grids' common name
     above them, each titled by the rest of its name."""
+    import os
+
     from rich.columns import Columns
     from rich.style import Style
     from rich.table import Table
@@ -461,13 +463,9 @@ def heat_maps(sample: dict[str, Any], grids: dict[str, list[list[str]]]) -> Any:
 
     top = max([1.0] + [v for rows in grids.values() for row in rows for n in row
                        if isinstance(v := sample.get(n), int | float) and v == v])
-    names = list(grids)
-    common = ""  # the names' common start, up to a _ (a string's, not a path's)
-    if len(names) > 1:
-        while len(common) < len(names[0]) and all(
-                n.startswith(common + names[0][len(common)]) for n in names[1:]):
-            common += names[0][len(common)]
-        common = common[:common.rfind("_") + 1]
+    # the names' common start as strings (not as paths), cut after its last _
+    common = os.path.commonprefix(list(grids)) if len(grids) > 1 else ""  # noqa: RUF071
+    common = common[:common.rfind("_") + 1]
     maps = []
     for part, rows in grids.items():
         t = Table(title=part[len(common):] or part, show_header=False, box=None, padding=0,

@@ -183,23 +183,13 @@ def read_recording_commands(path: Path) -> Recorded:
 def recorded_profile(recorded: Recorded) -> Profile:
     """The profile the recording was made with, from its ``profile`` metadata: untrusted
     text, loaded as a profile file is (size and YAML bounds, validation)."""
-    from deltoctl.errors import ProfileError
-    from deltoctl.profile.catalog import MAX_PROFILE_BYTES, merge_interface_limits
-    from deltoctl.profile.validate import validate
-    from deltoctl.profile.yaml_loader import load_data, profile_from_data
+    from deltoctl.profile.catalog import profile_from_text
 
     text = recorded.profile_yaml
-    source = f"{recorded.path} (profile metadata)"
     if not text:
         raise InvalidInput(f"{recorded.path} holds no profile (no 'profile' metadata with "
                            "YAML)", "pass the profile it was recorded with: -p PROFILE")
-    if len(text.encode()) > MAX_PROFILE_BYTES:
-        raise ProfileError(f"larger than {MAX_PROFILE_BYTES >> 20} MiB, the limit for a "
-                           "profile", source)
-    data = load_data(text, source)
-    if data is None:
-        raise ProfileError("empty (expected a YAML profile)", source)
-    return validate(merge_interface_limits(profile_from_data(data, source)))
+    return profile_from_text(text, f"{recorded.path} (profile metadata)")
 
 
 # -- checks --------------------------------------------------------------------------------------

@@ -16,7 +16,8 @@ from deltoctl.fleet import ERR, EXIT, HEARTBEAT, OUT, check_robot, key, zenoh_mo
 
 FOUND_WAIT = 2.0  # s to wait for agents to answer a look-up
 WEEK = 7 * 86400.0  # a query's timeout: a verb (a stream) may run for long
-CANCEL_GRACE = 5.0  # s to wait for the verb's exit after a cancel
+# s to wait for the verb's exit after a cancel: beyond the agent's SIGKILL at 6 s
+CANCEL_GRACE = 8.0
 
 
 class ErrorLines:
@@ -157,6 +158,10 @@ class RemoteCall:
                 except ValueError:
                     raise DeviceError(f"robot {self.robot}: a malformed reply from its agent "
                                       f"(exit code {body[:20]!r})") from None
+        if code is None and self.cancelled_at is not None:
+            self.err(f"deltoctl: robot {self.robot}: interrupted; its verb did not report "
+                     f"its end within {CANCEL_GRACE:g} s\n".encode())
+            return 130
         if code is None:
             raise Unreachable(f"robot {self.robot}: the agent went away before the verb "
                               "finished (the agent interrupts its verbs when it stops)")

@@ -52,22 +52,13 @@ def agent_info(session: Any, robot: str, wait: float = FOUND_WAIT) -> dict[str, 
 def load_profile_text(text: object, source: str) -> Profile:
     """A profile sent over the network: untrusted text, loaded as a profile file is (size and
     YAML bounds, validation)."""
-    from deltoctl.errors import ProfileError
-    from deltoctl.profile.catalog import MAX_PROFILE_BYTES, merge_interface_limits
-    from deltoctl.profile.validate import validate
-    from deltoctl.profile.yaml_loader import load_data, profile_from_data
+    from deltoctl.profile.catalog import profile_from_text
 
     if not isinstance(text, str) or not text.strip():
         raise InvalidInput(f"{source}: the agent sent no profile",
                            "update deltoctl on the robot's computer (its agent sends the "
                            "profile a remote record needs)")
-    if len(text.encode()) > MAX_PROFILE_BYTES:
-        raise ProfileError(f"larger than {MAX_PROFILE_BYTES >> 20} MiB, the limit for a "
-                           "profile", source)
-    data = load_data(text, source)
-    if data is None:
-        raise ProfileError("empty (expected a YAML profile)", source)
-    return validate(merge_interface_limits(profile_from_data(data, source)))
+    return profile_from_text(text, source)
 
 
 def driven(profile: Profile, names: list[str]) -> tuple[Profile, tuple[str, ...]]:

@@ -108,6 +108,21 @@ def load_profile(
     return validate(merge_interface_limits(profile))
 
 
+def profile_from_text(text: str, source: str) -> Profile:
+    """A YAML profile handed over as text (a recording's metadata, a robot's agent), loaded
+    as a profile file is: the size limit, the bounded YAML loader, validation."""
+    from deltoctl.profile.validate import validate
+    from deltoctl.profile.yaml_loader import load_data, profile_from_data
+
+    if len(text.encode()) > MAX_PROFILE_BYTES:
+        raise ProfileError(f"larger than {MAX_PROFILE_BYTES >> 20} MiB, the limit for a "
+                           "profile", source)
+    data = load_data(text, source)
+    if data is None:
+        raise ProfileError("empty (expected a YAML profile)", source)
+    return validate(merge_interface_limits(profile_from_data(data, source)))
+
+
 def _cache_file() -> Path:
     import os
 
