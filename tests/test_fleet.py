@@ -3,6 +3,7 @@ simulated robots, and `deltoctl --robot …` / `deltoctl fleet …` processes ca
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -203,6 +204,23 @@ def _start_slow_jog(bench, *extra: str) -> tuple[subprocess.Popen, lab.JointProb
     return client, probe
 
 
+@contextlib.contextmanager
+def _jogging_agent(tmp_path, robot):
+    """An agent of its own (the tests stop or kill it) whose robot is in a slow remote jog:
+    yields the Bench, the caller's process and a probe of the joint."""
+    b = Bench(tmp_path, robot, "dg-5f-right", "--allow-unauthenticated-motion", "--deadline", "0.5")
+    try:
+        client, probe = _start_slow_jog(b)
+        try:
+            yield b, client, probe
+        finally:
+            probe.close()
+            if client.poll() is None:
+                client.kill()
+    finally:
+        b.close()
+
+
 def test_one_motion_verb_at_a_time_and_ctrl_c_stops_it(bench):
     client, probe = _start_slow_jog(bench)
     try:
@@ -287,19 +305,10 @@ def test_a_router_going_down_during_a_remote_jog_stops_the_joint(tmp_path):
 
 def test_a_killed_agent_stops_the_joint(tmp_path):
     """SIGKILL leaves the agent no time: its verb processes stop on their own when it goes."""
-    b = Bench(tmp_path, "hand-k", "dg-5f-right", "--allow-unauthenticated-motion", "--deadline", "0.5")
-    try:
-        client, probe = _start_slow_jog(b)
-        try:
-            b.agent.proc.kill()
-            assert eventually(lambda: probe.still(0.1), timeout=5)
-            assert client.wait(30) == 4
-        finally:
-            probe.close()
-            if client.poll() is None:
-                client.kill()
-    finally:
-        b.close()
+    with _jogging_agent(tmp_path, "hand-k") as (b, client, probe):
+        b.agent.proc.kill()
+        assert eventually(lambda: probe.still(0.1), timeout=5)
+        assert client.wait(30) == 4
 
 
 def _children(pid):
@@ -322,41 +331,22 @@ def test_a_motion_verb_that_will_not_stop_is_killed_and_its_blocks_set_safe(tmp_
     """A verb frozen (SIGSTOP: it cannot take SIGINT or SIGTERM) is killed by the deadman's
     escalation; the agent then sets the robot's blocks safe itself (a gripper keeps its last
     duty otherwise)."""
-    b = Bench(tmp_path, "hand-f", "dg-5f-right", "--allow-unauthenticated-motion", "--deadline", "0.5")
-    try:
-        client, probe = _start_slow_jog(b)
-        try:
-            verbs = [c for z in _children(b.agent.proc.pid) for c in _children(z)]
-            assert len(verbs) == 1, verbs  # the jog, forked by the agent's warm process
-            os.kill(verbs[0], signal.SIGSTOP)
-            client.send_signal(signal.SIGINT)  # the deadman's SIGINT, then SIGTERM, then KILL
-            assert eventually(lambda: "set safe by connect (exit 0)" in b.agent.text(),
-                              timeout=30)
-            assert eventually(lambda: probe.still(0.1), timeout=5)
-        finally:
-            probe.close()
-            if client.poll() is None:
-                client.kill()
-    finally:
-        b.close()
+    with _jogging_agent(tmp_path, "hand-f") as (b, client, probe):
+        verbs = [c for z in _children(b.agent.proc.pid) for c in _children(z)]
+        assert len(verbs) == 1, verbs  # the jog, forked by the agent's warm process
+        os.kill(verbs[0], signal.SIGSTOP)
+        client.send_signal(signal.SIGINT)  # the deadman's SIGINT, then SIGTERM, then KILL
+        assert eventually(lambda: "set safe by connect (exit 0)" in b.agent.text(), timeout=30)
+        assert eventually(lambda: probe.still(0.1), timeout=5)
 
 
 def test_stopping_the_agent_stops_the_joint(tmp_path):
-    b = Bench(tmp_path, "hand-2", "dg-5f-right", "--allow-unauthenticated-motion", "--deadline", "0.5")
-    try:
-        client, probe = _start_slow_jog(b)
-        try:
-            b.agent.proc.terminate()
-            assert eventually(lambda: probe.still(0.1), timeout=5)
-            assert b.agent.proc.wait(15) == 0
-            assert client.wait(15) in (130, 4)
-            assert "the agent is stopping" in b.agent.text()
-        finally:
-            probe.close()
-            if client.poll() is None:
-                client.kill()
-    finally:
-        b.close()
+    with _jogging_agent(tmp_path, "hand-2") as (b, client, probe):
+        b.agent.proc.terminate()
+        assert eventually(lambda: probe.still(0.1), timeout=5)
+        assert b.agent.proc.wait(15) == 0
+        assert client.wait(15) in (130, 4)
+        assert "the agent is stopping" in b.agent.text()
 
 
 def test_an_agent_open_to_unauthenticated_peers_moves_nothing(tmp_path):
