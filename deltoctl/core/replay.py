@@ -16,6 +16,7 @@ recording stops the replay.
 
 from __future__ import annotations
 
+import bisect
 import math
 import threading
 import time
@@ -308,8 +309,6 @@ class Track:
             self.positions.append(position)
 
     def at(self, t_ns: int) -> float:
-        import bisect
-
         times, positions = self.times, self.positions
         if not times:
             return NAN
