@@ -44,3 +44,17 @@ def deltoctl_sim() -> Iterator[Callable[..., str]]:
 
         start.buses = buses  # type: ignore[attr-defined]
         yield start
+
+
+@pytest.fixture
+def deltoctl_robot() -> Iterator[Callable[..., object]]:
+    with contextlib.ExitStack() as stack:
+
+        def open_one(profile: str, hardware: tuple[str, ...] = (),
+                     allow_model_mismatch: bool = False, **faults: object) -> object:
+            from deltoctl.app.robot import open_robot
+
+            return stack.enter_context(open_robot(profile, sim=faults or True, hardware=hardware,
+                                                  allow_model_mismatch=allow_model_mismatch))
+
+        yield open_one

@@ -7,6 +7,8 @@ from typing import Annotated, Any
 
 import typer
 
+from deltoctl.app.robot import check_loop
+from deltoctl.app.sinks import LinkWatch
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.output import (
     emit_json,
@@ -18,7 +20,7 @@ from deltoctl.cli.output import (
     warn,
 )
 from deltoctl.core.runner import Sink
-from deltoctl.errors import WARNINGS, DeviceError, InvalidInput
+from deltoctl.errors import WARNINGS, InvalidInput
 
 AllowMismatch = Annotated[bool, typer.Option(
     "--allow-model-mismatch",
@@ -26,31 +28,25 @@ AllowMismatch = Annotated[bool, typer.Option(
 
 
 @contextlib.contextmanager
+def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any = None,
+               probe: bool = False) -> Iterator[Any]:
+    """The robot of the selected profile's blocks (``--hardware``), configured and active;
+    with ``--sim``, each block's simulator is started first. Pass ``profile`` when the verb
+    loaded it already; ``probe`` for a verb that looks at a bus where nothing may answer."""
+    from deltoctl.app.robot import open_robot as open_app_robot
+
+    with open_app_robot(profile or opts.load_profile(), opts.target, sim=opts.sim,
+                        hardware=opts.hardware, allow_model_mismatch=allow_model_mismatch,
+                        probe=probe, notice=info) as robot:
+        yield robot
+
+
+@contextlib.contextmanager
 def open_system(opts: Options, allow_model_mismatch: bool = False, profile: Any = None,
                 probe: bool = False) -> Iterator[Any]:
-    """The System of the selected profile's blocks (``--hardware``), configured and active;
-    with ``--sim``, each block's emulator is started first and its URL is the block's target.
-    Pass ``profile`` when the verb loaded it already; ``probe`` for a verb that looks at a bus
-    where nothing may answer."""
-    from deltoctl.core.system import System, mock_blocks
-
-    profile = profile or opts.load_profile()
-    with contextlib.ExitStack() as stack:
-        targets = list(opts.target)
-        simulated = dict.fromkeys(opts.hardware or [hw.name for hw in profile.hardware],
-                                  "--sim") if opts.sim else mock_blocks(profile, opts.hardware)
-        if simulated:
-            from deltoctl.sim.serve import ServeOptions, serve_profile
-
-            served = serve_profile(stack, profile, ServeOptions(), list(simulated))
-            targets += [f"{bus}={url}" for bus, url in served["buses"].items()]
-            for name, why in simulated.items():
-                if why != "--sim":  # the profile asked: say so before anything else
-                    info(f"{name}: simulated ({why}): no hardware is driven")
-        system = System(profile, targets, opts.hardware, probe=probe,
-                        allow_model_mismatch=allow_model_mismatch, simulated=simulated)
-        with system:
-            yield system
+    """The System of ``open_robot``, for verbs that drive the blocks themselves."""
+    with open_robot(opts, allow_model_mismatch, profile, probe) as robot:
+        yield robot.system
 
 
 def finish(system: Any, extra: list[str] | None = None) -> None:
@@ -75,12 +71,6 @@ def register(app: typer.Typer) -> None:
     app.add_typer(gpio_app, name="gpio")
 
 
-def block_entry(m: Any, **data: Any) -> dict[str, Any]:
-    """One block in a verb's JSON: the same keys first whatever the family."""
-    return {"name": m.name, "family": m.family.name, "target": m.url or None,
-            "simulated": m.simulated is not None, "state": m.lifecycle.state, **data}
-
-
 def connect(
     ctx: typer.Context,
     count: Annotated[int, typer.Option("--count", "-n", min=1, max=100000,
@@ -88,56 +78,37 @@ def connect(
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Reach every block, time round trips, and run the lifecycle to active and back."""
-    import statistics
-
     opts = options(ctx)
-    blocks = []
-    with open_system(opts, allow_model_mismatch) as system:
-        for m in system:
-            rtts = []
-            for _ in range(count):
-                start = time.perf_counter()
-                m.driver.round_trip()
-                rtts.append((time.perf_counter() - start) * 1e3)
-            if not m.driver.connected:
-                raise DeviceError(f"{m.name} ({m.url}) stopped answering during the round "
-                                  "trips")
-            blocks.append((m, {"reachable": True, "round_trips": len(rtts), "rtt_ms": {
-                "median": round(statistics.median(rtts), 3), "min": round(min(rtts), 3),
-                "max": round(max(rtts), 3)}}))
-    result = {"profile": system.profile.name,
-              "blocks": [block_entry(m, **data, lifecycle=m.lifecycle.history)
-                         for m, data in blocks]}
+    with open_robot(opts, allow_model_mismatch) as robot:
+        result = robot.connect(count)  # each block's lifecycle goes on to its end
     if opts.json:
         emit_json(result)
     else:
-        for m, data in blocks:
-            rtt = data["rtt_ms"]
-            where = m.url or "the in-process mock"
+        for b, m in zip(result["blocks"], robot.blocks):
+            rtt = b["rtt_ms"]
+            where = b["target"] or "the in-process mock"
             if m.simulated:
                 where = f"its simulator at {where} ({m.simulated})"
-            say(f"{m.name}: connected to {where}: round trip median "
+            say(f"{b['name']}: connected to {where}: round trip median "
                 f"{rtt['median']} ms (min {rtt['min']}, max {rtt['max']}, "
-                f"n={data['round_trips']})")
-            say(f"{m.name}: lifecycle " + " → ".join(m.lifecycle.history))
-    finish(system)
+                f"n={b['round_trips']})")
+            say(f"{b['name']}: lifecycle " + " → ".join(b["lifecycle"]))
+    finish(robot.system)
 
 
 def identify(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
     """What each block's device says it is (model, firmware, servos, joints), against the
     profile."""
     opts = options(ctx)
-    with open_system(opts, allow_model_mismatch) as system:
-        blocks = [block_entry(m, identity=m.driver.identify()) for m in system.able("identify")]
-        unable = [m.name for m in system if not m.can("identify")]
-    result = {"profile": system.profile.name, "blocks": blocks}
+    with open_robot(opts, allow_model_mismatch) as robot:
+        result = robot.identify()
     if opts.json:
         emit_json(result)
     else:
-        for b in blocks:
+        for b in result["blocks"]:
             identity_tables({"family": b["family"], "target": b["target"], **b["identity"]},
                             b["name"])
-    finish(system, [f"{', '.join(unable)}: cannot identify"] if unable else None)
+    finish(robot.system)
 
 
 def identity_tables(ident: dict, title: str | None = None) -> None:
@@ -166,16 +137,12 @@ def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> N
     """What is on each block's device or bus (sensors, GPIO, servos, I2C devices), against
     the profile."""
     opts = options(ctx)
-    blocks = []
-    with open_system(opts, allow_model_mismatch, probe=True) as system:
-        for m in system.able("detect"):
-            found = m.driver.detect()
-            blocks.append(block_entry(m, summary=found.pop("summary"),
-                                      checks=found.pop("checks"), details=found))
+    with open_robot(opts, allow_model_mismatch, probe=True) as robot:
+        result = robot.detect()
     if opts.json:
-        emit_json({"profile": system.profile.name, "blocks": blocks})
+        emit_json(result)
     else:
-        for b in blocks:
+        for b in result["blocks"]:
             say(b["summary"])
             if "grid" in b["details"]:
                 typer.echo(b["details"]["grid"])
@@ -183,30 +150,7 @@ def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> N
                 table(b["name"], ["check", "profile", "device", "match"],
                       [[c["what"], c["profile"], c["device"], "yes" if c["match"] else "NO"]
                        for c in b["checks"]])
-    mismatches = [f"{b['name']}: {c['what']}" for b in blocks for c in b["checks"]
-                  if not c["match"]]
-    finish(system, [f"the device differs from the profile in: {', '.join(mismatches)}"]
-           if mismatches else None)
-
-
-def _gpio_command(system: Any, output: str) -> str:
-    """The GPIO command interface a bare name (``output_2``) means: the one of that name."""
-    found = [n for m in system for c in m.hw.gpios for n in c.interface_names("command")
-             if n.endswith("/" + output)]
-    if len(found) == 1:
-        return found[0]
-    if found:
-        raise InvalidInput(f"{output} is ambiguous: name one of {', '.join(found)}")
-    from deltoctl.suggest import did_you_mean
-
-    commands = [n for m in system for c in m.hw.gpios for n in c.interface_names("command")]
-    raise InvalidInput(f"{system.profile.name} has no GPIO output {output!r}"
-                       + (did_you_mean(output, commands) or
-                          f" (its outputs: {', '.join(commands) or 'none'})"))
-
-
-def _gpio_names(system: Any) -> list[str]:
-    return [n for m in system for c in m.hw.gpios for n in c.interface_names("state")]
+    finish(robot.system)
 
 
 def gpio_get(ctx: typer.Context) -> None:
@@ -215,18 +159,13 @@ def gpio_get(ctx: typer.Context) -> None:
     profile = opts.load_profile()
     if not any(hw.gpios for hw in profile.hardware):
         raise InvalidInput(f"{profile.name} has no GPIO")
-    with open_system(opts, profile=profile) as system:
-        values = system.read()
-        names = [n for n in _gpio_names(system) if n in values]
-    if not names:
-        raise DeviceError("the devices send no GPIO values (no GPIO on this model, or IO is "
-                          "false in the profile)")
-    gpio = {n: values[n] for n in names}
+    with open_robot(opts, profile=profile) as robot:
+        gpio = robot.gpio()
     if opts.json:
         emit_json(gpio)
     else:
         table(None, ["interface", "value"], [[n, f"{v:g}"] for n, v in gpio.items()])
-    finish(system)
+    finish(robot.system)
 
 
 _ON = {"on": 1.0, "true": 1.0, "off": 0.0, "false": 0.0}
@@ -260,47 +199,13 @@ def gpio_set(
         raise InvalidInput(f"value must be on, off or a number, got {value!r}") from None
     if not math.isfinite(number):
         raise InvalidInput(f"value must be finite, got {value!r}")
-    with open_system(opts) as system:
-        full = name if "/" in name else _gpio_command(system, name)
-        m = system.member(full)
-        if not m.can("gpio"):
-            raise InvalidInput(f"{m.name} has no GPIO outputs to set")
-        m.driver.set_command(full, number)
-        after = dict(system.read())
-        names = _gpio_names(system)
-    if full in after and after[full] != number:
-        raise DeviceError(f"{full} reads back {after[full]:g} after setting it to {number:g}")
+    with open_robot(opts) as robot:
+        after = robot.set_gpio(name, number)
     if opts.json:
-        emit_json({n: after[n] for n in names if n in after})
+        emit_json(after)
     else:
-        say(f"{full} = {number:g}")
-    finish(system)
-
-
-def select(names: list[str], patterns: list[str]) -> list[str]:
-    import fnmatch
-
-    if not patterns:
-        return names
-    globs = [p for item in patterns for p in item.split(",") if p]
-    chosen = [n for n in names if any(fnmatch.fnmatchcase(n, g) for g in globs)]
-    if not chosen:
-        from deltoctl.suggest import did_you_mean
-
-        typed = globs[0].translate(str.maketrans("", "", "*?[]")) if globs else ""
-        raise InvalidInput(f"--interfaces {','.join(globs)} matches no interface"
-                           + did_you_mean(typed, names))
-    return chosen
-
-
-def check_loop(rate: float, duration: float | None) -> None:
-    """--rate and --duration: finite and positive."""
-    import math
-
-    if not (math.isfinite(rate) and 0 < rate <= 100_000):
-        raise InvalidInput(f"--rate must be a positive number of Hz up to 100000, got {rate:g}")
-    if duration is not None and not (math.isfinite(duration) and duration > 0):
-        raise InvalidInput(f"--duration must be a positive number of seconds, got {duration:g}")
+        say(f"{robot.gpio_output(name)} = {number:g}")
+    finish(robot.system)
 
 
 LIVE_PERIOD = 0.05  # s between redraws of the live table: people read at most 20 a second
@@ -404,8 +309,9 @@ def stream(
     opts = options(ctx)
     check_loop(rate, duration)
     with foxglove_live(foxglove, foxglove_host, foxglove_port) as live, \
-            open_system(opts, allow_model_mismatch) as system:
-        names = select(system.state_interfaces(), list(interfaces or []))
+            open_robot(opts, allow_model_mismatch) as robot:
+        system = robot.system
+        names = robot.interfaces(interfaces or [])
         sink = (LinesSink(names) if opts.json or not stdout_is_terminal()
                 else LiveSink(names, rate))
         links = LinkWatch(system)
@@ -419,35 +325,6 @@ def stream(
     info(f"{sink.samples} samples of {len(names)} interfaces")
     links.finish()
     finish(system)
-
-
-class LinkWatch(Sink):
-    """Counts link losses per block; at the end, a block whose link is still down is
-    unreachable (exit 4)."""
-
-    def __init__(self, system: Any) -> None:
-        self.system = system
-        self.keys = {m.status_key: m for m in system}
-        self.up = dict.fromkeys(self.keys, True)
-        self.losses: dict[str, int] = {}
-
-    def frame(self, t_ns: int, values: dict[str, float]) -> None:
-        if values.get("system/connection_status") == 1.0 and all(self.up.values()):
-            return
-        for key, m in self.keys.items():
-            up = values.get(key) == 1.0
-            if self.up[key] and not up:
-                self.losses[m.name] = self.losses.get(m.name, 0) + 1
-            self.up[key] = up
-
-    def finish(self) -> None:
-        from deltoctl.errors import Unreachable
-
-        down = [self.keys[k].name for k, up in self.up.items() if not up]
-        if down:
-            raise Unreachable(f"the link to {', '.join(down)} was lost and did not come back")
-        for name, n in self.losses.items():
-            self.system.notes.append(f"{name}: the link was lost {n} time(s) and came back")
 
 
 def heat_maps(sample: dict[str, Any], grids: dict[str, list[list[str]]]) -> Any:

@@ -1,0 +1,294 @@
+"""The robot as a library: ``open_robot`` composes the System of a profile's blocks (each
+block's simulator first, with ``sim=True`` or a block's ``use_mock_hardware``), and ``Robot``
+holds the procedures every front end runs — the CLI's verbs, the fleet agent's, a pytest
+suite's, a script's. They return the data a verb's JSON holds and collect warnings in
+``robot.warnings()``; they never print, prompt or exit. The safety envelope is the System's:
+a refused target raises ``deltoctl.errors.Refused`` before a byte is sent."""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from deltoctl.errors import DeviceError, InvalidInput
+
+if TYPE_CHECKING:
+    from deltoctl.core.system import Member, System
+    from deltoctl.profile.model import Profile
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One cycle of a stream: when (integer ns since the epoch) and the values by interface."""
+
+    t_ns: int
+    values: dict[str, float | None]
+
+
+def _targets(targets: Mapping[str, str] | Sequence[str] | str | None) -> list[str]:
+    """``{"bus": "url"}``, ``["bus=url", …]`` or one URL → the System's ``BUS=URL`` list."""
+    if targets is None:
+        return []
+    if isinstance(targets, str):
+        return [targets]
+    if isinstance(targets, Mapping):
+        return [f"{bus}={url}" for bus, url in targets.items()]
+    return list(targets)
+
+
+def load(profile: str | Path | Profile) -> Profile:
+    from deltoctl.profile.model import Profile
+
+    if isinstance(profile, Profile):
+        return profile
+    from deltoctl.profile.catalog import load_profile
+
+    return load_profile(profile)
+
+
+@contextlib.contextmanager
+def open_robot(profile: str | Path | Profile,
+               targets: Mapping[str, str] | Sequence[str] | str | None = None, *,
+               sim: bool | Mapping[str, Any] = False, hardware: Sequence[str] = (),
+               allow_model_mismatch: bool = False, probe: bool = False,
+               notice: Callable[[str], None] | None = None) -> Iterator[Robot]:
+    """The robot of ``profile`` (a catalog name, a file, or a loaded Profile), configured and
+    active, its blocks left safe and released on the way out.
+
+    ``targets``: where the blocks are (``{"bus": "tcp://…"}``, ``["bus=url"]``, or one URL);
+    ``sim``: start each block's simulated device first and drive it through its real
+    transport (a mapping: with those faults of ``deltoctl sim serve``, e.g.
+    ``{"missing": ("head_y",)}``); ``hardware``: only these blocks; ``probe``: a bus where
+    nothing answers is still opened (detect); ``notice``: told first when a block runs on its
+    simulator because its profile asks for mock hardware."""
+    from deltoctl.core.system import System, mock_blocks
+
+    prof = load(profile)
+    with contextlib.ExitStack() as stack:
+        urls = _targets(targets)
+        simulated = (dict.fromkeys(hardware or [hw.name for hw in prof.hardware], "--sim")
+                     if sim else mock_blocks(prof, hardware))
+        if simulated:
+            from deltoctl.sim.serve import ServeOptions, serve_profile
+
+            faults = dict(sim) if isinstance(sim, Mapping) else {}
+            try:
+                options = ServeOptions(**faults)
+            except TypeError as exc:
+                raise InvalidInput(f"sim: {exc}") from None
+            served = serve_profile(stack, prof, options, list(simulated))
+            urls += [f"{bus}={url}" for bus, url in served["buses"].items()]
+            for name, why in simulated.items():
+                if why != "--sim" and notice is not None:
+                    notice(f"{name}: simulated ({why}): no hardware is driven")
+        with System(prof, urls, hardware, probe=probe, allow_model_mismatch=allow_model_mismatch,
+                    simulated=simulated) as system:
+            yield Robot(system)
+
+
+def block_entry(m: Member, **data: Any) -> dict[str, Any]:
+    """One block in a result: the same keys first whatever the family."""
+    return {"name": m.name, "family": m.family.name, "target": m.url or None,
+            "simulated": m.simulated is not None, "state": m.lifecycle.state, **data}
+
+
+def _cannot(system: System, capability: str, what: str) -> None:
+    unable = [m.name for m in system if not m.can(capability)]
+    if unable:
+        system.notes.append(f"{', '.join(unable)}: {what}")
+
+
+class Robot:
+    """An open robot: one System of blocks, and the procedures run on it."""
+
+    def __init__(self, system: System) -> None:
+        self.system = system
+
+    @property
+    def profile(self) -> Profile:
+        return self.system.profile
+
+    @property
+    def blocks(self) -> list[Member]:
+        return list(self.system)
+
+    def warnings(self) -> list[str]:
+        """What went wrong without failing (a block left out, a model mismatch allowed, a
+        link re-established): a verb that ends with some exits 3."""
+        return self.system.warnings()
+
+    def read(self) -> dict[str, float]:
+        """One cycle's state of every block (a copy)."""
+        return dict(self.system.read())
+
+    # -- the lifecycle verbs -------------------------------------------------------------------
+
+    def connect(self, count: int = 20) -> dict[str, Any]:
+        """Time ``count`` round trips to every block."""
+        import statistics
+
+        blocks = []
+        for m in self.system:
+            rtts = []
+            for _ in range(count):
+                start = time.perf_counter()
+                m.driver.round_trip()
+                rtts.append((time.perf_counter() - start) * 1e3)
+            if not m.driver.connected:
+                raise DeviceError(f"{m.name} ({m.url}) stopped answering during the round "
+                                  "trips")
+            blocks.append(block_entry(m, reachable=True, round_trips=len(rtts), rtt_ms={
+                "median": round(statistics.median(rtts), 3), "min": round(min(rtts), 3),
+                "max": round(max(rtts), 3)}, lifecycle=m.lifecycle.history))
+        return {"profile": self.profile.name, "blocks": blocks}
+
+    def identify(self) -> dict[str, Any]:
+        """What each block's device says it is, against the profile."""
+        blocks = [block_entry(m, identity=m.driver.identify())
+                  for m in self.system.able("identify")]
+        _cannot(self.system, "identify", "cannot identify")
+        return {"profile": self.profile.name, "blocks": blocks}
+
+    def detect(self) -> dict[str, Any]:
+        """What is on each block's device or bus, against the profile; a difference is a
+        warning."""
+        blocks = []
+        for m in self.system.able("detect"):
+            found = m.driver.detect()
+            blocks.append(block_entry(m, summary=found.pop("summary"),
+                                      checks=found.pop("checks"), details=found))
+        differ = [f"{b['name']}: {c['what']}" for b in blocks for c in b["checks"]
+                  if not c["match"]]
+        if differ:
+            self.system.notes.append("the device differs from the profile in: "
+                                     + ", ".join(differ))
+        return {"profile": self.profile.name, "blocks": blocks}
+
+    # -- GPIO ----------------------------------------------------------------------------------
+
+    def gpio_names(self, kind: str = "state") -> list[str]:
+        return [n for m in self.system for c in m.hw.gpios for n in c.interface_names(kind)]
+
+    def gpio(self) -> dict[str, float]:
+        """Every GPIO state interface's value."""
+        if not any(hw.gpios for hw in self.profile.hardware):
+            raise InvalidInput(f"{self.profile.name} has no GPIO")
+        values = self.system.read()
+        gpio = {n: values[n] for n in self.gpio_names() if n in values}
+        if not gpio:
+            raise DeviceError("the devices send no GPIO values (no GPIO on this model, or IO "
+                              "is false in the profile)")
+        return gpio
+
+    def gpio_output(self, name: str) -> str:
+        """The GPIO command interface ``name`` means (``output_2`` alone: the one of that
+        name)."""
+        commands = self.gpio_names("command")
+        if "/" in name:
+            return name
+        found = [n for n in commands if n.endswith("/" + name)]
+        if len(found) == 1:
+            return found[0]
+        if found:
+            raise InvalidInput(f"{name} is ambiguous: name one of {', '.join(found)}")
+        from deltoctl.suggest import did_you_mean
+
+        raise InvalidInput(f"{self.profile.name} has no GPIO output {name!r}"
+                           + (did_you_mean(name, commands) or
+                              f" (its outputs: {', '.join(commands) or 'none'})"))
+
+    def set_gpio(self, name: str, value: float) -> dict[str, float]:
+        """Set one GPIO output and read it back; returns every GPIO state after."""
+        if not math.isfinite(value):
+            raise InvalidInput(f"a GPIO value must be finite, got {value!r}")
+        full = self.gpio_output(name)
+        m = self.system.member(full)
+        if not m.can("gpio"):
+            raise InvalidInput(f"{m.name} has no GPIO outputs to set")
+        m.driver.set_command(full, value)
+        after = dict(self.system.read())
+        if full in after and after[full] != value:
+            raise DeviceError(f"{full} reads back {after[full]:g} after setting it to "
+                              f"{value:g}")
+        return {n: after[n] for n in self.gpio_names() if n in after}
+
+    # -- motion --------------------------------------------------------------------------------
+
+    def move(self, targets: Mapping[str, float], velocity: float | None = None,
+             progress: Callable[[float], None] | None = None) -> dict[str, Any]:
+        """Move joints to absolute targets (radians or metres), the blocks on several links
+        at once; every block is stopped on the way out. A target outside the envelope is
+        refused (``Refused``) before anything is sent. Returns the report a ``jog --json``
+        prints."""
+        from deltoctl.core.runner import interrupted_by_signals
+
+        targets = dict(targets)
+        try:
+            with interrupted_by_signals():
+                result = self.system.move(targets, velocity, progress)
+        finally:
+            self.system.stop()
+        values = self.system.read()
+        return {
+            "settled": result.settled,
+            "seconds": round(result.seconds, 3),
+            "blocks": [{"name": name, "joints": {
+                j: {"target": targets[j], "position": values.get(f"{j}/position"),
+                    "settled": j not in result.unsettled} for j in joints}}
+                for name, joints in self.system.by_block(targets).items()],
+            "unsettled": result.unsettled,
+        }
+
+    def jog_targets(self, deltas: Mapping[str, float]) -> dict[str, float]:
+        """Each joint's target ``delta`` from where it is now."""
+        values = self.system.read()
+        return {j: values[f"{self.system.component(j).name}/position"] + d
+                for j, d in deltas.items()}
+
+    def jog(self, deltas: Mapping[str, float], velocity: float | None = None,
+            progress: Callable[[float], None] | None = None) -> dict[str, Any]:
+        """Move joints by ``deltas`` from where they are (``max_jog_step`` bounds each)."""
+        return self.move(self.jog_targets(deltas), velocity, progress)
+
+    # -- data ----------------------------------------------------------------------------------
+
+    def interfaces(self, patterns: Sequence[str] = ()) -> list[str]:
+        """The state interfaces whose names match the globs (every one without globs)."""
+        import fnmatch
+
+        names = self.system.state_interfaces()
+        globs = [p for item in patterns for p in item.split(",") if p]
+        if not globs:
+            return names
+        chosen = [n for n in names if any(fnmatch.fnmatchcase(n, g) for g in globs)]
+        if not chosen:
+            from deltoctl.suggest import did_you_mean
+
+            typed = globs[0].translate(str.maketrans("", "", "*?[]"))
+            raise InvalidInput(f"--interfaces {','.join(globs)} matches no interface"
+                               + did_you_mean(typed, names))
+        return chosen
+
+    def stream(self, rate: float = 50.0, duration: float | None = None,
+               interfaces: Sequence[str] = ()) -> Iterator[Frame]:
+        """Frames at ``rate`` Hz until ``duration`` passes (or the caller stops iterating)."""
+        from deltoctl.core.loop import CycleLoop
+
+        check_loop(rate, duration)
+        names = self.interfaces(interfaces)
+        for _ in CycleLoop(rate, duration):
+            values = self.system.read()
+            yield Frame(time.time_ns(), {n: values.get(n) for n in names})
+
+
+def check_loop(rate: float, duration: float | None) -> None:
+    """A loop's rate and duration: finite and positive."""
+    if not (math.isfinite(rate) and 0 < rate <= 100_000):
+        raise InvalidInput(f"--rate must be a positive number of Hz up to 100000, got {rate:g}")
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise InvalidInput(f"--duration must be a positive number of seconds, got {duration:g}")

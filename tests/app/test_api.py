@@ -1,0 +1,89 @@
+"""The robot as a library: ``from deltoctl import open_robot`` on every catalog profile's
+simulated devices, through their real transports — no typer, no argv, no stdout."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+import deltoctl
+from deltoctl.errors import InvalidInput, Refused
+from deltoctl.profile.catalog import catalog_names
+
+
+@pytest.mark.parametrize("name", catalog_names())
+def test_every_catalog_robot_opens_identifies_and_streams(name):
+    with deltoctl.open_robot(name, sim=True) as robot:
+        blocks = robot.identify()["blocks"]
+        frames = list(robot.stream(rate=200, duration=0.1))
+        values = robot.read()
+    identified = {b["name"] for b in blocks}
+    assert identified <= {m.name for m in robot.blocks}
+    assert all(b["simulated"] for b in blocks)
+    assert len(frames) >= 2
+    assert values["system/connection_status"] == 1.0
+    assert all(f.t_ns > 0 and "system/connection_status" in f.values for f in frames)
+
+
+def test_a_hand_moves_within_its_limits_and_refuses_beyond_them():
+    with deltoctl.open_robot("dg-5f-right", sim=True) as robot:
+        report = robot.move({"rj_dg_2_2": 0.2})
+        assert report["settled"]
+        assert robot.read()["rj_dg_2_2/position"] == pytest.approx(0.2, abs=0.05)
+        with pytest.raises(Refused) as refused:
+            robot.move({"rj_dg_2_2": -0.3})
+        assert refused.value.exit_code == 5
+        assert robot.read()["rj_dg_2_2/position"] == pytest.approx(0.2, abs=0.05)
+
+
+def test_jog_is_relative_and_names_are_checked():
+    with deltoctl.open_robot("dg-5f-right", sim=True) as robot:
+        start = robot.read()["rj_dg_2_2/position"]
+        robot.jog({"rj_dg_2_2": 0.1})
+        assert robot.read()["rj_dg_2_2/position"] == pytest.approx(start + 0.1, abs=0.05)
+        with pytest.raises(InvalidInput, match="no joint, sensor or GPIO"):
+            robot.jog({"rj_dg_9_9": 0.1})
+
+
+def test_gpio_set_and_read_back():
+    with deltoctl.open_robot("rrbot-gpio", sim=True) as robot:
+        after = robot.set_gpio("digital_output1", 1.0)
+        assert after["flange_digital_IOs/digital_output1"] == 1.0
+        assert robot.gpio()["flange_digital_IOs/digital_output1"] == 1.0
+        with pytest.raises(InvalidInput, match="no GPIO output"):
+            robot.set_gpio("digital_output9", 1.0)
+
+
+def test_a_robot_of_several_blocks_on_several_links():
+    with deltoctl.open_robot("mh5", sim=True) as robot:
+        result = robot.connect(count=3)
+        names = robot.interfaces(["head_*/position"])
+    assert len(result["blocks"]) >= 3  # two Dynamixel buses and the IMU
+    assert {b["target"].split(":")[0] for b in result["blocks"]} >= {"serial", "i2c+tcp"}
+    assert names and all(n.startswith("head_") for n in names)
+
+
+def test_the_fixture_opens_a_simulated_robot_with_faults(deltoctl_robot):
+    robot = deltoctl_robot("mh5", missing=("head_y",))
+    assert any("head_y" in w for w in robot.warnings() + [str(robot.detect())])
+
+
+def test_bad_arguments_are_invalid_input():
+    with deltoctl.open_robot("dg-5f-right", sim=True) as robot:
+        with pytest.raises(InvalidInput, match="--rate"):
+            next(robot.stream(rate=0))
+        with pytest.raises(InvalidInput, match="matches no interface"):
+            robot.interfaces(["nothing_*"])
+    with pytest.raises(InvalidInput, match="sim"):
+        with deltoctl.open_robot("dg-5f-right", sim={"no_such_fault": 1}):
+            pass
+
+
+def test_the_library_imports_no_terminal_code():
+    code = ("import sys, deltoctl; deltoctl.open_robot; "
+            "print(sorted(m for m in ('typer', 'click', 'rich') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == "[]"
