@@ -255,6 +255,48 @@ class Robot:
         """Move joints by ``deltas`` from where they are (``max_jog_step`` bounds each)."""
         return self.move(self.jog_targets(deltas), velocity, progress)
 
+    # -- calibration and servos ----------------------------------------------------------------
+
+    def calibrate_ft(self, samples: int = 50, force_tolerance: float = 0.3,
+                     torque_tolerance: float = 0.03,
+                     output_dir: Path | None = None) -> dict[str, Any]:
+        """Tare every F/T sensor and judge the residual (see ``deltoctl.app.calibrate``)."""
+        from deltoctl.app.calibrate import tare_ft
+
+        return tare_ft(self.system, samples, force_tolerance, torque_tolerance, output_dir)
+
+    def _registers(self, joint: str) -> Any:
+        m = self.system.member(joint)
+        if not m.can("registers"):
+            raise InvalidInput(f"{joint} is in {m.name}, which has no registers")
+        return m.driver
+
+    def registers(self, joint: str, items: Sequence[str] = ()) -> dict[str, Any]:
+        """A servo's control table items (every one without ``items``)."""
+        return self._registers(joint).read_registers(joint, list(items))
+
+    def write_register(self, joint: str, item: str, value: int) -> int:
+        """Write one item and read it back; a different read-back is a DeviceError."""
+        after = self._registers(joint).write_register(joint, item, value)
+        if after != value:
+            raise DeviceError(f"{item} reads back {after} after writing {value}")
+        return after
+
+    def _per_block(self, joints: Sequence[str], capability: str) -> dict[Any, list[str]]:
+        groups = {m.driver: [j.name for j in m.hw.joints if j.name in joints]
+                  for m in self.system.able(capability)}
+        return {driver: js for driver, js in groups.items() if js}
+
+    def torque(self, joints: Sequence[str], on: bool) -> list[str]:
+        """Switch the joints' torque; returns those done."""
+        return [j for driver, js in self._per_block(joints, "torque").items()
+                for j in driver.set_torque(js, on)]
+
+    def reboot(self, joints: Sequence[str]) -> list[str]:
+        """Reboot the joints' servos; returns those that acknowledged."""
+        return [j for driver, js in self._per_block(joints, "reboot").items()
+                for j in driver.reboot(js)]
+
     # -- data ----------------------------------------------------------------------------------
 
     def interfaces(self, patterns: Sequence[str] = ()) -> list[str]:

@@ -6,7 +6,7 @@ from typing import Annotated, Any
 import typer
 
 from deltoctl.cli.context import options
-from deltoctl.cli.device_cmd import finish, open_system
+from deltoctl.cli.device_cmd import finish, open_robot
 from deltoctl.cli.output import emit_json, say, table
 from deltoctl.errors import DeviceError, InvalidInput
 
@@ -87,13 +87,6 @@ def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
     return complete_part(ctx, incomplete)
 
 
-def _registers_of(system: Any, joint: str) -> Any:
-    m = system.member(joint)
-    if not m.can("registers"):
-        raise InvalidInput(f"{joint} is in {m.name}, which has no registers")
-    return m.driver
-
-
 JointArg = Annotated[str, typer.Argument(help="The servo's joint.",
                                          autocompletion=_complete_joint)]
 
@@ -107,15 +100,15 @@ def register_get(
 ) -> None:
     """Read control table items of one servo."""
     opts = options(ctx)
-    with open_system(opts) as system:
-        result = _registers_of(system, joint).read_registers(joint, list(items or []))
+    with open_robot(opts) as robot:
+        result = robot.registers(joint, items or [])
     if opts.json:
         emit_json({"joint": joint, "id": result["id"],
                    "values": {i["item"]: i["value"] for i in result["items"]}})
     else:
         table(f"{joint} (ID {result['id']})", ["address", "item", "value", "access"],
               [[i["address"], i["item"], i["value"], i["access"]] for i in result["items"]])
-    finish(system)
+    finish(robot.system)
 
 
 def register_set(
@@ -130,19 +123,10 @@ def register_set(
 
     opts = options(ctx)
     confirm_motion(opts, f"write {item} = {value} to {joint}")
-    with open_system(opts) as system:
-        after = _registers_of(system, joint).write_register(joint, item, value)
-    if after != value:
-        raise DeviceError(f"{item} reads back {after} after writing {value}")
+    with open_robot(opts) as robot:
+        after = robot.write_register(joint, item, value)
     _report(opts, {"joint": joint, "item": item, "value": after}, f"{joint}: {item} = {after}")
-    finish(system)
-
-
-def _per_block(system: Any, joints: list[str], capability: str) -> dict[Any, list[str]]:
-    """The driven blocks' drivers that offer ``capability``, each with its joints named."""
-    groups = {m.driver: [j.name for j in m.hw.joints if j.name in joints]
-              for m in system.able(capability)}
-    return {driver: js for driver, js in groups.items() if js}
+    finish(robot.system)
 
 
 def torque(
@@ -160,11 +144,10 @@ def torque(
     joints = select_joints(profile, target, "torque")
     if state == "on":
         confirm_motion(opts, f"torque on for {len(joints)} joint(s): they hold their position")
-    with open_system(opts, profile=profile) as system:
-        done = [j for driver, js in _per_block(system, joints, "torque").items()
-                for j in driver.set_torque(js, state == "on")]
+    with open_robot(opts, profile=profile) as robot:
+        done = robot.torque(joints, state == "on")
     _report(opts, {"torque": state, "joints": done}, f"torque {state}: {len(done)} joint(s)")
-    finish(system)
+    finish(robot.system)
 
 
 def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
@@ -172,14 +155,13 @@ def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
     opts = options(ctx)
     profile = opts.load_profile()
     joints = select_joints(profile, target, "reboot")
-    with open_system(opts, profile=profile) as system:
-        done = [j for driver, js in _per_block(system, joints, "reboot").items()
-                for j in driver.reboot(js)]
+    with open_robot(opts, profile=profile) as robot:
+        done = robot.reboot(joints)
     _report(opts, {"rebooted": done}, f"rebooted {len(done)} of {len(joints)} joint(s)")
     missing = sorted(set(joints) - set(done))
     if missing:
         raise DeviceError(f"no reboot acknowledgement from {', '.join(missing)}")
-    finish(system)
+    finish(robot.system)
 
 
 def _report(opts: Any, data: dict, text: str) -> None:
