@@ -46,6 +46,8 @@ class Family:
     # a plugin param that, "true", makes the plugin simulate its device (Bioscara's
     # use_mock_hardware): such a block runs on the family's emulator without --sim
     mock_param: str | None = None
+    # "module:function" of its codec naming a frame in the -vv trace: bytes → "GET_DATA" | None
+    frame_names: str | None = None
 
     def __post_init__(self) -> None:
         unknown = self.capabilities - CAPABILITIES
@@ -59,6 +61,9 @@ class Family:
 
     def emulator_function(self) -> Callable[..., Any] | None:
         return _load(self.emulator) if self.emulator else None
+
+    def frame_namer(self) -> Callable[[bytes], str | None] | None:
+        return _load(self.frame_names) if self.frame_names else None
 
     def register_names(self) -> list[str]:
         """The register item names its ``register`` verbs take (completion)."""

@@ -9,6 +9,10 @@ Tracing costs nothing when it is off. Nothing is imported or set up until a comm
 does it swap in traced methods (``trace_tcp``, ``trace_i2c``). An untraced link runs the
 code it always ran, without an ``if`` per packet.
 
+Each traced frame is named by its family's codec (``GET_DATA``, ``SYNC_READ``, ``PING`` …):
+the System tells ``name_frames`` which namer serves each link (and each device address on an
+I2C bus), so this module names no family.
+
 It sits beside ``errors`` rather than in ``core`` so that transports, which import nothing
 above them, may call it.
 """
@@ -16,11 +20,15 @@ above them, may call it.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Iterable
 from typing import Any
 
 PACKETS = False  # trace every packet: -vv or --log-file
 _logger: Any = None  # the "deltoctl" logger, once a command asked for logging
 _OURS = "_deltoctl_handler"
+FrameNamer = Callable[[bytes], "str | None"]
+# a link's label in the trace (host:port, a serial URL, "i2c URL @0x11") → its frames' namer
+_namers: dict[str, FrameNamer] = {}
 
 
 def configure(verbose: int, log_file: str | None) -> None:
@@ -33,6 +41,7 @@ def configure(verbose: int, log_file: str | None) -> None:
         logger.removeHandler(handler)
         handler.close()
     PACKETS = verbose >= 2 or bool(log_file)
+    _namers.clear()
     if not (verbose or log_file):
         logger.setLevel(logging.NOTSET)
         logger.propagate = True
@@ -116,8 +125,47 @@ def packet(bus: str, direction: str, data: bytes, frame: str | None = None) -> N
              "hex": data.hex(" ")}
     if frame:
         extra["frame"] = frame
-    _logger.getChild("wire").debug("%s %s %4d B %s%s", direction, bus, len(data), extra["hex"],
-                                   f"  ({frame})" if frame else "", extra=extra)
+    # the name before the bytes: a long frame's hex wraps, its name stays in sight
+    _logger.getChild("wire").debug("%s %s %4d B %s%s", direction, bus, len(data),
+                                   f"{frame}: " if frame else "", extra["hex"], extra=extra)
+
+
+def name_frames(url: str, namer: FrameNamer | None, addresses: Iterable[int] = ()) -> None:
+    """Name the frames traced on the link to ``url`` with ``namer`` (a family codec's
+    ``frame_name``); on an I2C bus, those of the devices at ``addresses`` only (several
+    families may share one bus)."""
+    if not PACKETS or namer is None:
+        return
+    scheme = url.partition("://")[0]
+    if scheme == "tcp":
+        from deltoctl.errors import DeltoctlError
+        from deltoctl.transport.tcp import parse_tcp_url
+
+        try:
+            host, port = parse_tcp_url(url)
+        except DeltoctlError:  # the driver says what is wrong with the URL
+            return
+        _namers[f"{host}:{port}"] = namer
+    elif scheme.startswith("i2c"):
+        _namers.update({_i2c_label(url, a): namer for a in addresses})
+    else:
+        _namers[url] = namer
+
+
+def _i2c_label(url: str, address: int) -> str:
+    return f"{url} @{address:#04x}"
+
+
+def _name(bus: str, data: bytes) -> str | None:
+    """The frame's name, when its link has a namer and the namer knows the frame; a namer
+    that fails on odd bytes names nothing (the trace never breaks a command)."""
+    namer = _namers.get(bus)
+    if namer is None:
+        return None
+    try:
+        return namer(data)
+    except Exception:
+        return None
 
 
 def trace_tcp(link_: Any) -> None:
@@ -126,12 +174,12 @@ def trace_tcp(link_: Any) -> None:
     send, recv = link_.send, link_.recv_frame
 
     def traced_send(data: bytes) -> None:
-        packet(bus, "tx", bytes(data))
+        packet(bus, "tx", bytes(data), _name(bus, bytes(data)))
         send(data)
 
     def traced_recv(timeout: float) -> bytes:
         frame = recv(timeout)
-        packet(bus, "rx", frame)
+        packet(bus, "rx", frame, _name(bus, frame))
         return frame
 
     link_.send, link_.recv_frame = traced_send, traced_recv
@@ -139,18 +187,21 @@ def trace_tcp(link_: Any) -> None:
 
 def trace_i2c(bus: Any) -> None:
     """Swap an I2CBus's transaction for a traced one: each write message out, then each
-    read message's bytes in, named by the device address."""
+    read message's bytes in, labelled by the device address; a reply is named after the
+    command written before it."""
     run = bus._run
 
     def traced_run(address: int, *msgs: Any) -> None:
-        where = f"{bus.url} @{address:#04x}"
+        where = _i2c_label(bus.url, address)
+        name = None
         for m in msgs:
             if not m.flags & 1:  # I2C_M_RD clear: a write
-                packet(where, "tx", bytes(m))
+                name = _name(where, bytes(m))
+                packet(where, "tx", bytes(m), name)
         run(address, *msgs)
         for m in msgs:
             if m.flags & 1:
-                packet(where, "rx", bytes(m))
+                packet(where, "rx", bytes(m), name and f"{name} reply")
 
     bus._run = traced_run
 
@@ -161,13 +212,13 @@ def trace_serial(port: Any, bus: str) -> None:
     write, read = port.write, port.read
 
     def traced_write(data: bytes) -> int | None:
-        packet(bus, "tx", bytes(data))
+        packet(bus, "tx", bytes(data), _name(bus, bytes(data)))
         return write(data)
 
     def traced_read(size: int = 1) -> bytes:
         data = read(size)
         if data:
-            packet(bus, "rx", data)
+            packet(bus, "rx", data, _name(bus, data))
         return data
 
     port.write, port.read = traced_write, traced_read

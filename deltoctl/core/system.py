@@ -14,7 +14,7 @@ import threading
 from collections.abc import Iterator
 from typing import Any
 
-from deltoctl import registry
+from deltoctl import registry, trace
 from deltoctl.core.driver import Block, Driver, Links, MoveResult, Progress
 from deltoctl.core.lifecycle import Lifecycle
 from deltoctl.errors import DeltoctlError, InvalidInput, Unreachable
@@ -95,6 +95,15 @@ def parse_targets(profile: Profile, targets: list[str] | tuple[str, ...]) -> tup
     return named, bare
 
 
+def _name_frames(profile: Profile, hw: Hardware, family: Family, url: str) -> None:
+    """The -vv trace names the block's frames with its family's codec (on an I2C bus, those
+    of its parts' addresses)."""
+    from deltoctl.profile.validate import part_address
+
+    addresses = [part_address(profile, hw, c) for c in hw.components()]
+    trace.name_frames(url, family.frame_namer(), [a for a in addresses if a is not None])
+
+
 class System:
     """``with System(profile, targets) as system: system.read()``."""
 
@@ -126,6 +135,8 @@ class System:
                           self.values)
             self.members.append(Member(hw, family, family.driver_class()(block),
                                        (simulated or {}).get(hw.name)))
+            if trace.PACKETS:  # -vv: the family's codec names the frames on its link
+                _name_frames(profile, hw, family, url)
         if not self.members:
             raise InvalidInput(f"{profile.name}: no block deltoctl can drive "
                                f"({'; '.join(self.notes) or 'the profile has no blocks'})")

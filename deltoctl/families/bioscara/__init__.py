@@ -7,6 +7,7 @@ FAMILY = Family(
     name="bioscara",
     summary="Bioscara SCARA arm: uStepper joints on I2C",
     driver="deltoctl.families.bioscara.driver:BioscaraDriver",
+    frame_names="deltoctl.families.bioscara.codec:frame_name",
     emulator="deltoctl.families.bioscara.emulator:serve",
     plugins=("bioscara_hardware_interfaces/BioscaraArmHardwareInterface",),
     schemes=("i2c", "i2c+tcp"),

@@ -31,6 +31,13 @@ GETENCODERRPM = 0x2C
 HOME = 0x2D
 HOMEOFFSET = 0x2E
 
+COMMANDS = {PING: "PING", SETUP: "SETUP", SETRPM: "SETRPM", MOVESTEPS: "MOVESTEPS",
+            MOVETOANGLE: "MOVETOANGLE", ANGLEMOVED: "ANGLEMOVED", SETCURRENT: "SETCURRENT",
+            SETHOLDCURRENT: "SETHOLDCURRENT", SETMAXACCELERATION: "SETMAXACCELERATION",
+            SETMAXVELOCITY: "SETMAXVELOCITY", ENABLESTALLGUARD: "ENABLESTALLGUARD",
+            SETBRAKEMODE: "SETBRAKEMODE", DISABLECLOSEDLOOP: "DISABLECLOSEDLOOP", STOP: "STOP",
+            CHECKORIENTATION: "CHECKORIENTATION", GETENCODERRPM: "GETENCODERRPM", HOME: "HOME",
+            HOMEOFFSET: "HOMEOFFSET"}
 BLOCKING = frozenset({CHECKORIENTATION, HOME})  # run in the firmware's loop(), BUSY meanwhile
 ACK, NACK = ord("O"), ord("N")
 
@@ -61,6 +68,11 @@ INT32 = struct.Struct("<i")
 def describe_flags(flags: int) -> str:
     words = [name for bit, name in FLAG_NAMES if flags & bit]
     return ", ".join(words) if words else "homed, enabled"
+
+
+def frame_name(data: bytes) -> str | None:
+    """The command an I2C write starts with, for the -vv trace."""
+    return COMMANDS.get(data[0], f"register {data[0]:#04x}") if data else None
 
 
 # -- requests: the bytes the master writes -------------------------------------------------------

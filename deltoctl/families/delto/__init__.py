@@ -6,6 +6,7 @@ FAMILY = Family(
     name="delto",
     summary="Tesollo Delto grippers (TCP, developer mode)",
     driver="deltoctl.families.delto.driver:DeltoDriver",
+    frame_names="deltoctl.families.delto.codec:frame_name",
     emulator="deltoctl.families.delto.emulator:serve",
     plugins=("delto_hardware/SystemInterface",),
     schemes=("tcp",),

@@ -27,12 +27,19 @@ SET_DUTY = 0x05
 SET_GPIO = 0x06
 GET_VERSION = 0x08
 SET_FT_SENSOR_OFFSET = 0x0B
+COMMANDS = {GET_DATA: "GET_DATA", SET_DUTY: "SET_DUTY", SET_GPIO: "SET_GPIO",
+            GET_VERSION: "GET_VERSION", SET_FT_SENSOR_OFFSET: "SET_FT_SENSOR_OFFSET"}
 
 # GET_DATA selectors
 JOINT, CURRENT, TEMPERATURE, VELOCITY, FINGERTIP_SENSOR, GPIO = 1, 2, 3, 4, 5, 6
 
 MAX_FRAME = 4096
 RPM_TO_RAD_S = math.pi / 30
+
+
+def frame_name(data: bytes) -> str | None:
+    """The command a frame carries (requests and replies alike), for the -vv trace."""
+    return COMMANDS.get(data[2], f"command {data[2]:#04x}") if len(data) >= 3 else None
 
 
 def frame(cmd: int, payload: bytes = b"") -> bytes:

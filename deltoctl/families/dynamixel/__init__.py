@@ -7,6 +7,7 @@ FAMILY = Family(
     name="dynamixel",
     summary="Dynamixel Protocol 2.0 servo buses (RS-485)",
     driver="deltoctl.families.dynamixel.driver:DynamixelDriver",
+    frame_names="deltoctl.families.dynamixel.codec:frame_name",
     emulator="deltoctl.families.dynamixel.emulator:serve",
     plugins=("mh5_hardware/MH5DynamixelInterface",),
     schemes=("serial",),

@@ -22,12 +22,33 @@ PING, READ, WRITE, REG_WRITE, ACTION = 0x01, 0x02, 0x03, 0x04, 0x05
 FACTORY_RESET, REBOOT, CLEAR, STATUS = 0x06, 0x08, 0x10, 0x55
 SYNC_READ, SYNC_WRITE, FAST_SYNC_READ = 0x82, 0x83, 0x8A
 BULK_READ, BULK_WRITE, FAST_BULK_READ = 0x92, 0x93, 0x9A
+INSTRUCTIONS = {PING: "PING", READ: "READ", WRITE: "WRITE", REG_WRITE: "REG_WRITE",
+                ACTION: "ACTION", FACTORY_RESET: "FACTORY_RESET", REBOOT: "REBOOT",
+                CLEAR: "CLEAR", STATUS: "STATUS", SYNC_READ: "SYNC_READ",
+                SYNC_WRITE: "SYNC_WRITE", FAST_SYNC_READ: "FAST_SYNC_READ",
+                BULK_READ: "BULK_READ", BULK_WRITE: "BULK_WRITE",
+                FAST_BULK_READ: "FAST_BULK_READ"}
 
 STATUS_ERRORS = {1: "result fail", 2: "instruction error", 3: "CRC error",
                  4: "data range error", 5: "data length error", 6: "data limit error",
                  7: "access error"}
 HARDWARE_ERRORS = {0: "input voltage", 2: "overheating", 3: "motor encoder",
                    4: "electrical shock", 5: "overload"}
+
+
+def frame_name(data: bytes) -> str | None:
+    """The instructions of the packets that start in ``data``, for the -vv trace:
+    ``SYNC_READ``, ``STATUS``, ``22 × STATUS`` (the replies to a sync read read at once);
+    None when no packet starts in it (the rest of a reply)."""
+    names = []
+    at = data.find(HEADER)
+    while at >= 0 and at + 7 < len(data):
+        inst = data[at + 7]
+        names.append(INSTRUCTIONS.get(inst, f"instruction {inst:#04x}"))
+        at = data.find(HEADER, at + 7 + max(1, data[at + 5] | data[at + 6] << 8))
+    if len(set(names)) > 1:
+        return " + ".join(names)
+    return (names[0] if len(names) == 1 else f"{len(names)} × {names[0]}") if names else None
 
 
 def _crc_table() -> list[int]:

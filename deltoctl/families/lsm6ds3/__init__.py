@@ -6,6 +6,7 @@ FAMILY = Family(
     name="lsm6ds3",
     summary="LSM6DS3 IMU on I2C",
     driver="deltoctl.families.lsm6ds3.driver:Lsm6ds3Driver",
+    frame_names="deltoctl.families.lsm6ds3.codec:frame_name",
     emulator="deltoctl.families.lsm6ds3.emulator:serve",
     plugins=("mh5_hardware/MH5I2CInterface",),
     schemes=("i2c", "i2c+tcp"),

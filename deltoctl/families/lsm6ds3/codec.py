@@ -19,6 +19,9 @@ ORIENT_CFG_G = 0x0B
 OUT_TEMP_L = 0x20  # temperature, then gyro X/Y/Z (0x22) and accelerometer X/Y/Z (0x28)
 OUTX_L_G = 0x22
 OUTX_L_XL = 0x28
+REGISTERS = {WHO_AM_I: "WHO_AM_I", CTRL1_XL: "CTRL1_XL", CTRL2_G: "CTRL2_G",
+             CTRL4_C: "CTRL4_C", ORIENT_CFG_G: "ORIENT_CFG_G", OUT_TEMP_L: "OUT_TEMP_L",
+             OUTX_L_G: "OUTX_L_G", OUTX_L_XL: "OUTX_L_XL"}
 BLOCK = 14  # bytes from OUT_TEMP_L to OUTZ_H_XL
 BW_SCAL_ODR = 0x80  # CTRL4_C: the accelerometer bandwidth comes from CTRL1_XL's BW bits
 
@@ -34,6 +37,14 @@ G = 9.80665
 MG_PER_LSB_2G = 0.061
 MDPS_PER_LSB_125 = 4.375
 RAW = struct.Struct("<7h")
+
+
+def frame_name(data: bytes) -> str | None:
+    """The register an I2C write selects (one byte: a read follows) or writes, for -vv."""
+    if not data:
+        return None
+    name = REGISTERS.get(data[0], f"register {data[0]:#04x}")
+    return name if len(data) == 1 else f"write {name}"
 
 
 def _lookup(table: dict, value: float, what: str) -> int:
