@@ -324,3 +324,9 @@ def test_start_up_stays_light():
                              capture_output=True, text=True, check=True)
         imported = {line.rsplit("|", 1)[-1].strip() for line in out.stderr.splitlines()}
         assert not {"logging", "deltoctl.trace", "deltoctl.suggest", "rich"} & imported
+
+
+def test_profile_show_suggests_the_nearest_part(cli):
+    result = cli("profile", "show", "dg-5f-right", "rj_dg_2_x")
+    assert result.exit_code == 2
+    assert "did you mean rj_dg_2_1" in result.stderr

@@ -192,7 +192,11 @@ def _show_part(prof: Any, name: str, as_json: bool) -> None:
 
     comp = prof.component(name)
     if comp is None:
-        raise InvalidInput(f"{prof.name} has no joint, sensor or GPIO named {name!r}")
+        from deltoctl.suggest import did_you_mean
+
+        names = [c.name for _, c in prof.components()]
+        raise InvalidInput(f"{prof.name} has no joint, sensor or GPIO named {name!r}"
+                           + did_you_mean(name, names))
     data = {"kind": comp.kind, **component_data(comp)}
     soft = comp.soft_limits if comp.kind == "joint" else None
     if soft is not None:
