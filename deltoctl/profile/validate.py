@@ -166,7 +166,10 @@ def _check_profile(profile: Profile, fail: Fail) -> None:
                    f"(known: {', '.join(known)})", None)
     schemes = {s for f in known.values() for s in f.schemes}
     for bus, url in profile.buses.items():
-        scheme = urlsplit(url).scheme
+        try:
+            scheme = urlsplit(url).scheme
+        except ValueError:  # tcp://[::1 (no closing bracket): no URL at all
+            scheme = ""
         if scheme not in schemes:
             raise fail(f"bus {bus!r}: {url!r} is not a target URL "
                        "(expected tcp://HOST:PORT, serial:///dev/PORT or i2c:///dev/i2c-N)", None)

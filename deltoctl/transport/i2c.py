@@ -11,12 +11,13 @@ from __future__ import annotations
 import errno
 import time
 from typing import Any
-from urllib.parse import parse_qsl, urlsplit
+from urllib.parse import parse_qsl
 
 from smbus2 import i2c_msg
 
 from deltoctl import trace
 from deltoctl.errors import DeviceError, InvalidInput, Unreachable
+from deltoctl.transport import split_url
 
 TRIES = 3
 RETRY_PAUSE = 50e-6  # s between tries
@@ -30,7 +31,7 @@ class NoAnswer(DeviceError):
 def parse_i2c_url(url: str) -> tuple[str, str, int]:
     """``(kind, path_or_host, port)`` with kind ``dev`` or ``tcp``; a query key, a host on a
     kernel bus or a bad port is an error naming it."""
-    parts = urlsplit(url)
+    parts = split_url(url)
     expected = "expected i2c:///dev/i2c-N or i2c+tcp://HOST:PORT from `deltoctl sim serve`"
     if parts.scheme not in ("i2c", "i2c+tcp"):
         raise InvalidInput(f"{url!r} is not an I2C target ({expected})")

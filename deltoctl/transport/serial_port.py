@@ -5,10 +5,11 @@ from __future__ import annotations
 import errno
 import os
 from typing import Any
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import parse_qs
 
 from deltoctl import trace
 from deltoctl.errors import InvalidInput, Unreachable
+from deltoctl.transport import split_url
 
 KEYS = ("baud", "rs485")
 MAX_BAUD = 12_000_000
@@ -18,7 +19,7 @@ _BOOL = {"1": True, "true": True, "yes": True, "0": False, "false": False, "no":
 def parse_serial_url(url: str) -> tuple[str, int, bool]:
     """``serial:///dev/PORT?baud=N&rs485=1`` → (path, baud, rs485); an unknown or repeated key,
     a baud that is not a rate, or ``serial://dev/…`` (two slashes) is an error naming it."""
-    parts = urlsplit(url)
+    parts = split_url(url)
     if parts.scheme != "serial" or not parts.path or parts.netloc:
         raise InvalidInput(f"{url!r} is not a serial target (expected "
                            "serial:///dev/PORT?baud=N[&rs485=1], three slashes)")

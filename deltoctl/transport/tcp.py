@@ -8,6 +8,7 @@ import time
 
 from deltoctl import trace
 from deltoctl.errors import DeviceError, InvalidInput, Unreachable
+from deltoctl.transport import split_url
 
 DEFAULT_PORT = 502  # Modbus TCP's, which a Delto's developer mode keeps
 
@@ -15,9 +16,9 @@ DEFAULT_PORT = 502  # Modbus TCP's, which a Delto's developer mode keeps
 def parse_tcp_url(url: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
     """``tcp://HOST[:PORT]`` → (host, port); anything else in it (a query key, a path, a
     port out of range) is an error naming it, never silently dropped."""
-    from urllib.parse import parse_qsl, urlsplit
+    from urllib.parse import parse_qsl
 
-    parts = urlsplit(url)
+    parts = split_url(url)
     if parts.scheme != "tcp" or not parts.hostname:
         raise InvalidInput(f"{url!r} is not a TCP target (expected tcp://HOST:PORT)")
     keys = [key for key, _ in parse_qsl(parts.query, keep_blank_values=True)]

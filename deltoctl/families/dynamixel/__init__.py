@@ -18,3 +18,19 @@ FAMILY = Family(
     serve_options=("missing", "pace", "wrong_baud"),
     register_items="deltoctl.families.dynamixel.control_table:item_names",
 )
+
+
+def parse_bus_url(url: str) -> tuple[str, int, bool]:
+    """A bus target, ``serial:///dev/PORT?baud=N&rs485=1`` → (path, baud, rs485), whose baud
+    is one the X-series servos run (their Baud Rate register's table): another is a usage
+    error naming those, before any port is opened."""
+    from deltoctl.errors import InvalidInput
+    from deltoctl.families.dynamixel.control_table import BAUD_RATES
+    from deltoctl.transport.serial_port import parse_serial_url
+
+    path, baud, rs485 = parse_serial_url(url)
+    if baud not in BAUD_RATES.values():
+        rates = ", ".join(str(rate) for rate in sorted(BAUD_RATES.values()))
+        raise InvalidInput(f"{url!r}: Dynamixel X-series servos cannot run at {baud} baud; "
+                           f"their rates: {rates}")
+    return path, baud, rs485

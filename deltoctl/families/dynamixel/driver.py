@@ -13,7 +13,7 @@ from deltoctl import trace
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
 from deltoctl.core.loop import CommLoop
 from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, ProtocolError, Refused
-from deltoctl.families.dynamixel import codec
+from deltoctl.families.dynamixel import codec, parse_bus_url
 from deltoctl.families.dynamixel.control_table import (
     BAUD_RATES,
     BY_NAME,
@@ -39,6 +39,7 @@ LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}
 class DynamixelDriver(Driver):
     def __init__(self, block: Block) -> None:
         super().__init__(block)
+        parse_bus_url(self.url)  # a rate its servos cannot run: exit 2 before a port opens
         hw = block.hw
         self.joints = {j.address: j for j in hw.joints if j.address is not None}
         self.port: Any = None

@@ -395,13 +395,13 @@ class DynamixelPtyServer:
 def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
     """One pseudo-terminal per bus block, its servos at the joints' IDs, listening at the bus
     URL's baud rate."""
-    from deltoctl.transport.serial_port import parse_serial_url
+    from deltoctl.families.dynamixel import parse_bus_url
 
     o = ctx.options
     buses = {}
     for hw in blocks:
         url = ctx.profile.buses.get(hw.bus or "", "serial:///dev/ttyUSB0?baud=1000000")
-        _, baud, _ = parse_serial_url(url)
+        _, baud, _ = parse_bus_url(url)
         bus = DynamixelBus([Servo(j.address) for j in hw.joints if j.address is not None],
                            baud=baud)
         bus.faults.missing |= {j.address for j in ctx.named("missing", hw)}
