@@ -320,7 +320,8 @@ def test_a_joint_leaving_its_limits_stops_the_replay(cli, gripper, tmp_path):
     narrow = tmp_path / "dg-3f-m-narrow.yaml"
     narrow.write_text(text.replace(wide, "{name: j_dg_1_2, limits: {lower: -5deg, upper: 5deg"))
     out = tmp_path / "pushing.mcap"
-    _recording_with(out, load_profile("dg-3f-m"), _held_effort(load_profile("dg-3f-m"), 10.0))
+    # recorded under the same narrow profile (a recording looser than -p is refused whole)
+    _recording_with(out, load_profile(str(narrow)), _held_effort(load_profile("dg-3f-m"), 10.0))
     result = cli("-p", str(narrow), "replay", str(out), "--max-deviation", "100", "--device",
                  "-t", gripper.endpoint, "--yes")
     assert result.exit_code == 5, result.stderr

@@ -1,6 +1,8 @@
 """``deltoctl replay FILE.mcap``: play a recording's commands back at their recorded timing.
 
-On the profile's simulators unless --device says otherwise (then confirmed as any motion);
+On the profile's simulators unless --device says otherwise (then confirmed as any motion, on
+the device -t names, under the limits of -p or of the catalog's profile: a recording is
+untrusted, its profile never relaxes a limit and its bus URLs never choose a device);
 every command is checked against the profile's limits before anything moves (exit 5); a safe
 move to the recorded start pose first; Ctrl-C, SIGTERM or SIGHUP stop every block, and so
 does a joint outside its limits or beyond --max-deviation from the recording (exit 5). The
@@ -41,30 +43,44 @@ def _tolerance(text: str | None, option: str = "--tolerance") -> float | None:
     return value
 
 
-def _where(opts: Options, device: bool) -> Options:
-    """The options the System opens with: the simulators unless --device."""
+def _where(opts: Options, device: bool, profile: Any, blocks: list[str]) -> Options:
+    """The options the System opens with: only the blocks the recording commands, on the
+    simulators unless --device; on a device, only the one -t names (or --sim's): neither
+    the recording's bus URLs nor a profile's choose a device."""
+    import copy
+
     if opts.target and not device:
         raise InvalidInput("-t/--target names a device: add --device to replay on it "
                            "(replay runs on the simulators unless told otherwise)")
-    if device and opts.sim:
-        raise InvalidInput("--sim and --device: choose one (replay runs on the simulators "
-                           "unless --device says otherwise)")
-    if device:
-        return opts
-    import copy
-
-    sim = copy.copy(opts)
-    sim.sim = True
-    return sim
+    run = copy.copy(opts)
+    run.hardware = opts.hardware or blocks
+    if not device:
+        run.sim = True
+    elif not opts.sim:
+        _check_targets(opts, profile, run.hardware)
+    return run
 
 
-def _targets(opts: Options, profile: Any, blocks: list[str]) -> str:
+def _check_targets(opts: Options, profile: Any, blocks: list[str]) -> None:
+    """Every bus a replay on a device drives is named by -t (a simulated block aside)."""
+    from deltoctl import registry
+    from deltoctl.core.system import mock_blocks, parse_targets
+
+    mock = mock_blocks(profile, blocks)
+    buses = {hw.bus or hw.name for hw in profile.hardware if hw.name in blocks
+             and hw.name not in mock and (f := registry.of_block(profile.family_of(hw),
+                                                                 hw.plugin)) and f.schemes}
+    named, bare = parse_targets(profile, opts.target)
+    missing = sorted(buses - set(named)) if not bare else []
+    if missing:
+        raise InvalidInput(f"replay --device: name the device of {', '.join(missing)} with "
+                           f"-t {missing[0]}=URL (or rehearse with --sim); a replay never "
+                           "takes a device from the recording or from a profile's bus URLs")
+
+
+def _targets(opts: Options) -> str:
     """Where --device sends the commands, for the confirmation."""
-    if opts.target:
-        return ", ".join(opts.target)
-    urls = {hw.bus: profile.buses.get(hw.bus or "", "?") for hw in profile.hardware
-            if hw.name in blocks and hw.bus}
-    return ", ".join(f"{bus} {url}" for bus, url in urls.items()) or "the profile's devices"
+    return ", ".join(opts.target) or "the simulators"
 
 
 def _home_simulated(system: Any, joints: list[str]) -> None:
@@ -87,8 +103,9 @@ def replay(
     recording: Annotated[Path, typer.Argument(
         metavar="FILE.mcap", help="A recording with commands (jog --record).")],
     device: Annotated[bool, typer.Option(
-        "--device", help="Replay on the real devices (the profile's buses, or -t/--target) "
-                         "instead of the simulators; asks for confirmation unless --yes.")
+        "--device", help="Replay on the devices -t/--target names (or, with --sim, on "
+                         "simulators) under the limits of -p PROFILE or of the catalog's "
+                         "profile, never the recording's; asks for confirmation unless --yes.")
     ] = False,
     tolerance: Annotated[str | None, typer.Option(
         "--tolerance", metavar="X", help="The largest difference allowed between recorded "
@@ -108,12 +125,17 @@ def replay(
     joints go to the recorded start pose; then the commands follow, and a joint that leaves
     its limits or strays beyond --max-deviation from the recording stops every block
     (exit 5). Runs on the profile's simulators unless --device (with --yes, or confirmed on
-    a terminal)."""
+    a terminal): then on the device -t names, under the limits of -p PROFILE or of the
+    catalog's profile of the recorded name; a recorded profile looser than that is refused
+    (exit 5)."""
     from deltoctl.cli.motion_cmd import confirm_motion
     from deltoctl.core.replay import (
         Deviated,
         Replay,
         check_commands,
+        check_recorded_profile,
+        commanded_components,
+        device_profile,
         read_recording_commands,
         recorded_profile,
     )
@@ -124,8 +146,13 @@ def replay(
     deviation = _tolerance(max_deviation, "--max-deviation")
     deviation = MAX_DEVIATION if deviation is None else deviation
     recorded = read_recording_commands(recording)
-    profile = opts.load_profile() if opts.profile else recorded_profile(recorded)
-    run_opts = _where(opts, device)
+    named = opts.load_profile() if opts.profile else None
+    if device:  # the limits in force are the robot's, never the file's
+        profile, theirs = device_profile(recorded, named)
+    else:
+        profile, theirs = named or recorded_profile(recorded), None
+    commanded_components(profile, recorded)  # a joint the profile lacks: exit 2
+    notes = check_recorded_profile(profile, theirs, recording)  # looser: exit 5
     check_commands(profile, recorded)  # refused before anything is opened or moves
     joints = recorded.joints
     blocks = [hw.name for hw in profile.hardware
@@ -134,12 +161,14 @@ def replay(
     if left_out:
         raise InvalidInput(f"the recording commands block(s) {', '.join(left_out)}, which "
                            "--hardware leaves out")
+    run_opts = _where(opts, device, profile, blocks)
+    for note in notes:
+        warn(note)
     rows = len(recorded.times)
-    if device:
+    if device and not opts.sim:
         confirm_motion(opts, f"move {', '.join(joints)} to the recorded start pose, then "
                              f"replay {rows} commands ({recorded.seconds:.2f} s) of "
-                             f"{recording.name} on {', '.join(blocks)} at "
-                             f"{_targets(opts, profile, blocks)}")
+                             f"{recording.name} on {', '.join(blocks)} at {_targets(opts)}")
     with open_system(run_opts, allow_model_mismatch, profile) as system:
         for block, names in system.by_block(joints).items():
             m = system.member(names[0])
@@ -152,7 +181,7 @@ def replay(
         task = bar.add_task(f"replay {recording.name}", total=1.0) if bar else None
         try:
             with interrupted_by_signals():
-                if not device:
+                if run_opts.sim:
                     _home_simulated(system, joints)
                 for names in system.by_block(joints).values():
                     system.member(names[0]).driver.check_motion(names)  # e.g. not homed
@@ -170,7 +199,7 @@ def replay(
             system.stop()
             if bar is not None:
                 bar.stop()
-    report = _report(recording, system, recorded, result, limit, device)
+    report = _report(recording, system, recorded, result, limit, device and not opts.sim)
     report["max_deviation"] = deviation
     report["stopped"] = stopped.message if stopped else None
     if stopped is not None:
@@ -184,6 +213,8 @@ def replay(
         finish(system)
         raise typer.Exit(WARNINGS)
     finish(system)
+    if notes:  # shown before the replay
+        raise typer.Exit(WARNINGS)
 
 
 def _report(recording: Path, system: Any, recorded: Any, result: Any, limit: float | None,

@@ -193,6 +193,104 @@ def recorded_profile(recorded: Recorded) -> Profile:
     return profile_from_text(text, f"{recorded.path} (profile metadata)")
 
 
+def catalog_profile(recorded: Profile) -> Profile | None:
+    """The catalog's profile of a recorded one: by its name, else the one catalog profile
+    of its model. Only catalog names are looked up: nothing in the file names a path."""
+    from deltoctl.profile.catalog import catalog_dir, catalog_names, load_profile
+
+    names = catalog_names()
+    if recorded.name in names:
+        return load_profile(catalog_dir() / f"{recorded.name}.yaml")
+    if not recorded.model:
+        return None
+    same = [p for p in (load_profile(catalog_dir() / f"{n}.yaml") for n in names)
+            if p.model == recorded.model]
+    return same[0] if len(same) == 1 else None
+
+
+def device_profile(recorded: Recorded, named: Profile | None) -> tuple[Profile, Profile | None]:
+    """The profile whose limits a replay on a device keeps — ``named`` (-p), else the
+    catalog's for the recorded profile — never the recording's own; and the recorded
+    profile (None when the file has none and ``named`` is given)."""
+    if named is not None and not recorded.profile_yaml:
+        return named, None
+    theirs = recorded_profile(recorded)
+    ours = named or catalog_profile(theirs)
+    if ours is None:
+        raise InvalidInput(f"{recorded.path} was recorded with profile {theirs.name!r} "
+                           f"(model {theirs.model or 'not given'}), which is not in the "
+                           "catalog: on a device, the limits are those of a profile you name",
+                           "pass the robot's profile: -p PROFILE")
+    return ours, theirs
+
+
+def check_recorded_profile(ours: Profile, theirs: Profile | None, path: Path) -> list[str]:
+    """Refuse (exit 5) a recorded profile looser than the one in force (wider limits,
+    higher caps, a larger jog step); the other differences, as one warning."""
+    if theirs is None:
+        return []
+    looser, other = profile_changes(ours, theirs)
+    if looser:
+        raise Refused(f"{path}: its profile is looser than {ours.name}, whose limits a replay "
+                      f"on a device keeps: {'; '.join(looser)}; nothing moved",
+                      "replay it on the simulators (without --device), or record it again "
+                      "within the robot's limits")
+    return [f"the recording's profile differs from {ours.name}, whose limits apply: "
+            f"{'; '.join(other)}"] if other else []
+
+
+def _looser_bound(what: str, ours: float | None, theirs: float | None, wider: int,
+                  looser: list[str], other: list[str]) -> None:
+    """One bound compared: ``wider`` is +1 where a larger value is looser (an upper limit,
+    a cap), -1 where a smaller one is (a lower limit); none at all is loosest."""
+    if ours == theirs or (ours is not None and theirs is not None
+                          and math.isclose(ours, theirs, rel_tol=1e-9, abs_tol=1e-9)):
+        return
+    shown = f"{what} {_show(theirs)} recorded, {_show(ours)} in force"
+    if ours is not None and (theirs is None or (theirs - ours) * wider > 0):
+        looser.append(shown)
+    else:
+        other.append(shown)
+
+
+def _show(value: float | None) -> str:
+    return "none" if value is None else f"{value:.4f}".rstrip("0").rstrip(".")
+
+
+LIMIT_FIELDS = (("lower", -1), ("upper", 1), ("velocity", 1), ("effort", 1),
+                ("acceleration", 1), ("deceleration", 1), ("jerk", 1))
+
+
+def profile_changes(ours: Profile, theirs: Profile) -> tuple[list[str], list[str]]:
+    """What a recorded profile changes in the one in force, in words: (looser, other).
+    Looser: a joint limit or soft limit wider or gone, limits disabled, a larger
+    max_jog_step or current_cap. Joints only one of them has are not compared."""
+    from deltoctl.profile.model import Limits
+
+    looser: list[str] = []
+    other: list[str] = []
+    for key, wider in (("max_jog_step", 1), ("current_cap", 1)):
+        _looser_bound(f"safety.{key}", getattr(ours.safety, key),
+                      getattr(theirs.safety, key), wider, looser, other)
+    for joint in ours.joints():
+        rec = theirs.component(joint.name)
+        if rec is None or rec.kind != "joint":
+            continue
+        if joint.enable_limits and not rec.enable_limits:
+            looser.append(f"{joint.name}: limits disabled")
+        mine, recorded = joint.limits or Limits(), rec.limits or Limits()
+        for name, wider in LIMIT_FIELDS:
+            _looser_bound(f"{joint.name} {name} limit", getattr(mine, name),
+                          getattr(recorded, name), wider, looser, other)
+        if joint.soft_limits is not None or rec.soft_limits is not None:
+            soft, rsoft = joint.soft_limits, rec.soft_limits
+            for name, wider in (("lower", -1), ("upper", 1)):
+                _looser_bound(f"{joint.name} soft {name} limit",
+                              getattr(soft, name) if soft else None,
+                              getattr(rsoft, name) if rsoft else None, wider, looser, other)
+    return looser, other
+
+
 # -- checks --------------------------------------------------------------------------------------
 
 def _bounded(joint: Component, what: str, value: float, bound: float | None, at: str) -> None:
@@ -200,6 +298,19 @@ def _bounded(joint: Component, what: str, value: float, bound: float | None, at:
         limit = "" if bound is None else f" (its limit: {bound:.4f})"
         raise Refused(f"{at}: {joint.name} {what} command {value:.4f} is beyond its "
                       f"limits{limit}; nothing moved")
+
+
+def commanded_components(profile: Profile, recorded: Recorded) -> dict[str, Component]:
+    """The profile's joint of each commanded name; a joint it lacks is invalid input."""
+    comps: dict[str, Component] = {}
+    for name in recorded.joints:
+        comp = profile.component(name)
+        if comp is None or comp.kind != "joint":
+            raise InvalidInput(f"{recorded.path} commands {name!r}, which is no joint of "
+                               f"{profile.name}", "replay takes the recording's own profile "
+                               "unless -p PROFILE (or DELTOCTL_PROFILE) names another")
+        comps[name] = comp
+    return comps
 
 
 def check_commands(profile: Profile, recorded: Recorded) -> None:
@@ -211,14 +322,7 @@ def check_commands(profile: Profile, recorded: Recorded) -> None:
     little. A joint the profile lacks is invalid input (exit 2)."""
     from deltoctl.core.motion import check_target
 
-    comps: dict[str, Component] = {}
-    for name in recorded.joints:
-        comp = profile.component(name)
-        if comp is None or comp.kind != "joint":
-            raise InvalidInput(f"{recorded.path} commands {name!r}, which is no joint of "
-                               f"{profile.name}", "replay takes the recording's own profile "
-                               "unless -p PROFILE (or DELTOCTL_PROFILE) names another")
-        comps[name] = comp
+    comps = commanded_components(profile, recorded)
     last = recorded.start_pose()
     for joint, position in last.items():
         try:
