@@ -325,9 +325,22 @@ def _bounded_eval_text(original: Callable[..., Any]) -> Callable[..., Any]:
     return eval_text
 
 
-def _refuse_environment(name: Any, *default: Any) -> str:
-    raise SandboxError(f"$(env {name}) / $(optenv {name}) is not allowed: a profile does not "
-                       "read the environment; pass --arg NAME:=VALUE instead")
+def _refused_environment(substitution: str, name: Any, default: str = "") -> SandboxError:
+    """A profile reads no environment variable: the same file must describe the same robot on
+    every computer and for every user, and the environment may hold secrets."""
+    given = f"{name} {default}".strip()
+    return SandboxError(f"$({substitution} {given}) is refused: a profile does not read "
+                        f"environment variables (they differ from one computer or user to the "
+                        f"next, and may hold secrets); pass --arg {name}:=VALUE and write "
+                        f"$(arg {name}) instead")
+
+
+def _refuse_env(name: Any) -> str:
+    raise _refused_environment("env", name)
+
+
+def _refuse_optenv(name: Any, default: str = "") -> str:
+    raise _refused_environment("optenv", name, default)
 
 
 @contextlib.contextmanager
@@ -347,8 +360,8 @@ def _sandboxed(run: _Run) -> Iterator[None]:
         (minidom, "_clone_node", run.counting_clone(minidom._clone_node)),
         (xacro, "all_includes", []),
         (sa, "_eval", run.eval_substitution),
-        (sa, "_eval_env", _refuse_environment),
-        (sa, "_eval_optenv", _refuse_environment),
+        (sa, "_eval_env", _refuse_env),
+        (sa, "_eval_optenv", _refuse_optenv),
         (sa, "_eval_find", run.find),
     ]
     saved = [(target, name, getattr(target, name)) for target, name, _ in patches]

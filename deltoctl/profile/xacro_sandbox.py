@@ -8,7 +8,9 @@ Attribute access is only a name lookup in a namespace (``math.pi``, an included 
 ``ns.prop``, a YAML mapping's ``d.key``) or one of a few whitelisted ``str``/``dict`` methods:
 no Python object's attributes are ever reached, so ``__class__``, ``__globals__`` and friends
 do not exist here. Sizes are bounded too (text, containers, integers), so an expression cannot
-exhaust memory or time.
+exhaust memory or time: an operation that would make a large value (a join, a repeat, a
+padding width, a split, a power) is refused from its operands' sizes before it is made, and
+the values one expression makes are bounded together.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import functools
 import math
 import operator
 import re
+import sys
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -27,6 +30,7 @@ MAX_EXPRESSION_DEPTH = 64
 MAX_TEXT = 1 << 20  # characters in a string, or the printed size of a container
 MAX_INT_BITS = 10_000  # str() of such an int stays under Python's 4300-digit limit
 MAX_ROUND_DIGITS = 1000
+MAX_EXPRESSION_BYTES = 16 << 20  # memory of all the values one expression makes
 
 
 class SandboxError(Exception):
@@ -153,7 +157,7 @@ def _check_mult(a: Any, b: Any) -> None:
 
 def _check_pow(base: Any, exp: Any) -> None:
     if type(base) in (int, bool) and type(exp) in (int, bool) and exp > 0 \
-            and abs(base) > 1 and (base.bit_length() - 1) * exp > MAX_INT_BITS:
+            and abs(base) > 1 and exp * math.log2(abs(base)) > MAX_INT_BITS:
         raise SandboxError(f"an integer larger than {MAX_INT_BITS} bits")
 
 
@@ -168,7 +172,7 @@ def _check_mod(a: Any, b: Any) -> None:
 
 
 def _check_shift(a: Any, b: Any) -> None:
-    if type(b) in (int, bool) and b > MAX_INT_BITS:
+    if type(a) in (int, bool) and type(b) in (int, bool) and a.bit_length() + b > MAX_INT_BITS:
         raise SandboxError(f"an integer larger than {MAX_INT_BITS} bits")
 
 
@@ -204,6 +208,13 @@ def _guard_text(*args: Any, **kwargs: Any) -> None:
         raise SandboxError(f"text longer than {MAX_TEXT} characters")
 
 
+def _guard_items(items: Any = (), *args: Any, **kwargs: Any) -> None:
+    """list(), tuple(), sorted() of a string make a string of each character: counted first."""
+    if type(items) is str and 2 + 5 * len(items) > MAX_TEXT:
+        raise SandboxError(f"a list of {len(items)} characters, beyond {MAX_TEXT} characters "
+                           "printed")
+
+
 def _guard_round(number: Any = 0, ndigits: Any = None) -> None:
     if type(ndigits) is int and abs(ndigits) > MAX_ROUND_DIGITS:
         raise SandboxError(f"round() to more than {MAX_ROUND_DIGITS} digits")
@@ -228,20 +239,24 @@ BUILTINS: dict[str, Any] = {
     "float": Function("float", float),
     "int": Function("int", int),
     "len": Function("len", len),
-    "list": Function("list", list),
+    "list": Function("list", list, _guard_items),
     "max": Function("max", max),
     "min": Function("min", min),
     "repr": Function("repr", repr, _guard_text),
     "round": Function("round", round, _guard_round),
-    "sorted": Function("sorted", sorted),
+    "sorted": Function("sorted", sorted, _guard_items),
     "str": Function("str", str, _guard_text),
-    "tuple": Function("tuple", tuple),
+    "tuple": Function("tuple", tuple, _guard_items),
 }
 
 
 def _tokenize(text: Any, sep: Any = ",; ", skip_empty: bool = True) -> list[str]:
     if not isinstance(text, str) or not isinstance(sep, str):
         raise SandboxError("xacro.tokenize() takes text")
+    pieces = sum(text.count(c) for c in set(sep)) + 1
+    if len(text) + 4 * pieces > MAX_TEXT:
+        raise SandboxError(f"xacro.tokenize() into {pieces} pieces, beyond {MAX_TEXT} "
+                           "characters")
     # xacro builds this regex from sep unescaped; escaping it keeps sep a set of characters
     items = re.split(f"[{re.escape(sep)}]", text) if sep else [text]
     return [i for i in items if i] if skip_empty else items
@@ -299,10 +314,40 @@ def _guard_replace(text: str, old: Any = "", new: Any = "", count: Any = -1) -> 
 
 
 def _guard_join(sep: str, items: Any = ()) -> None:
-    if type(items) in (list, tuple):
-        total = sum(len(i) for i in items if isinstance(i, str)) + len(sep) * len(items)
-        if total > MAX_TEXT:
-            raise SandboxError(f"str.join() beyond {MAX_TEXT} characters")
+    """The joined length, from the items' lengths: a string's items are its characters."""
+    if type(items) is str:
+        total = len(items) + len(sep) * max(len(items) - 1, 0)
+    elif type(items) in _CONTAINERS:
+        total = sum(len(i) for i in items if type(i) is str) + len(sep) * max(len(items) - 1, 0)
+    else:
+        return  # str.join raises TypeError itself
+    if total > MAX_TEXT:
+        raise SandboxError(f"str.join() of {total} characters, beyond {MAX_TEXT}")
+
+
+def _guard_width(text: str, width: Any = 0, *args: Any) -> None:
+    """ljust, rjust, center, zfill: the result is ``width`` characters long."""
+    if type(width) in (int, bool) and width > MAX_TEXT:
+        raise SandboxError(f"a width of {width} characters, beyond {MAX_TEXT}")
+
+
+def _guard_expandtabs(text: str, tabsize: Any = 8) -> None:
+    if type(tabsize) in (int, bool) and len(text) + text.count("\t") * tabsize > MAX_TEXT:
+        raise SandboxError(f"str.expandtabs() beyond {MAX_TEXT} characters")
+
+
+def _guard_split(text: str, sep: Any = None, maxsplit: Any = -1) -> None:
+    """The pieces of a split, counted before they are made: each costs a string."""
+    if sep is None:
+        pieces = sum(1 for _ in re.finditer(r"\S+", text))
+    elif isinstance(sep, str) and sep:
+        pieces = text.count(sep) + 1
+    else:
+        return  # str.split raises itself
+    if type(maxsplit) is int and maxsplit >= 0:
+        pieces = min(pieces, maxsplit + 1)
+    if len(text) + 4 * pieces > MAX_TEXT:
+        raise SandboxError(f"str.split() into {pieces} pieces, beyond {MAX_TEXT} characters")
 
 
 _STR_METHODS: dict[str, Callable[..., None] | None] = {
@@ -312,7 +357,9 @@ _STR_METHODS: dict[str, Callable[..., None] | None] = {
         "isalnum", "isnumeric", "isspace", "islower", "isupper", "removeprefix",
         "removesuffix", "partition", "rpartition")
 }
-_STR_METHODS.update(replace=_guard_replace, join=_guard_join)
+_STR_METHODS.update(replace=_guard_replace, join=_guard_join, split=_guard_split,
+                    rsplit=_guard_split, expandtabs=_guard_expandtabs,
+                    **dict.fromkeys(("ljust", "rjust", "center", "zfill"), _guard_width))
 _DICT_METHODS = {
     "get": lambda d, *a: d.get(*a),
     "keys": lambda d: list(d.keys()),
@@ -429,8 +476,10 @@ class Evaluator:
         self.member = member
         self.is_namespace = is_namespace or (lambda value: False)
         self.spend = spend
+        self.made = 0  # bytes of the values made so far by the expression being evaluated
 
     def evaluate(self, text: str) -> Any:
+        self.made = 0
         try:
             tree = parse_expression(text)
             return self.value(tree.body)
@@ -450,6 +499,12 @@ class Evaluator:
         if isinstance(result, Namespace) or self.is_namespace(result):
             raise SandboxError("a namespace is not a value")
         check_value(result)
+        # each value is bounded on its own; together, held in a list or beside each other
+        # while the rest is evaluated, they are bounded too
+        self.made += sys.getsizeof(result)
+        if self.made > MAX_EXPRESSION_BYTES:
+            raise SandboxError(f"an expression whose values take more than "
+                               f"{MAX_EXPRESSION_BYTES >> 20} MiB")
         if self.spend is not None:
             self.spend(1 + (len(result) if type(result) in _SIZED else 0))
         return result
