@@ -103,3 +103,73 @@ def test_a_profile_bus_that_cannot_be_read_is_a_usage_error(cli, tmp_path):
     result = cli("-p", str(profile), "connect")
     assert result.exit_code == 2, (result.stderr, result.exception)
     assert "'tcp://[::1' is not a target URL" in result.stderr
+
+
+# -- a serial port whose device goes away ----------------------------------------------------------
+
+def test_a_pty_whose_master_closed_fails_with_an_oserror():
+    """pyserial flushes with termios, whose error is no OSError: the port raises OSError (EIO)
+    as for every other failure, which the lost-bus path takes."""
+    import errno
+    import os
+
+    from deltoctl.transport.serial_port import open_serial
+
+    master, slave = os.openpty()
+    path = os.ttyname(slave)
+    os.close(slave)
+    port = open_serial(f"serial://{path}?baud=2000000")
+    try:
+        port.reset_input_buffer()  # fine while the other end is there
+        os.close(master)
+        for call in (port.reset_input_buffer, port.reset_output_buffer, port.flush):
+            with pytest.raises(OSError) as caught:
+                call()
+            assert caught.value.errno == errno.EIO
+    finally:
+        port.close()
+
+
+@pytest.mark.slow
+def test_a_servo_bus_closed_mid_record_is_a_lost_bus_every_time(tmp_path):
+    """The bus's pseudo-terminal closed at any moment of a record's cycle: never an internal
+    error, always the lost bus (exit 4) and a readable file."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    from mcap.reader import make_reader
+
+    from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
+    from deltoctl.profile.catalog import load_profile
+    from tests.conftest import REPO, eventually
+
+    hw = next(h for h in load_profile("mh5").hardware if h.name == "upper_body")
+    for run in range(6):
+        server = DynamixelPtyServer(DynamixelBus([Servo(j.address) for j in hw.joints])).start()
+        out = tmp_path / f"bus-{run}.mcap"
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "deltoctl", "-p", "mh5", "--hardware", "upper_body", "-t",
+             f"upper_body=serial://{server.port}?baud=2000000", "record", str(out),
+             "--rate", "200", "--duration", "1.5"],
+            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            assert eventually(lambda f=out: proc.poll() is not None  # noqa: B023
+                              or (f.exists() and f.stat().st_size > 0), timeout=30)
+            # the test holds the pty's other end: its number is not given to a new pty (the
+            # bus would "come back" as another device) and reopening it fails, as a bus
+            # whose adapter was pulled
+            held = os.open(server.port, os.O_RDWR | os.O_NOCTTY)
+            time.sleep(0.05 * run)  # a different moment of the cycle each run
+            server.close()
+            _, err = proc.communicate(timeout=60)
+            os.close(held)
+        finally:
+            proc.kill()
+            server.close()
+        assert proc.returncode == 4, (run, err)
+        assert "internal error" not in err and "Traceback" not in err, err
+        assert "upper_body" in err and "did not come back" in err
+        with out.open("rb") as f:  # whole: indexed, with the cycles before the loss
+            assert make_reader(f).get_summary().statistics.message_count > 0

@@ -67,6 +67,31 @@ def holders(path: str) -> list[str]:
     return found
 
 
+# pyserial calls termios directly in these; the rest raise OSError (SerialException) already
+_TERMIOS_CALLS = ("reset_input_buffer", "reset_output_buffer", "flush")
+
+
+def _termios_errors_as_oserror(port: Any) -> None:
+    """A port whose device went away (an adapter unplugged, a pty whose master closed: EIO)
+    fails in ``tcflush``/``tcdrain`` with ``termios.error``, which is no OSError: raised as
+    one, like every other failure of the port, so a driver's lost-link path takes it."""
+    if os.name != "posix":
+        return
+    import termios
+
+    def checked(call: Any) -> Any:
+        def run() -> None:
+            try:
+                call()
+            except termios.error as exc:
+                code, text = exc.args if len(exc.args) == 2 else (errno.EIO, str(exc))
+                raise OSError(code, text) from None
+        return run
+
+    for name in _TERMIOS_CALLS:
+        setattr(port, name, checked(getattr(port, name)))
+
+
 def open_serial(url: str, timeout: float = 0.05) -> Any:
     """An open pyserial port, locked for this process (two commands cannot share a bus); RS-485
     mode through the kernel where the port supports it."""
@@ -92,6 +117,7 @@ def open_serial(url: str, timeout: float = 0.05) -> Any:
                                                          rts_level_for_rx=False)
         except (ValueError, OSError, serial.SerialException):
             port.rs485_mode = None  # e.g. a USB adapter that switches direction itself
+    _termios_errors_as_oserror(port)
     trace.link("serial %s: open at %d baud%s", path, baud, ", RS-485" if rs485 else "")
     if trace.PACKETS:  # checked once per port: an untraced port keeps its own methods
         trace.trace_serial(port, url)
