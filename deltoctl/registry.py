@@ -43,6 +43,9 @@ class Family:
     summary: str = ""
     refused_hint: str = ""  # what to do when its TCP target refuses the connection
     register_items: str | None = None  # "module:function" → the register names it takes
+    # "module:function" → {item: (low, high, permission)}: the documented range of each
+    # configuration item, and the --allow `config restore` needs to write a safety setting
+    config_rules: str | None = None
     # a plugin param that, "true", makes the plugin simulate its device (Bioscara's
     # use_mock_hardware): such a block runs on the family's emulator without --sim
     mock_param: str | None = None
@@ -68,6 +71,9 @@ class Family:
     def register_names(self) -> list[str]:
         """The register item names its ``register`` verbs take (completion)."""
         return list(_load(self.register_items)()) if self.register_items else []
+
+    def config_rule_table(self) -> dict[str, tuple[int | None, int | None, str | None]]:
+        return dict(_load(self.config_rules)()) if self.config_rules else {}
 
     def show_address(self, address: int) -> str:
         return format(address, self.address_format)

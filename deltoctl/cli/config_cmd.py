@@ -457,12 +457,55 @@ def diff(
 
 # -- restoring ---------------------------------------------------------------------------------
 
+Rule = tuple[int | None, int | None, str | None]  # documented range, and its --allow
+
+
+def restore_rules(live: dict[str, dict[str, Any]]) -> dict[str, dict[str, Rule]]:
+    """Per block, what its family declares of each item: the documented range and the
+    permission a safety setting needs (``Family.config_rules``)."""
+    from deltoctl import registry
+
+    tables: dict[str, dict[str, Rule]] = {}
+    for name in {b["family"] for b in live.values()}:
+        family = registry.get(name)
+        tables[name] = family.config_rule_table() if family else {}
+    return {block: tables[b["family"]] for block, b in live.items()}
+
+
+def check_ranges(snap: Snapshot, rows: list[dict[str, Any]],
+                 rules: dict[str, dict[str, Rule]]) -> None:
+    """A value to restore outside its item's documented range (not only its size's) is a bad
+    snapshot: exit 2, naming the item, the value and the range, before anything is written."""
+    for row in rows:
+        low, high, _ = rules[row["block"]].get(row["item"], (None, None, None))
+        value = row["snapshot"]
+        if not isinstance(value, int) or isinstance(value, bool):
+            continue
+        if (low is not None and value < low) or (high is not None and value > high):
+            key = (row["block"], row["part"], row["item"])
+            raise ProfileError(f"{'/'.join(key)}: {value} is outside the item's documented "
+                               f"range {_bound(low)}..{_bound(high)}", snap.source,
+                               snap.values[key].line)
+
+
+def _bound(value: int | None) -> str:
+    return "" if value is None else str(value)
+
+
+def permission(text: str) -> str:
+    """An --allow value as the rules spell it: "Max Position Limit" → max-position-limit."""
+    return "-".join(text.strip().lower().replace("_", " ").split())
+
+
 def plan(rows: list[dict[str, Any]], live: dict[str, dict[str, Any]],
-         allow: frozenset[str]) -> None:
-    """Each differing item's fate: write, or why not (read-only, skipped, refused)."""
+         allow: frozenset[str], rules: dict[str, dict[str, Rule]] | None = None) -> None:
+    """Each differing item's fate: write, or why not (read-only, skipped, refused). A safety
+    setting a family declares needs its --allow, as EEPROM with torque on needs torque-off."""
     for row in rows:
         entry = live_entry(live, (row["block"], row["part"], row["item"]))
-        needs, opt_in = entry.get("needs"), entry.get("opt_in")
+        guard = ((rules or {}).get(row["block"], {}).get(row["item"]) or (None,) * 3)[2]
+        needs = [n for n in (entry.get("needs"), guard) if n]
+        missing, opt_in = [n for n in needs if n not in allow], entry.get("opt_in")
         if needs:
             row["needs"] = needs
         if entry.get("access") == "profile":
@@ -474,10 +517,12 @@ def plan(rows: list[dict[str, Any]], live: dict[str, dict[str, Any]],
             row["status"], row["note"] = "skipped", f"not restored: {entry['fixed']}"
         elif opt_in and opt_in not in allow:
             row["status"], row["note"] = "skipped", f"written only when asked: --allow {opt_in}"
-        elif needs and needs not in allow:
-            row["status"], row["note"] = "refused", f"needs --allow {needs}"
+        elif missing:
+            row["status"] = "refused"
+            row["note"] = "needs " + " and ".join(f"--allow {n}" for n in missing)
         else:
-            row["status"], row["note"] = "write", f"with --allow {needs}" if needs else ""
+            row["status"] = "write"
+            row["note"] = "with " + " and ".join(f"--allow {n}" for n in needs) if needs else ""
 
 
 def _write(system: Any, rows: list[dict[str, Any]], allow: frozenset[str]) -> None:
@@ -529,7 +574,11 @@ def _report(opts: Options, snapshot_file: Path, rows: list[dict[str, Any]],
 
 
 def _complete_allow(incomplete: str) -> list[str]:
-    return [n for n in PERMISSIONS if n.startswith(incomplete)]
+    from deltoctl import registry
+
+    declared = {rule[2] for f in registry.families().values()
+                for rule in f.config_rule_table().values() if rule[2]}
+    return [n for n in (*PERMISSIONS, *sorted(declared)) if n.startswith(incomplete)]
 
 
 def restore(
@@ -540,17 +589,20 @@ def restore(
         "--allow", metavar="WHAT", autocompletion=_complete_allow,
         help="Permit what a restore does not do unasked (repeatable): torque-off (switch a "
              "servo's torque off for its EEPROM writes, on again after), home-offset (write "
-             "a joint's stored home offset).")] = None,
+             "a joint's stored home offset), or a safety setting by its item name, e.g. "
+             "max-position-limit (limits, shutdown, homing offset and modes are written "
+             "only when named).")] = None,
 ) -> None:
     """Write back what differs from a snapshot, in the order each device requires, after
-    confirmation (--yes skips it); each item is verified by reading it back. Exit 1 when a
-    verification fails, 5 when refused for safety (EEPROM with torque on), 3 when some
-    items could not be written (read-only)."""
+    confirmation (--yes skips it); each item is verified by reading it back. A value outside
+    its item's documented range is exit 2, before anything is written. Exit 1 when a
+    verification fails, 5 when refused for safety (EEPROM with torque on, a safety setting
+    not named by --allow), 3 when some items could not be written (read-only)."""
     from deltoctl.cli.device_cmd import open_system
     from deltoctl.cli.motion_cmd import confirm_motion
 
     opts = options(ctx)
-    permitted = frozenset(allow or ())
+    permitted = frozenset(permission(a) for a in allow or ())
     snap = load_snapshot(snapshot_file)  # a bad snapshot stops here, before any device
     profile = _profile(opts, snap)
     with open_system(opts, profile=profile) as system:
@@ -560,12 +612,14 @@ def restore(
         rows = differences(snap.values, live_values(live), both_ways=False)
         for row in rows:
             row["live"] = row.pop("other")
-        plan(rows, live, permitted)
+        rules = restore_rules(live)
+        check_ranges(snap, rows, rules)
+        plan(rows, live, permitted, rules)
         writes = [r for r in rows if r["status"] == "write"]
         refused = [r for r in rows if r["status"] == "refused"]
         if refused:
             _report(opts, snapshot_file, rows, notes)
-            _refuse(refused)
+            _refuse(refused, permitted)
         if writes:
             confirm_motion(opts, _what(writes))
             _write(system, rows, permitted)
@@ -574,23 +628,28 @@ def restore(
     _exit(rows, notes)
 
 
-def _refuse(refused: list[dict[str, Any]]) -> None:
+def _refuse(refused: list[dict[str, Any]], allow: frozenset[str]) -> None:
     """Refused before anything is written or anyone is asked: what, and the way on."""
-    needs = sorted({r["needs"] for r in refused})
+    needs = sorted({n for r in refused for n in r["needs"] if n not in allow})
     parts = sorted({f"{r['block']}/{r['part']}" for r in refused})
     why = " ".join(NEEDS.get(n, "") for n in needs).strip()
+    safety = [n for n in needs if n not in NEEDS]
+    if safety:
+        why = (why + " " if why else "") + (f"{', '.join(safety)}: safety setting(s), "
+                                            "written only when named")
     raise Refused(f"nothing written: {len(refused)} item(s) of {', '.join(parts)} are "
                   f"written only with {' and '.join(f'--allow {n}' for n in needs)}"
                   + (f" ({why})" if why else ""),
-                  hint=" or ".join(HINTS.get(n, f"pass --allow {n}") for n in needs))
+                  hint="; ".join(HINTS.get(n, f"check the snapshot's value, then pass "
+                                              f"--allow {n}") for n in needs))
 
 
 def _what(writes: list[dict[str, Any]]) -> str:
     parts = sorted({f"{r['block']}/{r['part']}" for r in writes})
     shown = ", ".join(parts[:6]) + (f" and {len(parts) - 6} more" if len(parts) > 6 else "")
     what = f"restore {len(writes)} value(s) to {shown}"
-    for need in sorted({r["needs"] for r in writes if r.get("needs")}):
-        names = sorted({r["part"] for r in writes if r.get("needs") == need})
+    for need in sorted({n for r in writes for n in r.get("needs", ())}):
+        names = sorted({r["part"] for r in writes if need in r.get("needs", ())})
         what += f"; {', '.join(names)}: {ALLOWED.get(need, '--allow ' + need)}"
     return what
 

@@ -17,6 +17,7 @@ FAMILY = Family(
                             "reboot", "config"}),
     serve_options=("missing", "pace", "wrong_baud"),
     register_items="deltoctl.families.dynamixel.control_table:item_names",
+    config_rules="deltoctl.families.dynamixel.control_table:config_rules",
 )
 
 

@@ -1,7 +1,8 @@
 """The XL430-W250 control table as data (ROBOTIS e-manual; reference §3.3).
 
-One row per item: address, size in bytes, name, access (R or RW), area, default. EEPROM items
-(addresses below 64) are writable only while Torque Enable is 0.
+One row per item: address, size in bytes, name, access (R or RW), default, sign, the range the
+e-manual documents (docs/en/dxl/x/xl430-w250.md) and whether it is a safety setting. EEPROM
+items (addresses below 64) are writable only while Torque Enable is 0.
 """
 
 from __future__ import annotations
@@ -17,10 +18,20 @@ class Item:
     access: str = "RW"  # "R" or "RW"
     default: int = 0
     signed: bool = False
+    low: int | None = None  # the documented range (None: only the size's)
+    high: int | None = None
+    # a safety setting (a limit, what an error does, where zero is, how the servo moves):
+    # `config restore` writes it only when named with --allow
+    safety: bool = False
 
     @property
     def eeprom(self) -> bool:
         return self.address < 64
+
+    @property
+    def key(self) -> str:
+        """The name --allow takes: max-position-limit."""
+        return self.name.lower().replace(" ", "-")
 
 
 XL430_W250 = 1060
@@ -29,41 +40,41 @@ XL430: tuple[Item, ...] = (
     Item(0, 2, "Model Number", "R", XL430_W250),
     Item(2, 4, "Model Information", "R"),
     Item(6, 1, "Firmware Version", "R", 46),
-    Item(7, 1, "ID", default=1),
-    Item(8, 1, "Baud Rate", default=1),
-    Item(9, 1, "Return Delay Time", default=250),
-    Item(10, 1, "Drive Mode"),
-    Item(11, 1, "Operating Mode", default=3),
-    Item(12, 1, "Secondary ID", default=255),
-    Item(13, 1, "Protocol Type", default=2),
-    Item(20, 4, "Homing Offset", signed=True),
-    Item(24, 4, "Moving Threshold", default=10),
-    Item(31, 1, "Temperature Limit", default=72),
-    Item(32, 2, "Max Voltage Limit", default=140),
-    Item(34, 2, "Min Voltage Limit", default=60),
-    Item(36, 2, "PWM Limit", default=885),
-    Item(44, 4, "Velocity Limit", default=265),
-    Item(48, 4, "Max Position Limit", default=4095),
-    Item(52, 4, "Min Position Limit", default=0),
-    Item(60, 1, "Startup Configuration"),
-    Item(63, 1, "Shutdown", default=52),
-    Item(64, 1, "Torque Enable"),
-    Item(65, 1, "LED"),
-    Item(68, 1, "Status Return Level", default=2),
+    Item(7, 1, "ID", default=1, low=0, high=252),
+    Item(8, 1, "Baud Rate", default=1, low=0, high=7),
+    Item(9, 1, "Return Delay Time", default=250, low=0, high=254),
+    Item(10, 1, "Drive Mode", low=0, high=13, safety=True),
+    Item(11, 1, "Operating Mode", default=3, low=0, high=16, safety=True),
+    Item(12, 1, "Secondary ID", default=255, low=0, high=255),  # 253 and above: none
+    Item(13, 1, "Protocol Type", default=2, low=1, high=2),
+    Item(20, 4, "Homing Offset", signed=True, low=-1_044_479, high=1_044_479, safety=True),
+    Item(24, 4, "Moving Threshold", default=10, low=0, high=1023),
+    Item(31, 1, "Temperature Limit", default=72, low=0, high=100, safety=True),
+    Item(32, 2, "Max Voltage Limit", default=140, low=60, high=140, safety=True),
+    Item(34, 2, "Min Voltage Limit", default=60, low=60, high=140, safety=True),
+    Item(36, 2, "PWM Limit", default=885, low=0, high=885, safety=True),
+    Item(44, 4, "Velocity Limit", default=265, low=0, high=1023, safety=True),
+    Item(48, 4, "Max Position Limit", default=4095, low=0, high=4095, safety=True),
+    Item(52, 4, "Min Position Limit", low=0, high=4095, safety=True),
+    Item(60, 1, "Startup Configuration", low=0, high=3, safety=True),  # bit 0: torque on
+    Item(63, 1, "Shutdown", default=52, low=0, high=63, safety=True),  # bits 0-5
+    Item(64, 1, "Torque Enable", low=0, high=1),
+    Item(65, 1, "LED", low=0, high=1),
+    Item(68, 1, "Status Return Level", default=2, low=0, high=2),
     Item(69, 1, "Registered Instruction", "R"),
     Item(70, 1, "Hardware Error Status", "R"),
-    Item(76, 2, "Velocity I Gain", default=1000),
-    Item(78, 2, "Velocity P Gain", default=100),
-    Item(80, 2, "Position D Gain", default=4000),
-    Item(82, 2, "Position I Gain", default=0),
-    Item(84, 2, "Position P Gain", default=640),
-    Item(88, 2, "Feedforward 2nd Gain"),
-    Item(90, 2, "Feedforward 1st Gain"),
-    Item(98, 1, "Bus Watchdog"),
+    Item(76, 2, "Velocity I Gain", default=1000, low=0, high=16383),
+    Item(78, 2, "Velocity P Gain", default=100, low=0, high=16383),
+    Item(80, 2, "Position D Gain", default=4000, low=0, high=16383),
+    Item(82, 2, "Position I Gain", low=0, high=16383),
+    Item(84, 2, "Position P Gain", default=640, low=0, high=16383),
+    Item(88, 2, "Feedforward 2nd Gain", low=0, high=16383),
+    Item(90, 2, "Feedforward 1st Gain", low=0, high=16383),
+    Item(98, 1, "Bus Watchdog", low=0, high=127, safety=True),  # 0: off; 255 (-1): tripped
     Item(100, 2, "Goal PWM", signed=True),
     Item(104, 4, "Goal Velocity", signed=True),
-    Item(108, 4, "Profile Acceleration"),
-    Item(112, 4, "Profile Velocity"),
+    Item(108, 4, "Profile Acceleration", low=0, high=32767),
+    Item(112, 4, "Profile Velocity", low=0, high=32767),
     Item(116, 4, "Goal Position", signed=True),
     Item(120, 2, "Realtime Tick", "R"),
     Item(122, 1, "Moving", "R"),
@@ -131,6 +142,12 @@ READINGS = frozenset({
 # servo (the profile addresses it by ID at the bus's rate); `register set` changes them
 BUS_ITEMS = frozenset({"ID", "Baud Rate", "Protocol Type", "Status Return Level"})
 OPERATING_MODES = {1: "velocity", 3: "position", 4: "extended position", 16: "PWM"}
+
+
+def config_rules() -> dict[str, tuple[int | None, int | None, str | None]]:
+    """For `config restore`: each item's documented range, and the --allow that a safety
+    setting needs to be written (None for the others)."""
+    return {i.name: (i.low, i.high, i.key if i.safety else None) for i in XL430}
 
 
 def item_names() -> list[str]:
