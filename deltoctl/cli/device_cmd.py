@@ -297,6 +297,10 @@ def stream(
     foxglove_host: Annotated[str, typer.Option(
         "--foxglove-host", metavar="ADDRESS", help="The address to serve Foxglove on; another "
         "than loopback serves the robot's data to other machines.")] = "127.0.0.1",
+    foxglove_origin: Annotated[list[str] | None, typer.Option(
+        "--foxglove-origin", metavar="ORIGIN", help="Also let in browser pages of this origin "
+        "(repeatable); by default only Foxglove's own and clients that send no Origin.")]
+        = None,
 ) -> None:
     """Stream every block's state interfaces: a live table on a terminal, NDJSON with --json
     or when piped; with --foxglove, to Foxglove as well (every interface, whatever -i picks).
@@ -308,7 +312,7 @@ def stream(
 
     opts = options(ctx)
     check_loop(rate, duration)
-    with foxglove_live(foxglove, foxglove_host, foxglove_port) as live, \
+    with foxglove_live(foxglove, foxglove_host, foxglove_port, foxglove_origin) as live, \
             open_robot(opts, allow_model_mismatch) as robot:
         system = robot.system
         names = robot.interfaces(interfaces or [])

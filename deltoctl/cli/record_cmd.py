@@ -83,10 +83,16 @@ FoxgloveHostOpt = Annotated[str, typer.Option(
     "--foxglove-host", metavar="ADDRESS",
     help="The address to serve Foxglove on; another than loopback serves the robot's data to "
          "other machines.")]
+FoxgloveOriginOpt = Annotated[list[str] | None, typer.Option(
+    "--foxglove-origin", metavar="ORIGIN",
+    help="Also let in browser pages of this origin (repeatable, e.g. http://localhost:8080 for "
+         "a self-hosted Foxglove); by default only Foxglove's own (https://app.foxglove.dev, "
+         "the desktop app) and clients that send no Origin.")]
 
 
 @contextlib.contextmanager
-def foxglove_live(enabled: bool, host: str, port: int) -> Iterator[Any]:
+def foxglove_live(enabled: bool, host: str, port: int,
+                  origins: list[str] | None = None) -> Iterator[Any]:
     """With --foxglove, the Foxglove sink, its address and port checked before the devices
     are opened (the server starts with ``start_foxglove``, and stops on the way out); else
     None."""
@@ -95,7 +101,7 @@ def foxglove_live(enabled: bool, host: str, port: int) -> Iterator[Any]:
         return
     from deltoctl.record.foxglove_live import FoxgloveLive, is_local
 
-    with FoxgloveLive(host, port) as live:
+    with FoxgloveLive(host, port, origins=tuple(origins or ())) as live:
         if not is_local(host):
             warn(f"--foxglove-host {host}: the robot's data is served beyond this machine, to "
                  f"anyone who reaches port {port or 'chosen'} there")
@@ -104,6 +110,9 @@ def foxglove_live(enabled: bool, host: str, port: int) -> Iterator[Any]:
         warn(f"the live view stopped: {live.error}")
     if live.dropped:
         info(f"Foxglove: {live.dropped} cycles not sent (the live view fell behind)")
+    if live.gate.refused:
+        info(f"Foxglove: {live.gate.refused} connection(s) refused for their origin "
+             "(a web page that is not Foxglove; --foxglove-origin lets one in)")
 
 
 def start_foxglove(live: Any, profile: Any, extra_states: tuple[str, ...],
@@ -167,6 +176,7 @@ def record(
     foxglove: FoxgloveOpt = False,
     foxglove_port: FoxglovePortOpt = 8765,
     foxglove_host: FoxgloveHostOpt = "127.0.0.1",
+    foxglove_origin: FoxgloveOriginOpt = None,
 ) -> None:
     """Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
     valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back, 1 when
@@ -184,7 +194,8 @@ def record(
         raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
     # the file is created once the devices answer: an unreachable one leaves no empty file;
     # SIGTERM and SIGHUP before the loop interrupt like Ctrl-C, so the file is finished too
-    with interrupted_by_signals(), foxglove_live(foxglove, foxglove_host, foxglove_port) as live, \
+    with interrupted_by_signals(), \
+            foxglove_live(foxglove, foxglove_host, foxglove_port, foxglove_origin) as live, \
             open_system(opts, allow_model_mismatch) as system:
         create_output(output)
         recorded, metadata = recording_metadata(system)

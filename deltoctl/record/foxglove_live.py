@@ -11,6 +11,12 @@ to a thread of its own a few cycles at a time (the loop never waits for the netw
 two threads hand the interpreter over a few hundred times a second, not at every cycle); that
 thread packs and logs them while a client watches. When it falls more than ``QUEUE_CYCLES``
 behind, cycles are dropped and counted.
+
+A browser lets any web page open a WebSocket to any address, loopback included, and says
+which page in the handshake's ``Origin``: ``OriginGate`` listens on the address people connect
+to and passes a client on only when its Origin is Foxglove's own (or one the user names), or
+when it sends none (a program, not a page). foxglove-sdk's server cannot filter origins, so it
+listens behind the gate on a random loopback address and port no page can guess.
 """
 
 from __future__ import annotations
@@ -19,6 +25,8 @@ import contextlib
 import ipaddress
 import os
 import queue
+import secrets
+import socket
 import threading
 import time
 from types import ModuleType
@@ -35,6 +43,13 @@ BATCH_NS = 5_000_000  # cycles go to the publisher at least every 5 ms ...
 BATCH_CYCLES = 50  # ... and at most 50 at a time (an unpaced loop)
 CLOSE_TIMEOUT = 5.0  # s the publisher gets to send what is queued when the loop ends
 LOCAL_HOSTS = ("localhost",)
+# the Origins Foxglove's own clients send: the web app (and its former address); the desktop
+# app, an Electron page loaded from file:// URLs. "null" (a sandboxed frame of any page) is
+# not one of them. A client without an Origin is a program and is let in.
+FOXGLOVE_ORIGINS = ("https://app.foxglove.dev", "https://studio.foxglove.dev", "file://")
+HEAD_LIMIT = 16 * 1024  # bytes of a handshake's request line and headers
+HEAD_TIMEOUT = 10.0  # s a client gets to send its handshake
+MAX_CLIENTS = 16  # connections passed on at a time
 
 
 def load_foxglove() -> ModuleType:
@@ -116,12 +131,12 @@ class FoxgloveLive(Sink):
     stops whatever happens."""
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8765,
-                 queue_cycles: int = QUEUE_CYCLES) -> None:
+                 queue_cycles: int = QUEUE_CYCLES, origins: tuple[str, ...] = ()) -> None:
         if not 0 <= port <= 65535:
             raise InvalidInput(f"--foxglove-port must be 0-65535, got {port}")
         self.foxglove = load_foxglove()
         self.context = self.foxglove.Context()
-        _check_port(host, port)
+        self.gate = OriginGate(host, port, (*FOXGLOVE_ORIGINS, *map(check_origin, origins)))
         self.host, self.port = host, port
         self.server: Any = None
         self.url = ws_url(host, port)
@@ -156,15 +171,25 @@ class FoxgloveLive(Sink):
         # /diagnostics comes with the first status: this one, before any client
         self.recorder.diagnostic(time.time_ns(), OK, "foxglove", "live view started", {
             "topics": len(writer.channels) + 1})
-        try:
-            self.server = self.foxglove.start_server(
-                name="deltoctl", host=self.host, port=self.port, context=self.context)
-        except RuntimeError as exc:  # taken since the check
-            raise InvalidInput(_bind_error(self.host, self.port, str(exc))) from None
-        self.url = ws_url(self.host, self.server.port)
+        self.server, inner = self._start_behind_gate()
+        self.gate.start((inner, self.server.port))
+        self.url = ws_url(self.host, self.gate.port)
         self.thread = threading.Thread(target=self._publish, name="deltoctl-foxglove",
                                        daemon=True)
         self.thread.start()
+
+    def _start_behind_gate(self) -> tuple[Any, str]:
+        """foxglove-sdk's server and its address: a random loopback one (Linux routes all of
+        127/8 to loopback; elsewhere 127.0.0.1) and a free port, reached through the gate."""
+        error = ""
+        for host in (f"127.{secrets.randbelow(254) + 1}.{secrets.randbelow(256)}."
+                     f"{secrets.randbelow(254) + 1}", "127.0.0.1"):
+            try:
+                return self.foxglove.start_server(name="deltoctl", host=host, port=0,
+                                                  context=self.context), host
+            except RuntimeError as exc:
+                error = str(exc)
+        raise InvalidInput(_bind_error("127.0.0.1", 0, error))
 
     # -- the cycle thread: queue, never wait -------------------------------------------------
 
@@ -235,6 +260,7 @@ class FoxgloveLive(Sink):
         self.stopped = True
         if self.thread is not None and self.thread.is_alive():
             self.queue.put(None)
+        self.gate.stop()
         if self.server is not None:
             self.server.stop()
 
@@ -268,25 +294,196 @@ class FoxgloveLive(Sink):
                 recorder.writer.finish()
 
 
-def _check_port(host: str, port: int) -> None:
-    """The address resolves and the port is free (0: any free one will do)."""
-    import socket
-
+def _listen(host: str, port: int) -> socket.socket:
+    """A listening socket on the address (port 0: any free one), or one clear message."""
     try:
         infos = socket.getaddrinfo(host.strip("[]"), port, type=socket.SOCK_STREAM)
     except (OSError, UnicodeError) as exc:
         raise InvalidInput(f"--foxglove-host {host}: no such address "
                            f"({getattr(exc, 'strerror', None) or exc})") from None
-    if not port:
-        return
     family, kind, proto, _, address = infos[0]
-    with socket.socket(family, kind, proto) as probe:
-        if os.name != "nt":  # as the server binds: a port in TIME_WAIT is free
-            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock = socket.socket(family, kind, proto)
+    try:
+        if os.name != "nt":  # a port in TIME_WAIT is free
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(address)
+        sock.listen(MAX_CLIENTS)
+    except OSError as exc:
+        sock.close()
+        raise InvalidInput(_bind_error(host, port, exc.strerror or str(exc))) from None
+    return sock
+
+
+def check_origin(origin: str) -> str:
+    """An origin as a browser sends it: ``scheme://host[:port]``, nothing more (``file://``
+    too); a trailing slash is dropped. Anything else is a usage error."""
+    from urllib.parse import urlsplit
+
+    text = _normal(origin)
+    if text == "file://":
+        return text
+    try:
+        parts = urlsplit(text)
+        parts.port  # noqa: B018 - a port that is no number raises here
+    except ValueError:
+        parts = None
+    if (parts is None or not parts.scheme or not parts.hostname or parts.path or parts.query
+            or parts.fragment or parts.username is not None):
+        raise InvalidInput(f"--foxglove-origin {origin!r}: expected an origin as a browser "
+                           "sends it, scheme://host[:port] (e.g. https://app.foxglove.dev)")
+    return text
+
+
+def _normal(origin: str) -> str:
+    """An origin as compared: lower case, without a trailing slash (``file://`` whole)."""
+    text = origin.strip().lower()
+    return "file://" if text in ("file:", "file://", "file:///") else text.rstrip("/")
+
+
+class OriginGate:
+    """The live view's listening socket: each client's WebSocket handshake is read (bounded in
+    size and time); one whose ``Origin`` is not accepted gets 403 and is closed, the others are
+    passed on, bytes both ways, to the server behind the gate."""
+
+    def __init__(self, host: str, port: int, origins: tuple[str, ...]) -> None:
+        self.sock = _listen(host, port)
+        self.port = self.sock.getsockname()[1]
+        self.origins = frozenset(origins)
+        self.inner: tuple[str, int] = ("127.0.0.1", 0)
+        self.slots = threading.BoundedSemaphore(MAX_CLIENTS)
+        self.open: set[socket.socket] = set()
+        self.lock = threading.Lock()
+        self.refused = 0  # handshakes refused for their origin
+
+    def start(self, inner: tuple[str, int]) -> None:
+        self.inner = inner
+        threading.Thread(target=self._accept, name="deltoctl-foxglove-gate", daemon=True).start()
+
+    def stop(self) -> None:
+        with contextlib.suppress(OSError):
+            self.sock.close()
+        with self.lock:
+            for conn in self.open:
+                with contextlib.suppress(OSError):
+                    conn.shutdown(socket.SHUT_RDWR)
+                with contextlib.suppress(OSError):
+                    conn.close()
+            self.open.clear()
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                client, _ = self.sock.accept()
+            except OSError:  # stopped
+                return
+            if not self.slots.acquire(blocking=False):
+                _reply(client, "503 Service Unavailable", "too many live view clients",
+                       drain=False)  # this thread accepts: it never waits on a client
+                continue
+            threading.Thread(target=self._serve, args=(client,), daemon=True).start()
+
+    def _serve(self, client: socket.socket) -> None:
         try:
-            probe.bind(address)
-        except OSError as exc:
-            raise InvalidInput(_bind_error(host, port, exc.strerror or str(exc))) from None
+            head = _read_head(client)
+            if head is None:
+                _reply(client, "400 Bad Request", "expected a WebSocket handshake")
+                return
+            origin = _origin(head)
+            if origin is not None and origin not in self.origins:
+                self.refused += 1
+                _reply(client, "403 Forbidden", f"origin {origin} is not allowed "
+                                                 "(deltoctl --foxglove-origin)")
+                return
+            self._pass_on(client, head)
+        finally:
+            self.slots.release()
+
+    def _pass_on(self, client: socket.socket, head: bytes) -> None:
+        try:
+            server = socket.create_connection(self.inner, timeout=HEAD_TIMEOUT)
+        except OSError:
+            _reply(client, "502 Bad Gateway", "the live view is not running")
+            return
+        client.settimeout(None)
+        server.settimeout(None)
+        for conn in (client, server):
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        with self.lock:
+            self.open.update((client, server))
+        try:
+            server.sendall(head)
+            other = threading.Thread(target=_pipe, args=(server, client), daemon=True)
+            other.start()
+            _pipe(client, server)
+            other.join()
+        except OSError:
+            pass
+        finally:
+            with self.lock:
+                self.open.difference_update((client, server))
+            for conn in (client, server):
+                with contextlib.suppress(OSError):
+                    conn.close()
+
+
+def _read_head(client: socket.socket) -> bytes | None:
+    """The handshake's request line and headers, with any bytes after them (a client may send
+    its first frame at once), or None: too long, too slow, or the client left."""
+    client.settimeout(HEAD_TIMEOUT)
+    data = b""
+    try:
+        while b"\r\n\r\n" not in data:
+            if len(data) > HEAD_LIMIT:
+                return None
+            chunk = client.recv(4096)
+            if not chunk:
+                return None
+            data += chunk
+    except OSError:
+        return None
+    return data if data.index(b"\r\n\r\n") <= HEAD_LIMIT else None
+
+
+def _origin(head: bytes) -> str | None:
+    """The Origin a handshake names (lower case, as ``check_origin`` keeps them); None when it
+    names none. Several, or an old draft's Sec-WebSocket-Origin besides, read as "several":
+    never accepted."""
+    lines = head.split(b"\r\n\r\n", 1)[0].split(b"\r\n")[1:]
+    found = [_normal(value.decode("latin-1"))
+             for name, _, value in (line.partition(b":") for line in lines)
+             if name.strip().lower() in (b"origin", b"sec-websocket-origin")]
+    if not found:
+        return None
+    return found[0] if len(found) == 1 else "several origins"
+
+
+def _reply(client: socket.socket, status: str, reason: str, drain: bool = True) -> None:
+    """An HTTP answer instead of the handshake, then the connection closed once the client
+    has stopped sending (briefly, and boundedly: closed with bytes unread, it would be reset
+    before the client read the answer)."""
+    body = reason.encode() + b"\n"
+    with contextlib.suppress(OSError):
+        client.sendall(f"HTTP/1.1 {status}\r\nContent-Type: text/plain\r\nContent-Length: "
+                       f"{len(body)}\r\nConnection: close\r\n\r\n".encode() + body)
+        client.shutdown(socket.SHUT_WR)
+        client.settimeout(1.0)
+        drained = 0
+        while drain and drained < 4 * HEAD_LIMIT and (chunk := client.recv(4096)):
+            drained += len(chunk)
+    with contextlib.suppress(OSError):
+        client.close()
+
+
+def _pipe(source: socket.socket, sink: socket.socket) -> None:
+    """Bytes from one end to the other until the source ends; then the sink's sending half
+    closes (the other direction finishes on its own)."""
+    try:
+        while data := source.recv(65536):
+            sink.sendall(data)
+    except OSError:
+        pass
+    with contextlib.suppress(OSError):
+        sink.shutdown(socket.SHUT_WR)
 
 
 def _bind_error(host: str, port: int, reason: str) -> str:
