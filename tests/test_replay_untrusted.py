@@ -84,9 +84,9 @@ def _profile(url: str, upper: float | None = None, cap: float | None = None, nam
     return profile
 
 
-def _push(profile, seconds: float, to: float, effort: float = 5.0):
-    """Rows every 5 ms: JOINT's position command ramping from 0 to ``to`` with ``effort``,
-    and its recorded position following it."""
+def _push(profile, seconds: float, to: float, effort: float = 0.15):
+    """Rows every 5 ms: JOINT's position command ramping from 0 to ``to`` with ``effort``
+    (within the catalog's current cap), and its recorded position following it."""
     nan = float("nan")
     base = {f"{j.name}/{k}": 0.0 for j in profile.joints() for k in ("position", "velocity")}
     blank = {f"{JOINT}/{k}_command": nan for k in ("position", "velocity", "effort")}
@@ -112,7 +112,7 @@ def test_a_recording_that_widens_the_limits_is_refused_on_a_device(cli, hand, el
     url, accepted = elsewhere
     wide = _profile(url, upper=3.0, cap=3000)
     out = tmp_path / "wide.mcap"
-    _recording_with(out, wide, _push(wide, 1.0, 2.8))
+    _recording_with(out, wide, _push(wide, 1.0, 2.8, effort=3.0))  # within 3000 mA
     for profile in ((), ("-p", "dg-5f-right")):  # the catalog's by the recorded name, or -p
         result = cli(*profile, "replay", str(out), "--device", "-t", hand.endpoint, "--yes")
         assert result.exit_code == 5, result.stderr
@@ -138,7 +138,7 @@ def test_the_recordings_bus_urls_never_choose_a_device(cli, hand, elsewhere, tmp
     url, accepted = elsewhere
     same = _profile(url)
     out = tmp_path / "elsewhere.mcap"
-    _recording_with(out, same, _push(same, 0.1, 0.05, effort=0.5))
+    _recording_with(out, same, _push(same, 0.1, 0.05))
     for args in ((), ("-p", "dg-5f-right")):
         result = cli(*args, "replay", str(out), "--device", "--yes")
         assert result.exit_code == 2, result.stderr
@@ -176,7 +176,7 @@ def test_a_recorded_profile_not_in_the_catalog_needs_p(cli, hand, elsewhere, tmp
     url, accepted = elsewhere
     renamed = _profile(url, name="my-hand")
     out = tmp_path / "mine.mcap"
-    _recording_with(out, renamed, _push(renamed, 0.1, 0.05, effort=0.5))
+    _recording_with(out, renamed, _push(renamed, 0.1, 0.05))
     result = cli("replay", str(out), "--device", "-t", hand.endpoint, "--yes")
     assert result.exit_code == 2, result.stderr
     assert "'my-hand'" in result.stderr and "not in the catalog" in result.stderr
@@ -191,7 +191,7 @@ def test_a_tighter_recorded_profile_is_shown_and_replayed(cli, hand, elsewhere, 
     url, accepted = elsewhere
     tight = _profile(url, narrow="rj_dg_3_2")
     out = tmp_path / "tight.mcap"
-    _recording_with(out, tight, _push(tight, 0.1, 0.05, effort=0.5))
+    _recording_with(out, tight, _push(tight, 0.1, 0.05))
     result = cli("replay", str(out), "--device", "-t", hand.endpoint, "--yes",
                  "--max-deviation", "100")
     assert result.exit_code == 3, result.stderr
