@@ -77,9 +77,9 @@ def test_bad_arguments_are_invalid_input():
             next(robot.stream(rate=0))
         with pytest.raises(InvalidInput, match="matches no interface"):
             robot.interfaces(["nothing_*"])
-    with pytest.raises(InvalidInput, match="sim"):
-        with deltoctl.open_robot("dg-5f-right", sim={"no_such_fault": 1}):
-            pass
+    with pytest.raises(InvalidInput, match="sim"), \
+            deltoctl.open_robot("dg-5f-right", sim={"no_such_fault": 1}):
+        pass
 
 
 def test_the_library_imports_no_terminal_code():
