@@ -10,6 +10,7 @@ would take (a plain `info` or `profile show` peaks at about 30 MB, ``BASELINE`` 
 from __future__ import annotations
 
 import json
+import struct
 import subprocess
 import sys
 from pathlib import Path
@@ -37,11 +38,12 @@ def deltoctl(*args: str) -> dict:
 
 
 def refused(result: dict, *words: str) -> str:
-    """One line on stderr with ``words``, exit 2, no traceback, a bounded peak."""
+    """One line on stderr with ``words`` (and perhaps a hint), exit 2, no traceback, a
+    bounded peak."""
     assert result["code"] == 2, result
     assert "Traceback" not in result["stderr"] and "internal error" not in result["stderr"]
     lines = result["stderr"].strip().splitlines()
-    assert len(lines) == 1, result["stderr"]
+    assert len(lines) == 1 or (len(lines) == 2 and "hint:" in lines[1]), result["stderr"]
     for word in words:
         assert word in lines[0], lines[0]
     assert result["peak_mb"] < PEAK_MB, result
@@ -111,3 +113,149 @@ def test_an_environment_variable_is_refused_saying_why(tmp_path, substitution):
                    f"{substitution} is refused", "does not read environment variables",
                    "--arg")
     assert "TypeError" not in line and "<class" not in line
+
+
+# -- MCAP chunks ---------------------------------------------------------------------------------
+
+GIB = 1 << 30
+BLOCK = 1 << 20
+
+
+def _message(channel_id: int, t_ns: int, data_size: int) -> bytes:
+    """A message record's head; its ``data_size`` bytes of data follow."""
+    return struct.pack("<BQHIQQ", 0x05, 2 + 4 + 8 + 8 + data_size, channel_id, 0, t_ns, t_ns)
+
+
+def _compressed(compression: str, head: bytes, zeros: int, content_size: bool = True) -> bytes:
+    """``head`` and ``zeros`` zero bytes compressed as one frame, a megabyte at a time (the
+    test never holds what the bomb unpacks to)."""
+    import lz4.frame
+    import zstandard
+
+    total = len(head) + zeros
+    if compression == "zstd":
+        packer = zstandard.ZstdCompressor(write_content_size=content_size).compressobj(
+            size=total if content_size else -1)
+        parts = [packer.compress(head)]
+        flush = packer.flush
+    else:
+        packer = lz4.frame.LZ4FrameCompressor()
+        parts = [packer.begin(source_size=total if content_size else 0), packer.compress(head)]
+        flush = packer.flush
+    block = bytes(BLOCK)
+    for _ in range(zeros // BLOCK):
+        parts.append(packer.compress(block))
+    parts.append(packer.compress(bytes(zeros % BLOCK)))
+    parts.append(flush())
+    return b"".join(parts)
+
+
+def _record(record) -> bytes:
+    from mcap.data_stream import RecordBuilder
+
+    builder = RecordBuilder()
+    record.write(builder)
+    return builder.end()
+
+
+def bomb_mcap(path: Path, compression: str, declared: int, zeros: int,
+              content_size: bool = True, summary: bool = True,
+              topic: str = "/diagnostics", schema: str = "diagnostic_msgs/msg/DiagnosticArray"
+              ) -> Path:
+    """An MCAP file with one chunk holding one message of ``zeros`` bytes on ``topic``,
+    compressed, the chunk declaring ``declared`` bytes unpacked; with a summary that indexes
+    the chunk, or (``summary=False``) none, as a recorder killed before it wrote one leaves."""
+    from mcap.records import (
+        Channel,
+        Chunk,
+        ChunkIndex,
+        DataEnd,
+        Footer,
+        Header,
+        MessageIndex,
+        Schema,
+        Statistics,
+    )
+
+    magic = b"\x89MCAP0\r\n"
+    head = _message(1, 1_000, zeros)
+    records = [Schema(id=1, name=schema, encoding="ros2msg", data=b""),
+               Channel(id=1, schema_id=1, topic=topic, message_encoding="cdr", metadata={})]
+    out = bytearray(magic + _record(Header(profile="ros2", library="bombs")))
+    for r in records:
+        out += _record(r)
+    data = _compressed(compression, head, zeros, content_size)
+    chunk_at = len(out)
+    out += _record(Chunk(compression=compression, data=data, message_start_time=1_000,
+                         message_end_time=1_000, uncompressed_crc=0,
+                         uncompressed_size=declared))
+    chunk_length = len(out) - chunk_at
+    index_at = len(out)
+    out += _record(MessageIndex(channel_id=1, records=[(1_000, 0)]))
+    out += _record(DataEnd(data_section_crc=0))
+    summary_at = 0
+    if summary:
+        summary_at = len(out)
+        for r in records:
+            out += _record(r)
+        out += _record(Statistics(message_count=1, schema_count=1, channel_count=1,
+                                  attachment_count=0, metadata_count=0, chunk_count=1,
+                                  message_start_time=1_000, message_end_time=1_000,
+                                  channel_message_counts={1: 1}))
+        out += _record(ChunkIndex(message_start_time=1_000, message_end_time=1_000,
+                                  chunk_start_offset=chunk_at, chunk_length=chunk_length,
+                                  message_index_offsets={1: index_at},
+                                  message_index_length=summary_at - index_at - 13,
+                                  compression=compression, compressed_size=len(data),
+                                  uncompressed_size=declared))
+    out += _record(Footer(summary_start=summary_at, summary_offset_start=0, summary_crc=0))
+    path.write_bytes(bytes(out + magic))
+    return path
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4"])
+@pytest.mark.parametrize("summary", [True, False], ids=["indexed", "no-summary"])
+def test_a_chunk_that_declares_a_gibibyte_is_refused_before_it_is_unpacked(
+        tmp_path, compression, summary):
+    """33 kB (zstd) or 4.4 MB (LZ4) that unpack to 1 GiB: `info` peaked at 1.04 GB (zstd) and
+    2.07 GB (LZ4); now the declared size is refused before anything is allocated."""
+    path = bomb_mcap(tmp_path / "bomb.mcap", compression, GIB, GIB, summary=summary)
+    line = refused(deltoctl("info", str(path)), str(path), "the chunk at byte 139",
+                   "declares 1073741824 bytes unpacked", "more than the 64 MiB")
+    assert "MemoryError" not in line
+
+
+def test_a_zstd_chunk_without_its_content_size_claiming_a_tebibyte_is_refused(tmp_path):
+    """Was `internal error: MemoryError` (exit 1)."""
+    path = bomb_mcap(tmp_path / "bomb.mcap", "zstd", 1 << 40, 64 << 20, content_size=False)
+    refused(deltoctl("info", str(path)), str(path), "declares 1099511627776 bytes unpacked")
+
+
+@pytest.mark.parametrize(("compression", "content_size"), [
+    ("zstd", True), ("zstd", False), ("lz4", True), ("lz4", False)])
+@pytest.mark.parametrize("summary", [True, False], ids=["indexed", "no-summary"])
+def test_a_chunk_that_unpacks_to_more_than_it_declares_stops_at_its_declared_size(
+        tmp_path, compression, content_size, summary):
+    """A chunk declaring 1 MiB whose frame holds 256 MiB (and says so, or not): unpacking
+    stops one byte past the declared size (zstd followed the frame's own size: 1.04 GB)."""
+    path = bomb_mcap(tmp_path / "bomb.mcap", compression, 1 << 20, 256 << 20,
+                     content_size=content_size, summary=summary)
+    result = deltoctl("info", str(path))
+    refused(result, str(path), "the chunk at byte 139",
+            "unpacks to more than the 1048576 bytes it declares")
+    assert result["peak_mb"] < 100, result
+
+
+@pytest.mark.parametrize("summary", [True, False], ids=["indexed", "no-summary"])
+def test_a_chunk_that_unpacks_to_what_it_declares_reads(tmp_path, summary):
+    """The same files, honest: read as before (the bounds refuse only what lies or is huge)."""
+    path = bomb_mcap(tmp_path / "small.mcap", "zstd", 31 + 1000, 1000, summary=summary)
+    result = deltoctl("info", str(path), "--json")
+    assert result["code"] in (0, 3), result
+    assert json.loads(result["stdout"])["topics"][0]["messages"] == 1
+
+
+def test_plot_is_bounded_as_info_is(tmp_path):
+    path = bomb_mcap(tmp_path / "bomb.mcap", "lz4", 1 << 20, 256 << 20, content_size=False,
+                     topic="/joint_states", schema="sensor_msgs/msg/JointState")
+    refused(deltoctl("plot", str(path), "--json"), str(path), "unpacks to more than")

@@ -16,16 +16,25 @@ hold the channels asked for, and in a chunk only the messages its message index 
 A file without a summary (the recorder was killed) is read whole, record by record: slower,
 and said so. Any other MCAP with these ROS 2 types reads too. A file that is missing, cut short
 or not MCAP is an ``InvalidInput`` naming what is wrong (exit 2).
+
+A recording is untrusted input: every size it declares is checked against a bound before
+anything of that size is allocated. A chunk unpacks to at most ``MAX_CHUNK_BYTES``, and to
+exactly the size it declares (the decompressor is told to stop one byte past it, so a frame
+that lies about its size costs no more); the summary, the metadata and what a file without a
+summary keeps in memory are bounded too. Anything beyond is one ``InvalidInput`` naming the
+file and the record (exit 2).
 """
 
 from __future__ import annotations
 
 import fnmatch
+import io
 import json
 import multiprocessing
 import os
 import struct
 import sys
+import zlib
 from array import array
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
@@ -41,6 +50,14 @@ OP_CHUNK, OP_MESSAGE_INDEX, OP_MESSAGE = 0x06, 0x07, 0x05
 MESSAGE_HEAD = 1 + 8 + 2 + 4 + 8 + 8  # opcode, length, channel, sequence, log and publish time
 DIAGNOSTICS = "/diagnostics"
 MAX_WORKERS = 8  # processes that unpack chunks for ``series``
+# a chunk unpacked: the recorder writes chunks of 1 MiB, rosbag2 and mcap's tools a few MiB
+MAX_CHUNK_BYTES = 64 << 20
+MAX_RECORD_BYTES = 2 * MAX_CHUNK_BYTES  # any record as stored: a chunk, compressed or not
+MAX_SUMMARY_BYTES = 16 << 20  # the summary: the index of ~200,000 chunks (an hour: ~10,000)
+MAX_METADATA_BYTES = 32 << 20  # metadata, channel and schema records: twice a profile's 16 MiB
+MAX_KEPT_BYTES = 16 << 20  # messages a file without a summary keeps; beyond, read again
+CHUNK_HINT = ("a recording from another tool may use larger chunks: rewrite it with smaller ones "
+              "(`mcap compress --chunk-size`, the mcap CLI)")
 CHUNKS_PER_WORKER = 64  # fewer chunks than this a process: not worth starting one
 
 
@@ -212,7 +229,8 @@ class Recording:
     end_ns: int = 0
     messages: int = 0
     chunks: list[Any] = field(default_factory=list)  # mcap ChunkIndex, in time order
-    _scanned: dict[int, list[tuple[int, bytes]]] = field(default_factory=dict)
+    # a file without a summary: the kept channels' messages (None: too many, read again)
+    _scanned: dict[int, list[tuple[int, bytes]]] | None = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -239,7 +257,11 @@ class Recording:
     def read(self, channel_id: int) -> Iterator[tuple[int, memoryview]]:
         """(log time, data) of each message of a channel, in time order."""
         if not self.indexed:
-            for t, data in self._scanned.get(channel_id, []):
+            kept = None if self._scanned is None else self._scanned.get(channel_id)
+            if kept is None:
+                yield from _stream_channel(self.path, channel_id)
+                return
+            for t, data in kept:
                 yield t, memoryview(data)
             return
         for batch in self.batches(channel_id):
@@ -262,8 +284,9 @@ def open_recording(path: Path, keep: Iterable[str] | None = (DIAGNOSTICS,)) -> R
         size = _check_ends(f, path)
         from mcap.reader import SeekingReader
 
+        _check_summary_size(f, path, size)
         try:
-            reader = SeekingReader(f)
+            reader = SeekingReader(f, record_size_limit=MAX_RECORD_BYTES)
             summary = reader.get_summary()
             if summary is None:
                 return _scan(f, path, size, None if keep is None else set(keep))
@@ -274,7 +297,7 @@ def open_recording(path: Path, keep: Iterable[str] | None = (DIAGNOSTICS,)) -> R
                 schema = summary.schemas.get(ch.schema_id)
                 recording.channels[cid] = Channel(cid, ch.topic, schema.name if schema else "",
                                                   dict(ch.metadata), counts.get(cid, 0))
-            recording.metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+            recording.metadata = _metadata(f, path, summary.metadata_indexes)
         except InvalidInput:
             raise
         except Exception as exc:  # mcap's errors, struct's, a record cut short: one sentence
@@ -325,6 +348,41 @@ def _check_ends(f: BinaryIO, path: Path) -> int:
     return size
 
 
+def _check_summary_size(f: BinaryIO, path: Path, size: int) -> None:
+    """The footer's summary start, checked before mcap's reader reads the summary whole."""
+    f.seek(size - FOOTER_AND_MAGIC + 9)  # the footer's opcode and length, then the start
+    (start,) = struct.unpack("<Q", f.read(8))
+    if start and size - start > MAX_SUMMARY_BYTES:
+        raise InvalidInput(f"{path}: its summary is {size - start} bytes, more than the "
+                           f"{MAX_SUMMARY_BYTES >> 20} MiB deltoctl reads (an index of about "
+                           "200,000 chunks)")
+    f.seek(0)
+
+
+def _metadata(f: BinaryIO, path: Path, indexes: list[Any]) -> dict[str, dict[str, str]]:
+    """The metadata records the summary points to, each read after its length is checked
+    against what is left of MAX_METADATA_BYTES (a summary may point many times at one)."""
+    from mcap.data_stream import ReadDataStream
+    from mcap.opcode import Opcode
+    from mcap.records import Metadata
+
+    found: dict[str, dict[str, str]] = {}
+    left = MAX_METADATA_BYTES
+    for index in indexes:
+        f.seek(index.offset)
+        opcode, length = struct.unpack("<BQ", f.read(9))
+        if opcode != Opcode.METADATA:
+            raise _damaged(path, f"no metadata record at byte {index.offset}")
+        left -= length
+        if left < 0:
+            raise InvalidInput(f"{path}: metadata records of more than "
+                               f"{MAX_METADATA_BYTES >> 20} MiB (the metadata at byte "
+                               f"{index.offset}); deltoctl reads no more")
+        record = Metadata.read(ReadDataStream(io.BytesIO(f.read(length))))
+        found[record.name] = dict(record.metadata)
+    return found
+
+
 def _batches(path: Path, chunks: list[Any], channel_id: int) -> Iterator[Batch]:
     """One batch a chunk, unpacked straight from the file mapped in memory (no copy)."""
     import contextlib
@@ -338,7 +396,12 @@ def _batches(path: Path, chunks: list[Any], channel_id: int) -> Iterator[Batch]:
             end = chunk.chunk_start_offset + chunk.chunk_length + chunk.message_index_length
             if end > len(mapped):
                 raise _damaged(path, f"it ends inside the chunk at byte {chunk.chunk_start_offset}")
-            yield _batch(whole[chunk.chunk_start_offset:end], chunk, channel_id, path)
+            try:
+                batch = _batch(whole[chunk.chunk_start_offset:end], chunk, channel_id, path)
+            except (struct.error, IndexError, ValueError, UnicodeDecodeError) as exc:
+                raise _damaged(path, f"the chunk at byte {chunk.chunk_start_offset}: "
+                                     f"{type(exc).__name__}: {exc}") from None
+            yield batch
     finally:
         whole.release()
         with contextlib.suppress(BufferError):  # a view an error's traceback holds: GC closes it
@@ -355,44 +418,82 @@ def _batch(raw: memoryview, chunk: Any, channel_id: int, path: Path) -> Batch:
     compression = bytes(raw[pos:pos + name_length]).decode()
     pos += name_length
     (length,) = struct.unpack_from("<Q", raw, pos)
-    records = _unpack(raw[pos + 8:pos + 8 + length], compression, uncompressed_size, path)
+    records = _unpack(raw[pos + 8:pos + 8 + length], compression, uncompressed_size, path,
+                      chunk.chunk_start_offset)
     at = chunk.message_index_offsets[channel_id] - chunk.chunk_start_offset
     if raw[at] != OP_MESSAGE_INDEX:
         raise _damaged(path, f"no message index at byte {chunk.message_index_offsets[channel_id]}")
     (entries,) = struct.unpack_from("<I", raw, at + 9 + 2)
+    if entries % 16 or entries // 16 > len(records) // MESSAGE_HEAD:
+        raise _damaged(path, f"the message index at byte {chunk.message_index_offsets[channel_id]}"
+                             f" lists more messages than its chunk holds")
     pairs = array("Q")
     pairs.frombytes(raw[at + 15:at + 15 + entries])
     if sys.byteorder == "big":
         pairs.byteswap()
-    return Batch(records, pairs[0::2], pairs[1::2])
+    offsets = pairs[1::2]
+    if offsets and max(offsets) > len(records) - MESSAGE_HEAD:
+        raise _damaged(path, f"the message index at byte {chunk.message_index_offsets[channel_id]}"
+                             " points past the end of its chunk")
+    return Batch(records, pairs[0::2], offsets)
 
 
-def _unpack(data: memoryview, compression: str, size: int, path: Path) -> bytes:
+def _unpack(data: memoryview, compression: str, size: int, path: Path, at: int) -> bytes:
+    """A chunk's records: exactly the ``size`` bytes it declares, at most MAX_CHUNK_BYTES,
+    refused before they are allocated, and never more however the frame lies."""
+    if size > MAX_CHUNK_BYTES:
+        raise InvalidInput(f"{path}: the chunk at byte {at} declares {size} bytes unpacked, more "
+                           f"than the {MAX_CHUNK_BYTES >> 20} MiB deltoctl unpacks", CHUNK_HINT)
+    try:
+        records = _decompress(data, compression, size, path)
+    except (RuntimeError, ValueError, MemoryError) as exc:  # lz4's, zstandard's ZstdError
+        raise _damaged(path, f"the chunk at byte {at} does not unpack: {exc}") from None
+    if len(records) != size:
+        more = "more" if len(records) > size else "fewer"
+        raise InvalidInput(f"{path}: the chunk at byte {at} unpacks to {more} than the {size} "
+                           "bytes it declares; deltoctl reads no further",
+                           "a damaged or forged recording")
+    return records
+
+
+def _decompress(data: memoryview, compression: str, size: int, path: Path) -> bytes:
+    """Up to ``size`` + 1 bytes of the frame: one past tells a frame larger than declared."""
     if compression == "lz4":
         import lz4.frame
 
-        return lz4.frame.decompress(data)  # type: ignore[no-any-return]
+        return lz4.frame.LZ4FrameDecompressor().decompress(  # type: ignore[no-any-return]
+            data, max_length=size + 1)
     if compression == "zstd":
         import zstandard
 
-        return bytes(zstandard.ZstdDecompressor().decompress(data, max_output_size=size))
+        # the window a streamed frame asks for is bounded too; read() fills what it can
+        reader = zstandard.ZstdDecompressor(max_window_size=MAX_CHUNK_BYTES).stream_reader(data)
+        parts, got = [], 0
+        while got <= size:
+            part = reader.read(size + 1 - got)
+            if not part:
+                break
+            parts.append(part)
+            got += len(part)
+        return b"".join(parts)
     if compression == "":
-        return bytes(data)
+        return bytes(data[:size + 1])
     raise InvalidInput(f"{path}: chunks compressed with {compression!r}, which deltoctl "
                        "cannot unpack (lz4, zstd or none)")
 
 
 def _scan(f: BinaryIO, path: Path, size: int, keep: set[str] | None) -> Recording:
-    """A file without a summary, read record by record (mcap's reader checks each chunk)."""
+    """A file without a summary, read record by record: channels, counts, times, metadata,
+    and the messages of the ``keep`` topics while they fit in MAX_KEPT_BYTES (past that, a
+    channel's messages are read from the file again when asked for)."""
     from mcap.records import Channel as McapChannel
     from mcap.records import Message, Metadata, Schema
-    from mcap.stream_reader import StreamReader
 
     recording = Recording(path, size, False)
     schemas: dict[int, str] = {}
     first, last = None, 0
-    f.seek(0)
-    for record in StreamReader(f, validate_crcs=True).records:
+    kept, described = 0, 0
+    for record in _records(f, path):
         if isinstance(record, Message):
             channel = recording.channels.get(record.channel_id)
             if channel is None:
@@ -400,20 +501,95 @@ def _scan(f: BinaryIO, path: Path, size: int, keep: set[str] | None) -> Recordin
             channel.count += 1
             first = record.log_time if first is None else min(first, record.log_time)
             last = max(last, record.log_time)
-            if keep is None or channel.topic in keep:
-                recording._scanned.setdefault(channel.id, []).append(
-                    (record.log_time, record.data))
-        elif isinstance(record, Schema):
+            scanned = recording._scanned
+            if scanned is not None and channel.id in scanned:
+                kept += len(record.data) + MESSAGE_HEAD
+                if kept > MAX_KEPT_BYTES:
+                    recording._scanned = None  # too many to hold: read again on demand
+                else:
+                    scanned[channel.id].append((record.log_time, record.data))
+            continue
+        described += _described_size(record)
+        if described > MAX_METADATA_BYTES:
+            raise InvalidInput(f"{path}: metadata, channel and schema records of more than "
+                               f"{MAX_METADATA_BYTES >> 20} MiB; deltoctl reads no more")
+        if isinstance(record, Schema):
             schemas[record.id] = record.name
         elif isinstance(record, McapChannel):
             recording.channels[record.id] = Channel(
                 record.id, record.topic, schemas.get(record.schema_id, ""),
                 dict(record.metadata))
+            if recording._scanned is not None and (keep is None or record.topic in keep):
+                recording._scanned.setdefault(record.id, [])
         elif isinstance(record, Metadata):
             recording.metadata[record.name] = dict(record.metadata)
     recording.messages = sum(c.count for c in recording.channels.values())
     recording.start_ns, recording.end_ns = first or 0, last
     return recording
+
+
+def _described_size(record: Any) -> int:
+    """About the memory a schema, channel or metadata record's strings are kept in."""
+    texts = [getattr(record, name, "") for name in ("name", "topic")]
+    texts += [x for kv in (getattr(record, "metadata", None) or {}).items() for x in kv]
+    return sum(len(t) for t in texts if isinstance(t, str)) + 64
+
+
+def _records(f: BinaryIO, path: Path) -> Iterator[Any]:
+    """The file's records in order (mcap's reader checks each CRC), each chunk unpacked by
+    ``_unpack`` and its records given in its place."""
+    from mcap.exceptions import RecordLengthLimitExceeded
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+
+    f.seek(0)
+    reader = StreamReader(f, emit_chunks=True, validate_crcs=True,
+                          record_size_limit=MAX_RECORD_BYTES)
+    try:
+        for record in reader.records:
+            if isinstance(record, Chunk):
+                # where the chunk starts: the reader has just read it (and nothing past it)
+                at = f.tell() - 9 - 8 * 4 - 4 - len(record.compression.encode()) - 4 - \
+                    len(record.data)
+                yield from _chunk_records(record, path, at)
+            else:
+                yield record
+    except RecordLengthLimitExceeded as exc:
+        raise InvalidInput(f"{path}: {exc} (deltoctl reads records of at most "
+                           f"{MAX_RECORD_BYTES >> 20} MiB)", CHUNK_HINT) from None
+
+
+def _chunk_records(chunk: Any, path: Path, at: int) -> Iterator[Any]:
+    """The schema, channel and message records of a chunk, one at a time."""
+    from mcap.data_stream import ReadDataStream
+    from mcap.opcode import Opcode
+    from mcap.records import Channel as McapChannel
+    from mcap.records import Message, Schema
+
+    data = _unpack(memoryview(chunk.data), chunk.compression, chunk.uncompressed_size, path, at)
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise _damaged(path, f"the chunk at byte {at} fails its CRC check")
+    stream = ReadDataStream(io.BytesIO(data))
+    while stream.count < len(data):
+        opcode, length = stream.read1(), stream.read8()
+        if opcode == Opcode.MESSAGE:
+            yield Message.read(stream, length)
+        elif opcode == Opcode.CHANNEL:
+            yield McapChannel.read(stream)
+        elif opcode == Opcode.SCHEMA:
+            yield Schema.read(stream)
+        else:
+            stream.read(length)
+
+
+def _stream_channel(path: Path, channel_id: int) -> Iterator[tuple[int, memoryview]]:
+    """(log time, data) of each message of a channel, the file read again from its start."""
+    from mcap.records import Message
+
+    with path.open("rb") as f:
+        for record in _records(f, path):
+            if isinstance(record, Message) and record.channel_id == channel_id:
+                yield record.log_time, memoryview(record.data)
 
 
 def read_recording(path: Path, keep: Iterable[str] | None = (DIAGNOSTICS,)) -> Recording:
