@@ -136,6 +136,30 @@ class Transmission:
     line: int | None = field(default=None, compare=False, repr=False)
 
 
+def fill_transmission(hw: Hardware, transmission: Transmission) -> None:
+    """What ros2_control fills in, whichever form the profile came in: each transmission
+    joint's interfaces from the block's joint, and for an actuator block the one joint's
+    "actuator1". Raises ValueError naming what is wrong."""
+    for end in transmission.joints:
+        joint = next((j for j in hw.joints if j.name == end.name), None)
+        if joint is None:
+            raise ValueError(f"transmission {transmission.name!r} declared joint {end.name!r} "
+                             f"is not available in component {hw.name!r}")
+        end.command_interfaces = [i.name for i in joint.command_interfaces]
+        end.state_interfaces = [i.name for i in joint.state_interfaces]
+    if hw.type != "actuator":
+        return
+    if len(transmission.joints) != 1:
+        raise ValueError(f"transmission {transmission.name!r} of actuator {hw.name!r}: there "
+                         "should be exactly one joint defined in this component but found "
+                         f"{len(transmission.joints)}")
+    joint_end = transmission.joints[0]
+    transmission.actuators = [a for a in transmission.actuators if not a.implicit]
+    transmission.actuators.append(TransmissionEnd(
+        "actuator1", "actuator1", command_interfaces=list(joint_end.command_interfaces),
+        state_interfaces=list(joint_end.state_interfaces), implicit=True))
+
+
 @dataclass
 class AsyncParams:
     """ros2_control's HardwareAsyncParams: how an ``is_async`` block's thread runs."""

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 from deltoctl import registry
@@ -35,6 +35,7 @@ from deltoctl.profile.model import (
     Transmission,
     TransmissionEnd,
     clamp_soft_limits,
+    fill_transmission,
     merge_interface_limits,
     parse_bool,
     parse_number,
@@ -44,6 +45,7 @@ from deltoctl.profile.xmltree import Node, XMLSyntaxError, parse_xml
 
 PREFIX = "deltoctl."
 PROFILE_PREFIX = "deltoctl.profile."
+LIMITS_PREFIX = "deltoctl.limits."  # limits neither <limit> nor the interfaces hold
 
 _ROS2_CONTROL_CHILDREN = {"hardware", "properties", "joint", "sensor", "gpio", "transmission"}
 _HARDWARE_CHILDREN = {"plugin", "param", "group"}
@@ -518,8 +520,28 @@ def _component(node: Node, loc: _Locator) -> Component:
                             f"got {address!r}", node) from None
     comp.inverse = params.pop(PREFIX + "inverse", "false").lower() == "true"
     comp.offset = _float(params.pop(PREFIX + "offset", None), "deltoctl.offset", node, loc) or 0.0
+    if kind == "joint":  # joined with the URDF's <limit> in _join_urdf
+        comp.limits = _extra_limits(params, name, node, loc)
     comp.params = params
     return comp
+
+
+def _extra_limits(params: dict[str, str], joint: str, node: Node,
+                  loc: _Locator) -> Limits | None:
+    """The limits deltoctl's exporter writes as params because neither the URDF ``<limit>``
+    nor the interfaces hold them (an acceleration limit, a continuous joint's position range
+    in deltoctl's YAML form); ``None`` when there are none."""
+    limits = Limits()
+    for key in [f.name for f in fields(Limits)]:
+        text = params.pop(LIMITS_PREFIX + key, None)
+        if text is None:
+            continue
+        value = parse_number(text)
+        if value is None:
+            raise loc.error(f"{LIMITS_PREFIX}{key} of joint {joint!r} must be a finite number, "
+                            f"got {text!r}", node)
+        setattr(limits, key, value)
+    return None if limits == Limits() else limits
 
 
 def _interface(node: Node, kind: str, owner: str, loc: _Locator) -> Interface:
@@ -608,27 +630,12 @@ def _transmission_end(node: Node, transmission: str, loc: _Locator) -> Transmiss
 
 
 def _fill_transmissions(hw: Hardware, block: Node, loc: _Locator) -> None:
-    """What ros2_control fills in: each transmission joint's interfaces from the block's
-    joint, and for an actuator block the one joint's "actuator1"."""
-    nodes = block.find_all("transmission")
-    for transmission, node in zip(hw.transmissions, nodes):
-        for end in transmission.joints:
-            joint = next((j for j in hw.joints if j.name == end.name), None)
-            if joint is None:
-                raise loc.error(f"transmission {transmission.name!r} declared joint "
-                                f"{end.name!r} is not available in component {hw.name!r}", node)
-            end.command_interfaces = [i.name for i in joint.command_interfaces]
-            end.state_interfaces = [i.name for i in joint.state_interfaces]
-        if hw.type != "actuator":
-            continue
-        if len(transmission.joints) != 1:
-            raise loc.error(f"transmission {transmission.name!r} of actuator {hw.name!r}: there "
-                            "should be exactly one joint defined in this component but found "
-                            f"{len(transmission.joints)}", node)
-        joint_end = transmission.joints[0]
-        transmission.actuators.append(TransmissionEnd(
-            "actuator1", "actuator1", command_interfaces=list(joint_end.command_interfaces),
-            state_interfaces=list(joint_end.state_interfaces), implicit=True))
+    """What ros2_control fills in (model.fill_transmission), each problem at its tag."""
+    for transmission, node in zip(hw.transmissions, block.find_all("transmission")):
+        try:
+            fill_transmission(hw, transmission)
+        except ValueError as exc:
+            raise loc.error(str(exc), node) from None
 
 
 # -- a block's joint against the robot model ----------------------------------------------------
@@ -659,9 +666,16 @@ def _join_urdf(hw: Hardware, comp: Component, node: Node, urdf_joints: dict[str,
         raise loc.error(f"joint {comp.name!r} is fixed in the URDF (type 'fixed'): fixed joints "
                         "do not make sense in ros2_control", node)
     _warn_unread_limits(comp, node, loc)
-    comp.limits = merge_interface_limits(urdf.limits, comp)
+    comp.limits = merge_interface_limits(_with_extras(urdf.limits, comp.limits), comp)
     if urdf.soft_limits is not None:
         comp.soft_limits = clamp_soft_limits(urdf.soft_limits, comp.limits)
+
+
+def _with_extras(urdf: Limits | None, extras: Limits | None) -> Limits | None:
+    if extras is None:
+        return urdf
+    given = {k: v for k, v in vars(extras).items() if v is not None}
+    return replace(urdf or Limits(), **given)
 
 
 def _warn_unread_limits(comp: Component, node: Node, loc: _Locator) -> None:

@@ -23,6 +23,12 @@ from deltoctl.profile.model import (
     Mimic,
     Profile,
     Safety,
+    SoftLimits,
+    Transmission,
+    TransmissionEnd,
+    clamp_soft_limits,
+    fill_transmission,
+    merge_interface_limits,
 )
 from deltoctl.units import format_number, parse_quantity
 
@@ -289,15 +295,26 @@ class _Reader:
         return {str(k): param_text(v) for k, v in value.items() if v is not None}
 
 
-_INTERFACE_KEYS = {"name", "min", "max", "initial_value", "data_type", "size", "params"}
+_INTERFACE_KEYS = {
+    "name", "min", "max", "initial_value", "data_type", "size", "params", "enable_limits",
+}
 _COMPONENT_KEYS = {
     "name", "command_interfaces", "state_interfaces", "params", "bus", "address",
 }
-_JOINT_KEYS = _COMPONENT_KEYS | {"type", "limits", "mimic", "inverse", "offset"}
+_KEYS = {
+    "gpio": _COMPONENT_KEYS,
+    "sensor": _COMPONENT_KEYS | {"enable_limits"},
+    "joint": _COMPONENT_KEYS | {"type", "limits", "soft_limits", "enable_limits", "mimic",
+                                "inverse", "offset"},
+}
+_LIMIT_KEYS = {"lower", "upper", "velocity", "effort", "acceleration", "deceleration", "jerk"}
+_SOFT_LIMIT_KEYS = {"lower", "upper", "k_position", "k_velocity"}
 _HARDWARE_KEYS = {
     "name", "type", "plugin", "params", "group", "family", "bus", "joints", "sensors", "gpios",
-    "attributes",
+    "attributes", "async_properties", "transmissions",
 }
+_TRANSMISSION_KEYS = {"name", "type", "joints", "actuators", "params"}
+_END_KEYS = {"name", "role", "mechanical_reduction", "offset", "read_only"}
 _PROFILE_KEYS = {
     "name", "description", "family", "model", "status", "buses", "safety", "ros2_control",
 }
@@ -322,13 +339,14 @@ def _interface(r: _Reader, item: Any, line: int, owner: str) -> Interface:
         data_type=r.string(d, "data_type", f"{owner}/{name}"),
         size=r.integer(d, "size", f"{owner}/{name}"),
         params=r.scalars(d, "params", f"{owner}/{name}"),
+        enable_limits=r.boolean(d, "enable_limits", f"{owner}/{name}", default=True),
         line=d.line,
     )
 
 
 def _component(r: _Reader, kind: str, item: Any, line: int) -> Component:
     what = f"a {kind}"
-    d = r.mapping(item, what, line, _JOINT_KEYS if kind == "joint" else _COMPONENT_KEYS)
+    d = r.mapping(item, what, line, _KEYS[kind])
     name = r.string(d, "name", what, required=True) or ""
     what = f"{kind} {name!r}"
     comp = Component(kind=kind, name=name, line=d.line)
@@ -338,19 +356,17 @@ def _component(r: _Reader, kind: str, item: Any, line: int) -> Component:
     comp.params = r.scalars(d, "params", what)
     comp.bus = r.string(d, "bus", what)
     comp.address = r.integer(d, "address", what)
+    if kind != "gpio":
+        comp.enable_limits = r.boolean(d, "enable_limits", what, default=True)
     if kind == "joint":
         comp.joint_type = r.string(d, "type", what) or "revolute"
         comp.inverse = r.boolean(d, "inverse", what)
         comp.offset = r.number(d, "offset", what) or 0.0
         if "limits" in d:
-            ld = r.mapping(d["limits"], f"limits of {what}", d.lines["limits"],
-                           {"lower", "upper", "velocity", "effort"})
-            comp.limits = Limits(
-                lower=r.number(ld, "lower", what),
-                upper=r.number(ld, "upper", what),
-                velocity=r.number(ld, "velocity", what),
-                effort=r.number(ld, "effort", what),
-            )
+            ld = r.mapping(d["limits"], f"limits of {what}", d.lines["limits"], _LIMIT_KEYS)
+            comp.limits = Limits(**{k: r.number(ld, k, what) for k in sorted(_LIMIT_KEYS)})
+        if "soft_limits" in d:
+            comp.soft_limits = _soft_limits(r, d, comp, what)
         if "mimic" in d:
             md = r.mapping(d["mimic"], f"mimic of {what}", d.lines["mimic"],
                            {"joint", "multiplier", "offset"})
@@ -360,6 +376,46 @@ def _component(r: _Reader, kind: str, item: Any, line: int) -> Component:
                 offset=r.number(md, "offset", what) or 0.0,
             )
     return comp
+
+
+def _soft_limits(r: _Reader, d: LineDict, joint: Component, what: str) -> SoftLimits:
+    """A ``<safety_controller>``'s soft limits, clamped into the joint's limits as the URDF
+    loader (and ros2_control) clamps them."""
+    sd = r.mapping(d["soft_limits"], f"soft_limits of {what}", d.lines["soft_limits"],
+                   _SOFT_LIMIT_KEYS)
+    soft = SoftLimits(**{k: r.number(sd, k, f"soft_limits of {what}") or 0.0
+                         for k in sorted(_SOFT_LIMIT_KEYS)})
+    return clamp_soft_limits(soft, merge_interface_limits(joint.limits, joint))
+
+
+def _transmission(r: _Reader, hw: Hardware, item: Any, line: int) -> Transmission:
+    what = f"a transmission of {hw.name!r}"
+    d = r.mapping(item, what, line, _TRANSMISSION_KEYS)
+    name = r.string(d, "name", what, required=True) or ""
+    what = f"transmission {name!r}"
+    transmission = Transmission(name=name, type=r.string(d, "type", what) or "",
+                                params=r.scalars(d, "params", what), line=d.line)
+    for key in ("joints", "actuators"):
+        items = r.sequence(d, key, what)
+        setattr(transmission, key, [_end(r, i, ln, what) for i, ln in zip(items, items.lines)])
+    try:
+        fill_transmission(hw, transmission)
+    except ValueError as exc:
+        raise r.fail(str(exc), d.line) from None
+    return transmission
+
+
+def _end(r: _Reader, item: Any, line: int, owner: str) -> TransmissionEnd:
+    what = f"an end of {owner}"
+    d = r.mapping(item, what, line, _END_KEYS)
+    reduction = r.number(d, "mechanical_reduction", what)
+    return TransmissionEnd(
+        name=r.string(d, "name", what, required=True) or "",
+        role=r.string(d, "role", what) or "",
+        mechanical_reduction=1.0 if reduction is None else reduction,
+        offset=r.number(d, "offset", what) or 0.0,
+        read_only=r.boolean(d, "read_only", what),
+    )
 
 
 def _hardware(r: _Reader, item: Any, line: int) -> Hardware:
@@ -375,11 +431,14 @@ def _hardware(r: _Reader, item: Any, line: int) -> Hardware:
         family=r.string(d, "family", what),
         bus=r.string(d, "bus", what),
         attributes=r.scalars(d, "attributes", what),
+        async_properties=r.scalars(d, "async_properties", what),
         line=d.line,
     )
     for key, kind in (("joints", "joint"), ("sensors", "sensor"), ("gpios", "gpio")):
         items = r.sequence(d, key, what)
         setattr(hw, key, [_component(r, kind, i, ln) for i, ln in zip(items, items.lines)])
+    items = r.sequence(d, "transmissions", what)
+    hw.transmissions = [_transmission(r, hw, i, ln) for i, ln in zip(items, items.lines)]
     return hw
 
 
