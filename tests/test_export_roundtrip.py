@@ -52,7 +52,7 @@ def _source(source: str, tmp_path: Path) -> Profile:
     if kind == "catalog":
         return load_profile(name)
     directory = tmp_path / "source"
-    directory.mkdir()
+    directory.mkdir(parents=True)
     return load_profile(_load(CASES[name], directory))
 
 
@@ -112,3 +112,70 @@ def test_export_reads_back_into_the_same_profile(source: str, fmt: str, tmp_path
     assert len(new) == len(expected) and all(e in m for e, m in zip(expected, new)), new
     if source.startswith("catalog:"):
         assert _messages(profile) == []
+
+
+def test_an_unbounded_revolute_joint_is_refused_not_locked(cli, tmp_path: Path) -> None:
+    """A missing lower/upper reads as 0 in a URDF: the export refuses (exit 2, one line)
+    rather than write a joint that ros2_control would hold at 0."""
+    source = _load(CASES["valid_sdf"], tmp_path)
+    result = cli("profile", "export", str(source), "--format", "urdf")
+    assert result.exit_code == 2, result.output
+    assert result.stdout == ""
+    assert "Traceback" not in result.output
+    assert "cannot be written as URDF: joint 'left_wheel_joint' is revolute" in result.stderr
+    yaml_result = cli("profile", "export", str(source), "--format", "yaml")
+    assert yaml_result.exit_code == 0, yaml_result.output
+
+
+YAML_LIMITS = """\
+name: limits-beyond-interfaces
+family: generic
+ros2_control:
+  - name: arm
+    plugin: mock_components/GenericSystem
+    joints:
+      - name: wrist
+        type: continuous
+        limits: {lower: -2, upper: 2, velocity: 1, effort: 3, acceleration: 4, jerk: 9}
+        soft_limits: {lower: -3, upper: 1.5, k_position: 10, k_velocity: 2}
+        command_interfaces: [position]
+        state_interfaces: [position]
+      - name: elbow
+        limits: {lower: -1, upper: 1, velocity: 2, effort: 5}
+        enable_limits: false
+        state_interfaces: [position]
+"""
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_limits_no_urdf_limit_holds_come_back(fmt: str, tmp_path: Path) -> None:
+    """deltoctl's YAML gives a continuous joint a position range and an acceleration and jerk
+    limit without interfaces to carry them: the URDF carries them as deltoctl params; soft
+    limits are clamped into the range; switched-off limits stay off."""
+    source = tmp_path / "limits.yaml"
+    source.write_text(YAML_LIMITS)
+    profile = load_profile(source)
+    wrist, elbow = profile.joints()
+    assert (wrist.limits.lower, wrist.limits.acceleration, wrist.limits.jerk) == (-2, 4, 9)
+    assert (wrist.soft_limits.lower, wrist.soft_limits.upper) == (-2, 1.5)
+    assert elbow.limits is None and not elbow.enable_limits
+    back = read_back(profile, fmt, tmp_path / fmt)
+    assert back == profile
+    assert _messages(back) == []
+
+
+@pytest.mark.parametrize("case", ["minimal_robot_urdf", "async_components"])
+def test_text_of_transmissions_and_async_properties_is_escaped(case: str, tmp_path: Path) -> None:
+    """XML's special characters and xacro's ``$`` in the elements an export now carries come
+    back as they were, in a URDF and through xacro."""
+    nasty = "a<b>&\"c' ${x} $(env HOME) $$ ]]> --"
+    profile = _source(f"ros2_control:{case}", tmp_path)
+    hw = profile.hardware[0]
+    for transmission in hw.transmissions:
+        transmission.type = "ns<x>/" + nasty
+        transmission.params["note"] = nasty
+        transmission.joints[0].role = nasty
+    if hw.async_properties:
+        hw.async_properties["scheduling_policy"] = nasty
+    for fmt in FORMATS:
+        assert read_back(profile, fmt, tmp_path / fmt) == profile
