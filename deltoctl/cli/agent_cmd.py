@@ -57,9 +57,10 @@ def agent(
         "--allow-unauthenticated-motion",
         help="Lab bench: allow motion and outputs without mutual TLS; only when every "
              "endpoint is on loopback.")] = False,
-    workdir: Annotated[str, typer.Option(
+    workdir: Annotated[str | None, typer.Option(
         "--workdir", metavar="DIR",
-        help="Where remote verbs run (their reports and recordings go there).")] = ".",
+        help="Where remote verbs run (their reports and recordings go there; default: a "
+             "directory of the agent's own, $XDG_STATE_HOME/deltoctl/agent/NAME).")] = None,
 ) -> None:
     """Serve the robot of --profile (its links from --target, or --sim) over Zenoh until
     Ctrl-C or SIGTERM: every verb as a queryable, a liveliness token, a deadman on motion.
@@ -76,13 +77,18 @@ def agent(
     robot = check_robot(name or _default_name())
     if not (math.isfinite(deadline) and 0.1 <= deadline <= 10):
         raise InvalidInput(f"--deadline must be 0.1 to 10 seconds, got {deadline:g}")
-    if not os.path.isdir(workdir):
+    if workdir is None:
+        workdir = _own_workdir(robot)
+    elif not os.path.isdir(workdir):
         raise InvalidInput(f"--workdir {workdir}: no such directory")
     profile = opts.load_profile()  # a bad profile stops here, with its file:line
+    own_files = _profile_files(opts)
     spec = opts.profile or profile.name
     if os.path.exists(spec):
         spec = os.path.abspath(spec)
-    config = zconfig.load(zconfig.config_file(opts.zenoh_config), "agent", listen, connect)
+    config_path = zconfig.config_file(opts.zenoh_config)
+    config = zconfig.load(config_path, "agent", listen, connect)
+    own_files += [*([config_path] if config_path else []), *zconfig.tls_files(config)]
     motion, why_not = _motion_rule(config, allow_unauthenticated_motion)
     links = _links(opts, spec)
     python = [sys.executable, "-m", "deltoctl"]
@@ -95,11 +101,12 @@ def agent(
             links = [a for a in links if not a.startswith("--target=")]
             links += [f"--target={bus}={url}" for bus, url in served["buses"].items()]
         children = ([sys.executable, "-c", ZYGOTE, spec], [sys.executable, "-c", SPARE, spec])
+        from deltoctl.cli.fleet_cmd import agent_checks
         from deltoctl.profile.exporter import to_yaml
 
         node = Agent(robot, spec, profile.name, links, children, config, motion, why_not,
                      deadline, os.path.abspath(workdir), simulated=opts.sim,
-                     profile_yaml=to_yaml(profile))
+                     profile_yaml=to_yaml(profile), own_files=own_files, check=agent_checks)
         signals_stop(node.stop)
         try:
             node.start()
@@ -112,6 +119,36 @@ def agent(
     finally:
         if simulator is not None:
             stop_process(simulator)
+
+
+def _own_workdir(robot: str) -> str:
+    """The agent's own directory for remote verbs: $XDG_STATE_HOME/deltoctl/agent/ROBOT
+    (~/.local/state/… by default), made if need be; none of the agent's files is there."""
+    state = os.environ.get("XDG_STATE_HOME", "")
+    if not os.path.isabs(state):
+        state = os.path.join(os.path.expanduser("~"), ".local", "state")
+    path = os.path.join(state, "deltoctl", "agent", robot)
+    try:
+        os.makedirs(path, mode=0o700, exist_ok=True)
+    except OSError as exc:
+        raise InvalidInput(f"cannot make the agent's directory {path}: "
+                           f"{exc.strerror or exc}", "pass --workdir DIR") from None
+    return path
+
+
+def _profile_files(opts: Options) -> list[str]:
+    """The files the robot's profile was read from: the profile, and what xacro included."""
+    from deltoctl.profile.catalog import resolve, runs_xacro
+
+    path = resolve(opts.profile) if opts.profile else None
+    if path is None:
+        return []
+    files = [str(path)]
+    if runs_xacro(path, opts.xacro):
+        from deltoctl.profile.xacro_runner import included_files
+
+        files += included_files()
+    return files
 
 
 def _motion_rule(config: object, allow_unauthenticated: bool) -> tuple[bool, str]:

@@ -19,6 +19,7 @@ app = typer.Typer(help="The robots whose agents answer over Zenoh, and verbs on 
 # exit codes from best to worst: the fleet's code is the worst of its robots'
 SEVERITY = (0, 3, 1, 4, 2, 5, 130)
 FORWARDED = {"json": "--json", "yes": "--yes", "quiet": "--quiet"}
+AGENT_RECORD_MAX = 3600.0  # s: the longest record an agent writes in its own directory
 
 
 def register(root: typer.Typer) -> None:
@@ -131,6 +132,17 @@ def _verb_args(argv: list[str]) -> list[str]:
 
 
 def _record_params(args: list[str], robot: str) -> dict[str, Any]:
+    """The record's own options, checked here; its file's directory must be there."""
+    params = record_options(args)
+    from pathlib import Path
+
+    output = params["output"] = Path(params["output"])
+    if not output.parent.is_dir():
+        raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
+    return params
+
+
+def record_options(args: list[str]) -> dict[str, Any]:
     """The record's own options, parsed as ``deltoctl record`` parses them, and checked as
     it checks them; those that make no sense remotely refused."""
     from typer.main import get_command
@@ -150,12 +162,25 @@ def _record_params(args: list[str], robot: str) -> dict[str, Any]:
     if params["gpio_type"] not in GPIO_TYPES:
         raise InvalidInput(f"--gpio-type {params['gpio_type']!r}: one of "
                            f"{', '.join(GPIO_TYPES)}")
-    from pathlib import Path
-
-    output = params["output"] = Path(params["output"])
-    if not output.parent.is_dir():
-        raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
     return params
+
+
+def agent_checks(verb: str, argv: list[str]) -> None:
+    """What the agent checks in a remote command line with the CLI's own parse: a record it
+    runs (``fleet run record``, its file in the agent's directory) has a duration of at most
+    AGENT_RECORD_MAX, so that no caller fills the robot's computer's disk."""
+    from deltoctl.cmdline import hoist_global_options
+
+    args = _verb_args(hoist_global_options(argv))
+    if verb != "record" or {"--help", "-h"} & set(args):
+        return
+    duration = record_options(args)["duration"]
+    if duration is None or duration > AGENT_RECORD_MAX:
+        raise InvalidInput(f"a record written on the robot's computer needs --duration of at "
+                           f"most {AGENT_RECORD_MAX:g} s"
+                           + ("" if duration is None else f", got {duration:g}"),
+                           "or write the file on this computer: deltoctl --robot ROBOT record "
+                           "FILE (Ctrl-C ends it)")
 
 
 def _remote_record(opts: Options, robot: str, argv: list[str],

@@ -12,6 +12,7 @@ token goes, when the caller cancels, or when the agent stops.
 from __future__ import annotations
 
 import contextlib
+import hmac
 import json
 import os
 import signal
@@ -19,16 +20,18 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any
 
 from deltoctl.errors import DeltoctlError, InvalidInput, Refused, Unreachable
 from deltoctl.fleet import ACTUATING, DEADLINE, ERR, EXIT, MOTION, OUT, key, zenoh_module
-from deltoctl.fleet.argv import check_argv
+from deltoctl.fleet.argv import _values, check_argv
+from deltoctl.fleet.client import KEY_BYTES, sign
 
 WATCH_PERIOD = 0.005  # s between two looks at the heartbeats
 LENIENT = 5.0  # s: the deadline of a verb that moves nothing (a busy caller is no danger)
 ESCALATE = (3.0, 6.0)  # s after SIGINT: SIGTERM, then SIGKILL, for a verb that will not stop
+MAKE_SAFE = 30.0  # s for the connect that leaves a killed motion verb's blocks safe
 _RID = frozenset("0123456789abcdef")
 PROFILE_YAML = "profile_yaml"  # the info query's parameter, and its key in the answer
 
@@ -39,22 +42,107 @@ def log(message: str) -> None:
     sys.stderr.flush()
 
 
+def _signal_name(number: int) -> str:
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return f"signal {number}"
+
+
+def beat_key(request: dict[str, Any]) -> bytes:
+    """The heartbeat key of a run request: a secret only the caller and this agent know, that
+    signs its heartbeats and its cancel (see client.signed)."""
+    text = request.get("key")
+    if not (isinstance(text, str) and len(text) == 2 * KEY_BYTES and set(text) <= _RID):
+        raise InvalidInput("a run request needs the key of its heartbeats (hex digits)",
+                           "update deltoctl on the caller's computer")
+    return bytes.fromhex(text)
+
+
 class Running:
     """One verb running for one caller."""
 
-    def __init__(self, rid: str, verb: str, proc: subprocess.Popen[bytes]) -> None:
+    def __init__(self, rid: str, verb: str, proc: subprocess.Popen[bytes],
+                 beat: bytes = b"") -> None:
         self.rid, self.verb, self.proc = rid, verb, proc
         self.started = self.last_beat = time.monotonic()
+        self.beat, self.beats = beat, 0  # the heartbeat key; the last heartbeat's number
         self.caller_gone = False
         self.interrupted_at: float | None = None
+        self.ended_at: float | None = None  # when the deadman saw the process gone
+        self.signals: list[tuple[signal.Signals, float]] = []  # sent, and when
         self.why = ""
         self.made_safe = False  # killed, then its blocks set safe by the agent
 
     def interrupt(self, why: str) -> None:
         if self.interrupted_at is None and self.proc.poll() is None:
             self.interrupted_at, self.why = time.monotonic(), why
-            with contextlib.suppress(ProcessLookupError):
-                self.proc.send_signal(signal.SIGINT)
+            self.send(signal.SIGINT)
+
+    def send(self, sig: signal.Signals) -> None:
+        self.signals.append((sig, time.monotonic()))
+        with contextlib.suppress(ProcessLookupError):
+            self.proc.send_signal(sig)
+
+    def escalate(self, now: float) -> signal.Signals | None:
+        """SIGTERM, then SIGKILL, each once, for an interrupted verb that will not stop."""
+        assert self.interrupted_at is not None
+        sent = {sig for sig, _ in self.signals}
+        for sig, after in zip((signal.SIGTERM, signal.SIGKILL), ESCALATE):
+            if now - self.interrupted_at > after and sig not in sent:
+                self.send(sig)
+                return sig
+        return None
+
+    def signed(self, payload: bytes, what: str) -> bool:
+        """Whether ``payload`` is a heartbeat (``alive``) or the cancel of this verb's caller:
+        signed with its key, a heartbeat numbered after the last one (a heartbeat seen on
+        the network cannot be played again)."""
+        number = payload.partition(b":")[0]
+        if not (self.beat and number.isdigit() and len(number) <= 18):
+            return False
+        n = int(number)
+        if (what == "alive" and n <= self.beats) or \
+                not hmac.compare_digest(payload, sign(self.beat, self.rid, what, n)):
+            return False
+        if what == "alive":
+            self.beats = n
+        return True
+
+    def ending(self, code: int) -> str:
+        """Which signal ended the verb, and when its process exited (its motion stopped)."""
+        assert self.interrupted_at is not None
+        ended = getattr(self.proc, "exited_at", None) or self.ended_at or time.monotonic()
+        ms = (ended - self.interrupted_at) * 1e3
+        sent = ", ".join(f"{sig.name} at {(t - self.interrupted_at) * 1e3:.0f} ms"
+                         for sig, t in self.signals)
+        before = [sig.name for sig, t in self.signals if t <= ended]
+        by = _signal_name(-code) if code < 0 else before[-1] if before else "its own end"
+        return f"{sent}; ended by {by}: its process exited {ms:.0f} ms after the interrupt"
+
+
+class OwnFiles:
+    """The agent's own files (its profile and includes, its Zenoh configuration and
+    certificates), known by real path and by inode (a hard link to one is one too)."""
+
+    def __init__(self, paths: Collection[str]) -> None:
+        self.paths = {os.path.realpath(p) for p in paths}
+        self.inodes = set()
+        for path in self.paths:
+            with contextlib.suppress(OSError):
+                st = os.stat(path)
+                self.inodes.add((st.st_dev, st.st_ino))
+
+    def holds(self, value: str, workdir: str) -> bool:
+        """Whether ``value``, read as a path from ``workdir``, is one of them."""
+        path = os.path.realpath(os.path.join(workdir, value))
+        if path in self.paths:
+            return True
+        try:
+            st = os.stat(path)
+        except (OSError, ValueError):
+            return False
+        return (st.st_dev, st.st_ino) in self.inodes
 
 
 class Spares:
@@ -69,9 +157,11 @@ class Spares:
         self._refill()
 
     def _start(self) -> subprocess.Popen[bytes]:
+        from deltoctl.fleet.forks import restore_signals
+
         return subprocess.Popen(self.command, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, env=self.env, cwd=self.cwd,
-                                start_new_session=True)
+                                start_new_session=True, preexec_fn=restore_signals)
 
     def _refill(self) -> None:
         with self.lock:
@@ -161,13 +251,19 @@ class Agent:
     """Serves ``robot`` (profile ``spec``) on a Zenoh session opened from ``config``.
 
     ``children``: the commands that start the zygote and a spare (see Launcher); ``links``:
-    the global options that point a verb at the robot (``-t BUS=URL`` …)."""
+    the global options that point a verb at the robot (``-t BUS=URL`` …); ``own_files``: the
+    agent's profile, its includes, its configuration and certificates, which no remote
+    command line names; ``check``: the CLI's further checks of a command line (verb, argv)."""
 
     def __init__(self, robot: str, spec: str, profile_name: str, links: list[str],
                  children: tuple[list[str], list[str]], config: Any, motion_allowed: bool,
                  why_not: str, deadline: float = DEADLINE, workdir: str = ".",
-                 simulated: bool = False, profile_yaml: str = "") -> None:
+                 simulated: bool = False, profile_yaml: str = "",
+                 own_files: Collection[str] = (),
+                 check: Callable[[str, list[str]], None] | None = None) -> None:
         self.robot, self.spec, self.profile_name = robot, spec, profile_name
+        self.own_files = OwnFiles(own_files)
+        self.check = check
         self.profile_yaml = profile_yaml  # the resolved profile, for a caller that records
         self.links, self.config = links, config
         self.motion_allowed, self.why_not = motion_allowed, why_not
@@ -184,6 +280,8 @@ class Agent:
         self.session: Any = None
         self._declared: list[Any] = []
         self._threads: list[threading.Thread] = []
+        self._making_safe: list[threading.Thread] = []
+        self._deadman: threading.Thread | None = None
         self._gone: set[str] = set()
 
     # -- life ----------------------------------------------------------------------------------
@@ -204,8 +302,8 @@ class Agent:
             live.declare_subscriber(key(self.robot, "caller", "*"), self._on_caller),
         ]
         self._state_pub = s.declare_publisher(key(self.robot, "state"))
-        watch = threading.Thread(target=self._watch, name="deadman", daemon=True)
-        watch.start()
+        self._deadman = threading.Thread(target=self._watch, name="deadman", daemon=True)
+        self._deadman.start()
         self._set_state()
         self._token = live.declare_token(key(self.robot, "agent", self.profile_name))
 
@@ -217,14 +315,14 @@ class Agent:
         self.stopping.set()
 
     def close(self) -> None:
-        """Interrupt every verb (they stop their motion), wait for them, then leave."""
+        """Interrupt every verb (they stop their motion), wait for them — the deadman escalates
+        to SIGTERM, SIGKILL and a safe stop of its own for a verb that will not stop —, then
+        leave."""
         self.stopping.set()
-        with self.lock:
-            running = list(self.running.values())
-        for r in running:
-            r.interrupt("the agent is stopping")
+        if self._deadman is not None:
+            self._deadman.join(timeout=ESCALATE[1] + MAKE_SAFE + 5)
         for t in list(self._threads):
-            t.join(timeout=ESCALATE[1] + 2)
+            t.join(timeout=5)  # the verbs' last output, their exit codes
         self.launcher.close()
         if self.session is not None:
             with contextlib.suppress(Exception):
@@ -290,13 +388,15 @@ class Agent:
             query.reply(key(self.robot, "info"), json.dumps(doc))
 
     def _on_beat(self, sample: Any) -> None:
+        """A heartbeat counts only signed by the verb's own caller (another peer may see the
+        verb's id, not its key)."""
         r = self.running.get(str(sample.key_expr).rsplit("/", 1)[-1])
-        if r is not None:
+        if r is not None and r.signed(sample.payload.to_bytes(), "alive"):
             r.last_beat = time.monotonic()
 
     def _on_cancel(self, sample: Any) -> None:
         r = self.running.get(str(sample.key_expr).rsplit("/", 1)[-1])
-        if r is not None:
+        if r is not None and r.signed(sample.payload.to_bytes(), "cancel"):
             r.interrupt("the caller cancelled it")
 
     def _on_caller(self, sample: Any) -> None:
@@ -333,7 +433,8 @@ class Agent:
                 raise InvalidInput("a run request needs an id of hex digits")
             as_json = isinstance(argv, list) and "--json" in argv
             verb = check_argv(argv, self.workdir)
-            running = self._launch(rid, verb, argv)
+            self._vet(verb, argv)
+            running = self._launch(rid, verb, argv, beat_key(request))
         except DeltoctlError as exc:
             query.reply(run_key, ERR + _error_line(exc, as_json))
             query.reply(run_key, EXIT + str(exc.exit_code).encode())
@@ -351,7 +452,20 @@ class Agent:
             self.launcher.refill()
             query.drop()
 
-    def _launch(self, rid: str, verb: str, argv: list[str]) -> Running:
+    def _vet(self, verb: str, argv: list[str]) -> None:
+        """Beyond check_argv: no remote command line names one of the agent's own files (a
+        verb writing one would change the next verb's profile or the agent's security), and
+        the CLI's own checks (a record's duration) hold."""
+        for arg in argv:
+            if any(self.own_files.holds(v, self.workdir) for v in _values(arg)):
+                raise Refused(f"{arg!r} names one of the agent's own files: a remote verb "
+                              "neither reads nor writes the agent's profile, its includes, its "
+                              "Zenoh configuration or certificates",
+                              "name another file in the agent's directory")
+        if self.check is not None:
+            self.check(verb, argv)
+
+    def _launch(self, rid: str, verb: str, argv: list[str], beat: bytes = b"") -> Running:
         if {verb, verb.split(" ")[0]} & ACTUATING and not self.motion_allowed:  # calibrate ft
             raise Refused(f"'{verb}' refused: {self.why_not}",
                                 "see the README (Remote robots: security)")
@@ -362,7 +476,7 @@ class Agent:
             if verb in MOTION and moving:
                 raise Refused(f"busy: '{moving[0].verb}' (request {moving[0].rid}) is moving "
                               "the robot; one motion verb at a time")
-            running = Running(rid, verb, self.launcher.take([*self.links, *argv]))
+            running = Running(rid, verb, self.launcher.take([*self.links, *argv]), beat)
             if rid in self._gone:
                 running.caller_gone = True
             self.running[rid] = running
@@ -391,9 +505,8 @@ class Agent:
         r.proc.stderr.close()
         seconds = time.monotonic() - r.started
         if r.interrupted_at is not None:
-            stop_ms = (time.monotonic() - r.interrupted_at) * 1e3
-            log(f"robot {self.robot}: {r.rid}: {r.verb} interrupted ({r.why}); it stopped "
-                f"within {stop_ms:.0f} ms")
+            log(f"robot {self.robot}: {r.rid}: {r.verb} interrupted ({r.why}); "
+                f"{r.ending(code)}")
         log(f"robot {self.robot}: {r.rid}: {r.verb}: exit {code} after {seconds:.3f} s")
         query.reply(run_key, EXIT + str(code).encode())
 
@@ -422,27 +535,39 @@ class Agent:
             self.stop()
 
     def _watching(self) -> None:
-        while not self.stopping.is_set():
-            now = time.monotonic()
+        """Until the agent stops and every verb it ran has exited (made safe if killed)."""
+        while True:
             with self.lock:
                 running = list(self.running.values())
+                self._making_safe = [t for t in self._making_safe if t.is_alive()]
+                busy = bool(self._making_safe)
             for r in running:
-                if r.caller_gone:
-                    r.interrupt("its caller left")
-                elif now - r.last_beat > (self.deadline if r.verb in MOTION else LENIENT):
-                    r.interrupt("no heartbeat from its caller for "
-                                f"{self.deadline if r.verb in MOTION else LENIENT:g} s")
-                if r.interrupted_at is not None and r.proc.poll() is None:
-                    late = now - r.interrupted_at
-                    sig = (signal.SIGKILL if late > ESCALATE[1] else
-                           signal.SIGTERM if late > ESCALATE[0] else None)
-                    if sig is not None:
-                        with contextlib.suppress(ProcessLookupError):
-                            r.proc.send_signal(sig)
-                    if sig == signal.SIGKILL and r.verb in MOTION and not r.made_safe:
-                        r.made_safe = True
-                        threading.Thread(target=self._make_safe, args=(r,), daemon=True).start()
+                self._look_at(r, time.monotonic())
+            if self.stopping.is_set() and not busy and \
+                    all(r.proc.poll() is not None for r in running):
+                return
             time.sleep(WATCH_PERIOD)
+
+    def _look_at(self, r: Running, now: float) -> None:
+        """Interrupt a verb whose caller is gone, silent or the agent stopping; escalate."""
+        if r.proc.poll() is not None:
+            if r.ended_at is None:
+                r.ended_at = now
+            return
+        deadline = self.deadline if r.verb in MOTION else LENIENT
+        if self.stopping.is_set():
+            r.interrupt("the agent is stopping")
+        elif r.caller_gone:
+            r.interrupt("its caller left")
+        elif now - r.last_beat > deadline:
+            r.interrupt(f"no heartbeat from its caller for {deadline:g} s")
+        if r.interrupted_at is not None and r.escalate(now) == signal.SIGKILL and \
+                r.verb in MOTION and not r.made_safe:
+            r.made_safe = True
+            t = threading.Thread(target=self._make_safe, args=(r,), daemon=True)
+            with self.lock:
+                self._making_safe.append(t)
+            t.start()
 
     def _make_safe(self, r: Running) -> None:
         """A motion verb killed had no time for its safe stop (a gripper keeps its last
@@ -451,7 +576,7 @@ class Agent:
         r.proc.wait()
         proc = self.launcher.take([*self.links, "connect", "--json"])
         try:
-            collect(proc, 30)
+            collect(proc, MAKE_SAFE)
         except subprocess.TimeoutExpired:
             proc.send_signal(signal.SIGKILL)
         self.launcher.refill()
@@ -473,12 +598,15 @@ def _error_line(exc: DeltoctlError, as_json: bool) -> bytes:
 def start_simulator(command: list[str], env: dict[str, str] | None = None,
                     timeout: float = 30.0) -> tuple[subprocess.Popen[bytes], dict[str, Any]]:
     """``deltoctl sim serve --json`` in a process of its own; returns it and what it serves."""
-    from deltoctl.fleet.forks import die_with_parent
+    from deltoctl.fleet.forks import die_with_parent, restore_signals
+
+    def preexec() -> None:
+        restore_signals()
+        die_with_parent(signal.SIGKILL)  # a simulator keeps nothing, must not outlive its agent
 
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             stdin=subprocess.DEVNULL, env=env, start_new_session=True,
-                            # SIGKILL: a simulator keeps nothing, and must not outlive its agent
-                            preexec_fn=lambda: die_with_parent(signal.SIGKILL))
+                            preexec_fn=preexec)
     assert proc.stdout is not None
     line = _readline(proc, timeout)
     try:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import hashlib
+import hmac
 import json
 import queue
 import secrets
@@ -18,6 +20,15 @@ FOUND_WAIT = 2.0  # s to wait for agents to answer a look-up
 WEEK = 7 * 86400.0  # a query's timeout: a verb (a stream) may run for long
 # s to wait for the verb's exit after a cancel: beyond the agent's SIGKILL at 6 s
 CANCEL_GRACE = 8.0
+KEY_BYTES = 16  # the heartbeat key's size
+
+
+def sign(key_: bytes, rid: str, what: str, number: int) -> bytes:
+    """A heartbeat (``alive``, numbered from 1) or the cancel (``cancel``, 0) of verb ``rid``:
+    its number and an HMAC with the key that only the caller and the agent know (sent in the
+    run request). Another peer can see a heartbeat but not make the next one."""
+    mac = hmac.new(key_, f"{rid}/{what}/{number}".encode(), hashlib.sha256).hexdigest()
+    return f"{number}:{mac}".encode()
 
 
 class ErrorLines:
@@ -86,6 +97,7 @@ class RemoteCall:
         self.session, self.robot, self.argv = session, check_robot(robot), argv
         self.out, self.err = out, err
         self.rid = secrets.token_hex(8)
+        self.key = secrets.token_bytes(KEY_BYTES)  # signs its heartbeats and its cancel
         self.done = threading.Event()
         self.agent_gone = threading.Event()
         self.cancelled_at: float | None = None
@@ -108,7 +120,8 @@ class RemoteCall:
         try:
             handler = zenoh.handlers.Callback(replies.put, lambda: replies.put(None))
             s.get(key(robot, "run"), handler,
-                  payload=json.dumps({"id": self.rid, "argv": self.argv}),
+                  payload=json.dumps({"id": self.rid, "argv": self.argv,
+                                      "key": self.key.hex()}),
                   consolidation=zenoh.ConsolidationMode.NONE, timeout=WEEK)
             return self._collect(replies)
         finally:
@@ -122,7 +135,8 @@ class RemoteCall:
         if self.cancelled_at is None:
             self.cancelled_at = time.monotonic()
             with contextlib.suppress(Exception):
-                self.session.put(key(self.robot, "cancel", self.rid), b"")
+                self.session.put(key(self.robot, "cancel", self.rid),
+                                 sign(self.key, self.rid, "cancel", 0))
 
     def _collect(self, replies: queue.Queue[Any]) -> int:
         code: int | None = None
@@ -168,9 +182,11 @@ class RemoteCall:
         return code
 
     def _beat(self, publisher: Any) -> None:
+        number = 0
         while not self.done.wait(HEARTBEAT):
+            number += 1
             with contextlib.suppress(Exception):
-                publisher.put(b"")
+                publisher.put(sign(self.key, self.rid, "alive", number))
 
     def _on_agent(self, sample: Any) -> None:
         if sample.kind == zenoh_module().SampleKind.DELETE:

@@ -2,7 +2,9 @@
 ``DELTOCTL_ZENOH_CONFIG``), else safe defaults: the agent listens on loopback only, the caller
 connects there; no multicast scouting either way. An agent never scouts (multicast or gossip):
 it links only through the endpoints its config names, so their TLS settings say who reaches
-it. And the rule that decides whether an agent's peers are authenticated."""
+it; a config file that names none to listen on (in peer or router mode) listens on loopback,
+never on Zenoh's default of every interface. And the rule that decides whether an agent's
+peers are authenticated."""
 
 from __future__ import annotations
 
@@ -46,6 +48,8 @@ def load(path: str | None, role: str, listen: list[str] | None = None,
     if role == "agent":  # it links only where its config says: no peer found by scouting
         config.insert_json5("scouting/multicast/enabled", "false")
         config.insert_json5("scouting/gossip/enabled", "false")
+        if not listen and _listens_by_default(config):
+            config.insert_json5("listen/endpoints", json.dumps([DEFAULT_ENDPOINT]))
     for given in (*(listen or []), *(connect or [])):
         if not re.fullmatch(r"[a-z0-9]+/\S+", given):
             raise InvalidInput(f"endpoint {given!r}: a Zenoh endpoint is PROTOCOL/ADDRESS:PORT, "
@@ -58,6 +62,16 @@ def load(path: str | None, role: str, listen: list[str] | None = None,
     except Exception as exc:
         raise InvalidInput(f"endpoints {listen or connect}: {zenoh_message(exc)}") from None
     return config
+
+
+def _listens_by_default(config: Any) -> bool:
+    """A peer or router whose config names no endpoint to listen on (an empty list says:
+    nowhere): Zenoh's default is every interface (``tcp/[::]:0``)."""
+    mode = _get(config, "mode") or "peer"
+    found = _get(config, "listen/endpoints")
+    default = _get(zenoh_module().Config(), "listen/endpoints")
+    return mode != "client" and (found is None or found == default
+                                 or (isinstance(found, dict) and mode not in found))
 
 
 def _get(config: Any, path: str) -> Any:
@@ -103,6 +117,16 @@ def _on_loopback(endpoint: str) -> bool:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:
         return False
+
+
+TLS_FILES = ("root_ca_certificate", "listen_private_key", "listen_certificate",
+             "connect_private_key", "connect_certificate")
+
+
+def tls_files(config: Any) -> list[str]:
+    """The certificate and key files the config names."""
+    tls = _get(config, "transport/link/tls")
+    return [tls[k] for k in TLS_FILES if isinstance(tls, dict) and isinstance(tls.get(k), str)]
 
 
 def describe(config: Any) -> str:

@@ -19,9 +19,23 @@ import signal
 import socket
 import subprocess
 import threading
+import time
 from typing import Any
 
-MESSAGE = 65536
+from deltoctl.errors import InvalidInput
+
+MESSAGE = 65536  # bytes: the largest message between the agent and its zygote
+# what a verb relies on: Ctrl-C's KeyboardInterrupt (the deadman's SIGINT stops its motion),
+# SIGTERM and SIGHUP ending it; a process started from a script (`agent … &`, nohup) inherits
+# them ignored
+RESTORED = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def restore_signals() -> None:
+    """Default dispositions for RESTORED (a Python process started after this installs its
+    KeyboardInterrupt handler); for ``preexec_fn`` of every process the agent starts."""
+    for sig in RESTORED:
+        signal.signal(sig, signal.SIG_DFL)
 
 
 class Forked:
@@ -30,6 +44,7 @@ class Forked:
     def __init__(self, pid: int, stdout: Any, stderr: Any) -> None:
         self.pid, self.stdout, self.stderr = pid, stdout, stderr
         self.returncode: int | None = None
+        self.exited_at: float | None = None  # time.monotonic() when the zygote reaped it
         self._exited = threading.Event()
 
     def send_signal(self, sig: int) -> None:
@@ -46,6 +61,7 @@ class Forked:
         return self.returncode
 
     def exited(self, code: int) -> None:
+        self.exited_at = time.monotonic()
         self.returncode = code
         self._exited.set()
 
@@ -58,7 +74,8 @@ class Zygote:
         self.sock = ours
         self.proc = subprocess.Popen([*command, str(theirs.fileno())], pass_fds=[theirs.fileno()],
                                      stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                     env=env, cwd=cwd, start_new_session=True)
+                                     env=env, cwd=cwd, start_new_session=True,
+                                     preexec_fn=restore_signals)
         theirs.close()
         self.lock = threading.Lock()
         self.pending: collections.deque[tuple[Any, Any, threading.Event, list[Forked]]] = \
@@ -68,15 +85,29 @@ class Zygote:
         self.reader.start()
 
     def take(self, argv: list[str]) -> Forked:
+        """Fork a child running ``argv``. A command line too long for one message is refused
+        before anything is sent; should the send fail, nothing stays queued (the next verb's
+        pid must not be matched with this one's pipes)."""
+        message = json.dumps(argv).encode()
+        if len(message) > MESSAGE:
+            raise InvalidInput(f"the command line is {len(message)} bytes; the agent runs "
+                               f"command lines of up to {MESSAGE // 1024} KiB")
         out_r, out_w = os.pipe()
         err_r, err_w = os.pipe()
         ready = threading.Event()
         box: list[Forked] = []
+        entry = (os.fdopen(out_r, "rb", buffering=0), os.fdopen(err_r, "rb", buffering=0),
+                 ready, box)
         try:
-            with self.lock:
-                self.pending.append((os.fdopen(out_r, "rb", buffering=0),
-                                     os.fdopen(err_r, "rb", buffering=0), ready, box))
-                socket.send_fds(self.sock, [json.dumps(argv).encode()], [out_w, err_w])
+            with self.lock:  # queued before the send: the zygote may answer at once
+                self.pending.append(entry)
+                try:
+                    socket.send_fds(self.sock, [message], [out_w, err_w])
+                except OSError:
+                    self.pending.remove(entry)
+                    entry[0].close()
+                    entry[1].close()
+                    raise
         finally:
             os.close(out_w)
             os.close(err_w)
@@ -93,8 +124,13 @@ class Zygote:
             if not data:
                 break
             message = json.loads(data)
-            if "pid" in message:
+            if "pid" in message or "refused" in message:
                 stdout, stderr, ready, box = self.pending.popleft()
+                if "refused" in message:  # a message it could not read: no child
+                    stdout.close()
+                    stderr.close()
+                    ready.set()
+                    continue
                 child = Forked(message["pid"], stdout, stderr)
                 self.children[child.pid] = child
                 box.append(child)
@@ -143,15 +179,21 @@ def serve(sock_fd: int, run: Any) -> None:
         readable, _, _ = select.select([sock], [], [], 0.002 if children else None)
         if readable:
             try:
-                data, fds, _, _ = socket.recv_fds(sock, MESSAGE, 2)
+                data, fds, flags, _ = socket.recv_fds(sock, MESSAGE, 2)
             except OSError:
-                data, fds = b"", []
+                data, fds, flags = b"", [], 0
             if not data:
                 break
+            argv = _command_line(data, fds, flags)
+            if argv is None:
+                for fd in fds:
+                    os.close(fd)
+                sock.send(b'{"refused": "not a command line"}')
+                continue
             pid = os.fork()
             if pid == 0:
                 sock.close()
-                _child(json.loads(data), fds, run)
+                _child(argv, fds, run)
             for fd in fds:
                 os.close(fd)
             children.add(pid)
@@ -168,6 +210,19 @@ def serve(sock_fd: int, run: Any) -> None:
             os.kill(pid, signal.SIGINT)
 
 
+def _command_line(data: bytes, fds: list[int], flags: int) -> list[str] | None:
+    """The command line of a whole message with its two pipes; None for anything else."""
+    if flags & (socket.MSG_TRUNC | socket.MSG_CTRUNC) or len(fds) != 2:
+        return None
+    try:
+        argv = json.loads(data)
+    except ValueError:
+        return None
+    if not isinstance(argv, list) or not all(isinstance(a, str) for a in argv):
+        return None
+    return argv
+
+
 def _child(argv: list[str], fds: list[int], run: Any) -> None:
     """In the forked child: the pipes as stdout and stderr, no stdin, a session of its own."""
     import sys
@@ -175,6 +230,8 @@ def _child(argv: list[str], fds: list[int], run: Any) -> None:
     code = 1
     try:
         os.setsid()
+        restore_signals()
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C's, as at start-up
         die_with_parent(signal.SIGINT)
         os.dup2(fds[0], 1)
         os.dup2(fds[1], 2)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -65,19 +66,32 @@ def deltoctl_command() -> list[str]:
     return [sys.executable, "-m", "deltoctl"]
 
 
+# a shell script's `deltoctl agent … &`: the agent inherits SIGINT ignored (sh does that to a
+# command in the background; the trap makes sure); the shell says its pid, then waits for it
+IN_BACKGROUND = ['sh', '-c', 'trap "" INT; "$@" >/dev/null & echo $!; wait', 'sh']
+
+
 class AgentProcess:
-    """``deltoctl agent`` in a process of its own; ``wait_ready`` until it serves."""
+    """``deltoctl agent`` in a process of its own; ``wait_ready`` until it serves. Its remote
+    verbs run in ``cwd`` (``--workdir``) unless ``args`` say otherwise; ``background``: started
+    as a shell script starts it in the background."""
 
     def __init__(self, robot: str, profile: str, args: list[str], cwd: str | None = None,
-                 config: Path | None = None) -> None:
+                 config: Path | None = None, background: bool = False,
+                 env: dict[str, str] | None = None) -> None:
         self.robot = robot
         command = [*deltoctl_command(), "-p", profile, "--sim"]
         if config is not None:
             command += ["--zenoh-config", str(config)]
         command += ["agent", "--name", robot, *args]
-        env = {k: v for k, v in os.environ.items() if not k.startswith("DELTOCTL_")}
-        self.proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                     stdin=subprocess.DEVNULL, env=env, cwd=cwd)
+        if cwd is not None and "--workdir" not in args:
+            command += ["--workdir", cwd]
+        env = env or {k: v for k, v in os.environ.items() if not k.startswith("DELTOCTL_")}
+        self.proc = subprocess.Popen([*IN_BACKGROUND, *command] if background else command,
+                                     stdout=subprocess.PIPE if background else subprocess.DEVNULL,
+                                     stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env,
+                                     cwd=cwd)
+        self.pid = int(self.proc.stdout.readline()) if background else self.proc.pid  # type: ignore[union-attr]
         self.log: list[str] = []
         self.ready = threading.Event()
         threading.Thread(target=self._read, daemon=True).start()
@@ -101,10 +115,13 @@ class AgentProcess:
 
     def stop(self, timeout: float = 15.0) -> int:
         if self.proc.poll() is None:
-            self.proc.terminate()
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.pid, signal.SIGTERM)  # the agent (not the shell that waits)
             try:
                 self.proc.wait(timeout)
             except subprocess.TimeoutExpired:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(self.pid, signal.SIGKILL)
                 self.proc.kill()
                 self.proc.wait()
         return self.proc.returncode
