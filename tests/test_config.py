@@ -346,7 +346,7 @@ def test_a_bad_snapshot_is_refused_naming_the_item(cli, mh5_buses, mh5_snapshot,
 
 
 def test_snapshot_size_and_alias_bombs_are_refused(cli, tmp_path, monkeypatch):
-    from deltoctl.cli import config_cmd
+    from deltoctl.app import config
 
     bomb = tmp_path / "bomb.yaml"
     lines = ["a: &a [x, x, x, x, x, x, x, x, x, x]"]
@@ -356,7 +356,7 @@ def test_snapshot_size_and_alias_bombs_are_refused(cli, tmp_path, monkeypatch):
     bomb.write_text("\n".join(lines) + "\n")
     result = cli("config", "diff", str(bomb), str(bomb))
     assert result.exit_code == 2 and "alias" in result.stderr
-    monkeypatch.setattr(config_cmd, "MAX_SNAPSHOT_BYTES", 100)
+    monkeypatch.setattr(config, "MAX_SNAPSHOT_BYTES", 100)
     big = tmp_path / "big.yaml"
     big.write_text("deltoctl_config: 1\n" + "#" * 200 + "\n")
     result = cli("config", "diff", str(big), str(big))

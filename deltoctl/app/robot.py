@@ -297,6 +297,39 @@ class Robot:
         return [j for driver, js in self._per_block(joints, "reboot").items()
                 for j in driver.reboot(js)]
 
+    # -- configuration -------------------------------------------------------------------------
+
+    def config_snapshot(self) -> dict[str, Any]:
+        """Every block's configuration, as a snapshot document (``config.dump_yaml`` writes
+        it)."""
+        from deltoctl.app import config
+
+        return config.snapshot(self.system)[0]
+
+    def config_diff(self, snapshot: str | Path) -> list[dict[str, Any]]:
+        """The items where the devices differ from a snapshot file; notes are warnings."""
+        from deltoctl.app import config
+
+        rows, notes = config.compare_live(self.system, config.load_snapshot(Path(snapshot)))
+        self.system.notes.extend(notes)
+        return rows
+
+    def config_restore(self, snapshot: str | Path,
+                       allow: Sequence[str] = ()) -> list[dict[str, Any]]:
+        """Write back what differs from a snapshot file (safety settings only when ``allow``
+        names them), each item verified by reading it back; returns each item's fate."""
+        from deltoctl.app import config
+
+        permitted = frozenset(config.permission(a) for a in allow)
+        rows, notes = config.plan_restore(self.system, config.load_snapshot(Path(snapshot)),
+                                          permitted)
+        self.system.notes.extend(notes)
+        refused = [r for r in rows if r["status"] == "refused"]
+        if refused:
+            raise config.refusal(refused, permitted)
+        config.write_changes(self.system, rows, permitted)
+        return rows
+
     # -- data ----------------------------------------------------------------------------------
 
     def interfaces(self, patterns: Sequence[str] = ()) -> list[str]:

@@ -88,3 +88,18 @@ def test_the_library_imports_no_terminal_code():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_config_round_trip_through_the_library(tmp_path):
+    from deltoctl.app.config import dump_yaml
+
+    with deltoctl.open_robot("mh5", sim=True) as robot:
+        doc = robot.config_snapshot()
+        path = tmp_path / "mh5.yaml"
+        path.write_text(dump_yaml(doc))
+        assert robot.config_diff(path) == []
+        doc["blocks"]["upper_body"]["parts"]["head_y"]["Max Position Limit"]["value"] = 3000
+        path.write_text(dump_yaml(doc))
+        with pytest.raises(Refused, match="--allow"):
+            robot.config_restore(path)
+        assert robot.registers("head_y", ["Max Position Limit"])["items"][0]["value"] != 3000
