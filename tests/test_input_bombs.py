@@ -259,3 +259,95 @@ def test_plot_is_bounded_as_info_is(tmp_path):
     path = bomb_mcap(tmp_path / "bomb.mcap", "lz4", 1 << 20, 256 << 20, content_size=False,
                      topic="/joint_states", schema="sensor_msgs/msg/JointState")
     refused(deltoctl("plot", str(path), "--json"), str(path), "unpacks to more than")
+
+
+# -- replay --------------------------------------------------------------------------------------
+
+def _joint_state(names: list[str], *arrays: list[float]) -> bytes:
+    """A sensor_msgs/JointState in CDR: a zero stamp, no frame, the names, three arrays."""
+    body = bytearray(struct.pack("<III", 0, 0, 1) + b"\0")
+
+    def align(n: int) -> None:
+        body.extend(bytes(-len(body) % n))
+
+    align(4)
+    body += struct.pack("<I", len(names))
+    for name in names:
+        align(4)
+        body += struct.pack("<I", len(name) + 1) + name.encode() + b"\0"
+    for values in arrays:
+        align(4)
+        body += struct.pack("<I", len(values))
+        if values:
+            align(8)
+            body += struct.pack(f"<{len(values)}d", *values)
+    return b"\0\1\0\0" + bytes(body)
+
+
+def commands_mcap(path: Path, rows: int, joints: int = 1, counted: int | None = None,
+                  summary: bool = True) -> Path:
+    """A recording of ``rows`` command rows of ``joints`` DG-3F-M-like joints at 200 Hz, with
+    their /joint_states; its summary counts ``counted`` rows (None: the truth), or there is no
+    summary (a recorder killed before it wrote one)."""
+    from mcap.records import DataEnd, Footer
+    from mcap.writer import CompressionType, Writer
+
+    names = [f"j_dg_{i // 4 + 1}_{i % 4 + 1}" for i in range(joints)]
+    nan = float("nan")
+    command = _joint_state(names, [0.1] * joints, [nan] * joints, [nan] * joints)
+    state = _joint_state(names, [0.1] * joints, [0.0] * joints, [0.0] * joints)
+    with path.open("wb") as f:
+        writer = Writer(f, compression=CompressionType.LZ4)
+        writer.start(profile="ros2", library="bombs")
+        schema = writer.register_schema("sensor_msgs/msg/JointState", "ros2msg", b"")
+        commands = writer.register_channel("/joint_commands", "cdr", schema)
+        states = writer.register_channel("/joint_states", "cdr", schema)
+        for i in range(rows):
+            t = 1_000_000_000 + i * 5_000_000
+            writer.add_message(states, t, state, t)
+            writer.add_message(commands, t, command, t)
+        if counted is not None:  # the summary lies
+            writer._Writer__statistics.channel_message_counts[commands] = counted
+        writer.finish()
+    if not summary:  # cut at the data section's end, and a footer that points at no summary
+        data = path.read_bytes()
+        end = data.rindex(b"\x0f" + struct.pack("<Q", 4))  # the DataEnd record
+        path.write_bytes(data[:end] + _record(DataEnd(data_section_crc=0)) +
+                         _record(Footer(summary_start=0, summary_offset_start=0,
+                                        summary_crc=0)) + b"\x89MCAP0\r\n")
+    return path
+
+
+def test_a_recording_whose_summary_lies_about_its_commands_is_refused_as_they_are_read(
+        tmp_path):
+    """The summary says one row; 200,001 and more follow: they are counted as they are read,
+    and refused at the bound (was: every row read, 2.9 GB and a MemoryError at 2,031,708)."""
+    path = commands_mcap(tmp_path / "lies.mcap", 200_100, counted=1)
+    refused(deltoctl("replay", str(path)), str(path),
+            "more than 200000 /joint_commands messages", "more than a replay takes")
+
+
+def test_a_recording_of_too_many_joint_setpoints_is_refused_as_they_are_read(tmp_path):
+    """Fewer rows than the bound, each of 12 joints: 500,000 setpoints at most."""
+    path = commands_mcap(tmp_path / "wide.mcap", 50_000, joints=12, counted=1)
+    refused(deltoctl("replay", str(path)), str(path), "more than 500000 joint setpoints")
+
+
+def test_a_recording_without_a_summary_is_refused_from_its_count_keeping_little(tmp_path):
+    """No summary: the file is read once to count its rows, keeping at most 16 MiB of them
+    (was: every message kept, 2.08 GB before the refusal)."""
+    path = commands_mcap(tmp_path / "killed.mcap", 200_100, summary=False)
+    result = deltoctl("replay", str(path))
+    refused(result, str(path), "200100 recorded commands, more than the 200000")
+    assert result["peak_mb"] < 150, result
+
+
+def test_a_file_without_a_summary_beyond_what_is_kept_is_read_again_whole(tmp_path):
+    """40 MB of messages without a summary: 16 MiB are kept, the rest read again from the
+    file when plotted; every value is there."""
+    path = commands_mcap(tmp_path / "killed.mcap", 150_000, summary=False)
+    result = deltoctl("plot", str(path), "j_dg_1_1/position", "--json")
+    assert result["code"] in (0, 3), result
+    (plotted,) = json.loads(result["stdout"])["interfaces"]
+    assert plotted["count"] == 150_000 and plotted["max"] == 0.1
+    assert result["peak_mb"] < PEAK_MB, result

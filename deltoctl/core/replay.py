@@ -20,6 +20,7 @@ import bisect
 import math
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -36,7 +37,11 @@ COMMANDS_TOPIC = "/joint_commands"
 STATES_TOPIC = "/joint_states"
 COMMAND_SUFFIX = "_command"
 NAN = float("nan")
-MAX_COMMAND_ROWS = 2_000_000  # a replay is of a fault: minutes at most, read whole
+# a replay is of a fault, minutes at most, and is read whole before anything moves: 200,000
+# rows (16 minutes at the 200 Hz a jog records) of 500,000 joint setpoints in all (2 minutes
+# of a 20-joint hand), about 120 MB held
+MAX_COMMAND_ROWS = 200_000
+MAX_COMMAND_SETPOINTS = 500_000
 MAX_HOLD_S = 0.5  # s: the longest a recording may leave one setpoint to stand
 
 
@@ -124,29 +129,52 @@ class Recorded:
         return {j: pose[j] for j in self.joints if j in pose}
 
 
-def _rows(rec: Any, topic: str) -> list[tuple[int, dict[str, float]]]:
-    """(time, interface → value) for each JointState message of ``topic``."""
+def _rows(rec: Any, topic: str) -> Iterator[tuple[int, dict[str, float]]]:
+    """(time, interface → value) for each JointState message of ``topic``, one at a time;
+    more than MAX_COMMAND_ROWS messages are refused as they are read (a summary may lie
+    about its count, and a file without one gives none)."""
     import struct
 
     from deltoctl.record.reader import Cdr, _damaged, _joint_state
 
     channel = rec.channel(topic)
     if channel is None:
-        return []
-    rows = []
-    for t, data in rec.read(channel.id):
+        return
+    names: dict[str, str] = {}  # one copy of each interface name for every row
+    for count, (t, data) in enumerate(rec.read(channel.id), 1):
+        if count > MAX_COMMAND_ROWS:
+            raise _too_many(rec.path, f"more than {MAX_COMMAND_ROWS} {topic} messages")
         try:
             layout = _joint_state(Cdr(data), topic)
-            rows.append((t, {name: struct.unpack_from("<d", data, at)[0]
-                             for name, at in layout}))
+            row = {names.setdefault(name, name): struct.unpack_from("<d", data, at)[0]
+                   for name, at in layout}
         except (struct.error, IndexError, ValueError):
             raise _damaged(rec.path, f"a {topic} message at {t} ns is not a "
                                      "sensor_msgs/JointState") from None
-    return rows
+        yield t, row
+
+
+def _too_many(path: Path, what: str) -> InvalidInput:
+    return InvalidInput(f"{path}: {what}, more than a replay takes ({MAX_COMMAND_ROWS} "
+                        f"command rows, {MAX_COMMAND_SETPOINTS} joint setpoints)",
+                        "replay a shorter recording of the fault (`deltoctl jog --record`)")
+
+
+def _setpoints(values: dict[str, float]) -> dict[str, Setpoint]:
+    """Each joint's (position, velocity, effort) setpoint in a row, if any is commanded."""
+    row: dict[str, Setpoint] = {}
+    for joint in dict.fromkeys(k.rpartition("/")[0] for k in values):
+        sp = [values.get(command_key(joint, f), NAN) for f in SETPOINT_FIELDS]
+        if any(v == v for v in sp):
+            p, v, e = (x if x == x else NAN for x in sp)  # one NaN object for every row
+            row[joint] = (p, v, e)
+    return row
 
 
 def read_recording_commands(path: Path) -> Recorded:
-    """The commands, positions and profile (YAML text) of a recording made with commands."""
+    """The commands, positions and profile (YAML text) of a recording made with commands.
+    The rows are read one at a time and only the commanded joints of each kept: the commands
+    first, bounded as they are read, then each commanded joint's recorded position."""
     from deltoctl.record.reader import read_recording
 
     rec = read_recording(path, keep=(COMMANDS_TOPIC, STATES_TOPIC))
@@ -161,23 +189,30 @@ def read_recording_commands(path: Path) -> Recorded:
                            f"{MAX_COMMAND_ROWS} a replay takes",
                            "replay a shorter recording of the fault (`deltoctl jog --record`)")
     recorded = Recorded(rec.path, rec.metadata.get("profile", {}).get("yaml"))
-    states = dict(_rows(rec, STATES_TOPIC))
-    fields = [(f, COMMAND_SUFFIX) for f in SETPOINT_FIELDS]
-    for t, values in sorted(_rows(rec, COMMANDS_TOPIC), key=lambda r: r[0]):
-        row: dict[str, Setpoint] = {}
-        joints = dict.fromkeys(k.rpartition("/")[0] for k in values)
-        for joint in joints:
-            sp = tuple(values.get(f"{joint}/{f}{s}", NAN) for f, s in fields)
-            if any(v == v for v in sp):
-                row[joint] = (sp[0], sp[1], sp[2])
-        if not row:
-            continue
-        state = states.get(t, {})
+    rows: list[tuple[int, dict[str, Setpoint]]] = []
+    setpoints = 0
+    for t, values in _rows(rec, COMMANDS_TOPIC):
+        row = _setpoints(values)
+        setpoints += len(row)
+        if setpoints > MAX_COMMAND_SETPOINTS:
+            raise _too_many(path, f"more than {MAX_COMMAND_SETPOINTS} joint setpoints")
+        if row:
+            rows.append((t, row))
+    if not rows:
+        raise InvalidInput(f"{path}: its {COMMANDS_TOPIC} topic holds no command to replay")
+    rows.sort(key=lambda r: r[0])  # in time order already, as the recorder writes them
+    times = {t for t, _ in rows}
+    joints = {j for _, row in rows for j in row}
+    positions: dict[int, dict[str, float]] = {}  # at each commanded time
+    for t, state in _rows(rec, STATES_TOPIC):
+        if t in times:
+            positions[t] = {j: state[f"{j}/position"] for j in joints
+                            if f"{j}/position" in state}
+    for t, row in rows:
+        at = positions.get(t, {})
         recorded.times.append(t)
         recorded.setpoints.append(row)
-        recorded.positions.append({j: state.get(f"{j}/position", NAN) for j in row})
-    if not recorded.times:
-        raise InvalidInput(f"{path}: its {COMMANDS_TOPIC} topic holds no command to replay")
+        recorded.positions.append({j: at.get(j, NAN) for j in row})
     return recorded
 
 
