@@ -51,7 +51,7 @@ def _signal_name(number: int) -> str:
 
 def beat_key(request: dict[str, Any]) -> bytes:
     """The heartbeat key of a run request: a secret only the caller and this agent know, that
-    signs its heartbeats and its cancel (see client.signed)."""
+    signs its heartbeats and its cancel (see client.sign)."""
     text = request.get("key")
     if not (isinstance(text, str) and len(text) == 2 * KEY_BYTES and set(text) <= _RID):
         raise InvalidInput("a run request needs the key of its heartbeats (hex digits)",
