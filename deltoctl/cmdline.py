@@ -4,7 +4,8 @@ fleet agent judges a remote command line with the same rules."""
 
 from __future__ import annotations
 
-# option spellings → whether they take a value
+# option spellings → whether they take a value: the root command's options (cli/main.py), which
+# the fleet reads without loading the CLI; a test holds the two equal
 GLOBAL_OPTIONS: dict[str, bool] = {
     "--profile": True, "-p": True, "--target": True, "-t": True, "--arg": True,
     "--package-path": True, "--hardware": True, "--log-file": True, "--xacro": False,

@@ -10,6 +10,7 @@ from typing import Annotated, Any
 
 import typer
 
+from deltoctl import verbs
 from deltoctl.cli.main import EXIT_LINE, TEACH, VERBS
 
 EXIT_CODES = (
@@ -24,48 +25,7 @@ EXIT_CODES = (
 
 
 # one example per verb, shown in its help (command path without "deltoctl")
-EXAMPLES = {
-    "profile": "deltoctl profile show dg-5f-right rj_dg_1_2",
-    "profile list": "deltoctl profile list --json",
-    "profile show": "deltoctl profile show dg-5f-right rj_dg_1_2",
-    "profile validate": "deltoctl profile validate my_robot.yaml --strict",
-    "profile import": "deltoctl profile import robot.urdf.xacro -o robot.yaml",
-    "profile export": "deltoctl profile export dg-5f-right --format xacro -o dg5f.xacro",
-    "connect": "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 connect",
-    "identify": "deltoctl -p dg-5f-right --sim identify --json",
-    "detect": "deltoctl -p mh5 --hardware upper_body detect",
-    "home": "deltoctl -p bioscara-arm home -j j1 --yes",
-    "jog": "deltoctl -p dg-5f-right jog rj_dg_2_2 5deg -y",
-    "calibrate": "deltoctl -p dg-5f-right calibrate ft",
-    "calibrate ft": "deltoctl -p dg-5f-right calibrate ft --samples 200",
-    "gpio": "deltoctl -p rrbot-gpio gpio set flange_vacuum/vacuum on",
-    "gpio get": "deltoctl -p dg-5f-right gpio get --json",
-    "gpio set": "deltoctl -p rrbot-gpio gpio set flange_vacuum/vacuum on",
-    "stream": "deltoctl -p dg-5f-right stream --rate 50 -i 'rj_dg_1_*/position'",
-    "record": "deltoctl -p mh5 record run.mcap --duration 60 --foxglove",
-    "torque": "deltoctl -p mh5 torque off left_arm",
-    "reboot": "deltoctl -p mh5 reboot head_y",
-    "register": "deltoctl -p mh5 register get head_y present_temperature",
-    "register get": "deltoctl -p mh5 register get head_y present_temperature",
-    "register set": "deltoctl -p mh5 register set head_y return_delay_time 0",
-    "sim": "deltoctl sim serve mh5 --missing head_y",
-    "sim serve": "deltoctl sim serve dg-5f-right --firmware 2.7",
-    "bench": "deltoctl bench loop --duration 2",
-    "doctor": "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 doctor",
-    "completion": "deltoctl completion bash > ~/.local/share/bash-completion/completions/deltoctl",
-    "help": "deltoctl help exit-codes",
-    "info": "deltoctl info run.mcap --json",
-    "plot": "deltoctl plot run.mcap 'rj_dg_1_*/position' --out plot.png",
-    "replay": "deltoctl replay fault.mcap --tolerance 1deg --json",
-    "config": "deltoctl -p mh5 config snapshot",
-    "config snapshot": "deltoctl -p mh5 config snapshot -o mh5.yaml",
-    "config diff": "deltoctl -p mh5 config diff mh5.yaml",
-    "config restore": "deltoctl -p mh5 config restore mh5.yaml --allow torque-off",
-    "agent": "deltoctl -p dg-5f-right agent --name hand-1 --sim",
-    "fleet": "deltoctl fleet run --robots 'hand-*' identify",
-    "fleet list": "deltoctl --zenoh-config fleet.json5 fleet list --json",
-    "fleet run": "deltoctl fleet run --robots 'hand-*' identify --json",
-}
+EXAMPLES = verbs.examples()
 GLOBAL_PANEL = "Global options (before or after the verb)"
 _NOT_GLOBAL = ("version", "help", "install_completion", "show_completion")
 

@@ -5,31 +5,24 @@ Global options are accepted before the verb and after it (``deltoctl --json iden
 Every verb's help lists them in a "Global options" panel, with an example and the exit codes.
 """
 
+import functools
 import sys
+from collections.abc import Sequence
 from typing import Annotated, Any
 
 import typer
 from typer._click import exceptions as click_exceptions
 from typer.core import TyperGroup
 
-from deltoctl import __version__
+from deltoctl import __version__, verbs
 from deltoctl.cli.context import Options, parse_pairs
 from deltoctl.cmdline import GLOBAL_OPTIONS, hoist_global_options
-from deltoctl.errors import DeltoctlError
+from deltoctl.errors import DeltoctlError, InvalidInput
 
-# verb → the module of deltoctl.cli whose register(app) adds it. A module is imported only
-# when one of its verbs runs: every line of a bring-up script pays for what it imports.
-VERBS = {
-    "config": "config_cmd", "info": "data_cmd", "plot": "data_cmd",
-    "profile": "profile_cmd", "connect": "device_cmd", "identify": "device_cmd",
-    "detect": "device_cmd", "home": "motion_cmd", "jog": "motion_cmd",
-    "calibrate": "calibrate_cmd", "gpio": "device_cmd", "stream": "device_cmd",
-    "record": "record_cmd", "replay": "replay_cmd", "torque": "servo_cmd", "reboot": "servo_cmd",
-    "register": "servo_cmd",
-    "sim": "sim_cmd", "bench": "bench_cmd", "doctor": "doctor_cmd",
-    "completion": "completion_cmd", "help": "help_cmd",
-    "agent": "agent_cmd", "fleet": "fleet_cmd",
-}
+# verb → the module of deltoctl.cli whose register(app) adds it (deltoctl.verbs declares
+# them). A module is imported only when one of its verbs runs: every line of a bring-up script
+# pays for what it imports.
+VERBS = verbs.modules()
 
 EXIT_LINE = ("Exit codes: 0 ok · 1 failed · 2 usage or invalid input · 3 warnings · "
              "4 unreachable · 5 refused for safety · 130 interrupted")
@@ -82,7 +75,7 @@ class DeltoctlGroup(TyperGroup):
         try:
             return super().parse_args(ctx, args)
         except click_exceptions.UsageError as exc:
-            if "--json" in options_part and not isinstance(
+            if "--json" in options_part and not ctx.resilient_parsing and not isinstance(
                     exc, click_exceptions.NoArgsIsHelpError):
                 _usage_error(exc, True)
             raise
@@ -161,8 +154,8 @@ app = typer.Typer(
 )
 
 
-def _version(value: bool) -> None:
-    if value:
+def _version(ctx: typer.Context, value: bool) -> None:
+    if value and not ctx.resilient_parsing:  # not while a command line is only resolved
         typer.echo(f"deltoctl {__version__}")
         raise typer.Exit()
 
@@ -255,6 +248,39 @@ def _logging(verbose: int, log_file: str | None) -> None:
         from deltoctl import trace
 
         trace.configure(verbose, log_file)
+
+
+@functools.cache
+def _command_tree() -> Any:
+    return typer.main.get_command(app)
+
+
+def command_path(args: Sequence[str]) -> tuple[str, ...]:
+    """The verb and sub-commands a command line runs (``("gpio", "set")``), resolved as
+    DeltoctlGroup.invoke resolves them — click's own parse, ``--`` and hoisted global options
+    included — but resiliently: no callback, prompt or help runs. A command line click would
+    refuse is InvalidInput; one that cannot be read otherwise is UNRESOLVED (it counts as
+    moving)."""
+    try:
+        ctx = _command_tree().make_context("deltoctl", list(args), resilient_parsing=True)
+        path: list[str] = []
+        rest = [*ctx._protected_args, *ctx.args]
+        while rest and hasattr(ctx.command, "resolve_command"):
+            word = rest[0]
+            name, command, rest = ctx.command.resolve_command(ctx, rest)
+            if command is None:
+                raise InvalidInput(f"no command {' '.join([*path, word])!r}")
+            path.append(name)
+            ctx = command.make_context(name, rest, parent=ctx, resilient_parsing=True)
+            rest = [*ctx._protected_args, *ctx.args]
+        return tuple(path)
+    except click_exceptions.UsageError as exc:
+        raise InvalidInput(exc.format_message()) from None
+    except (click_exceptions.ClickException, typer.Exit, typer.Abort):
+        return (verbs.UNRESOLVED,)
+
+
+verbs.provide_resolver(command_path)
 
 
 def main() -> None:

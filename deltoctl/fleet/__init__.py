@@ -23,16 +23,18 @@ from __future__ import annotations
 
 import re
 
+from deltoctl import verbs
 from deltoctl.errors import InvalidInput
 
 ROOT = "deltoctl"
-# one at a time per robot; the deadman matters most (replay moves the robot with --device)
-MOTION = frozenset({"home", "jog", "replay"})
-# verbs that move or switch something on the robot: they need an authenticated caller
-ACTUATING = MOTION | {"gpio set", "torque", "reboot", "register set", "config restore",
-                      "calibrate"}
+# command paths ("jog", "gpio set") by their effect in deltoctl.verbs; one the table does not
+# declare is in both (fail-closed). MOTION: one at a time per robot, the deadman matters most
+MOTION = verbs.Effects(verbs.MOVES)
+# what moves or switches something on the robot: it needs an authenticated caller
+ACTUATING = verbs.Effects(verbs.MOVES, verbs.ACTUATES)
 # the agent's own verbs, and a benchmark that would load the robot's computer while it moves
-NOT_REMOTE = frozenset({"agent", "fleet", "sim", "completion", "bench"})
+NOT_REMOTE = frozenset(name for name, verb in verbs.TABLE.items() if not verb.remote)
+MAX_VERBS = 8  # verbs running at once on one robot's agent; more are refused (exit 5)
 HEARTBEAT = 0.05  # s between a caller's heartbeats
 DEADLINE = 0.2  # s without a heartbeat before the agent interrupts the verb
 INSTALL_HINT = "pip install 'deltoctl[fleet]'"

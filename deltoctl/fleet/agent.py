@@ -24,9 +24,10 @@ from collections.abc import Callable, Collection
 from typing import Any
 
 from deltoctl.errors import DeltoctlError, InvalidInput, Refused, Unreachable
-from deltoctl.fleet import ACTUATING, DEADLINE, ERR, EXIT, MOTION, OUT, key, zenoh_module
-from deltoctl.fleet.argv import _values, check_argv
+from deltoctl.fleet import ACTUATING, DEADLINE, ERR, EXIT, MAX_VERBS, MOTION, OUT, key, zenoh_module
+from deltoctl.fleet.argv import _values, check_argv, fits, read_request
 from deltoctl.fleet.client import KEY_BYTES, sign
+from deltoctl.verbs import UNRESOLVED
 
 WATCH_PERIOD = 0.005  # s between two looks at the heartbeats
 LENIENT = 5.0  # s: the deadline of a verb that moves nothing (a busy caller is no danger)
@@ -410,35 +411,46 @@ class Agent:
             r.caller_gone = True
 
     def _on_run(self, query: Any) -> None:
+        """Each request in a thread of its own; with 2 × MAX_VERBS threads already (verbs
+        running, requests being read), refused at once: a flood of requests costs no thread."""
         if self.stopping.is_set():
             query.reply_err("the agent is stopping")
             query.drop()
             return
         t = threading.Thread(target=self._serve_query, args=(query,), daemon=True)
         with self.lock:
-            self._threads.append(t)
-        t.start()
+            self._threads = [th for th in self._threads if th.is_alive()]
+            full = len(self._threads) >= 2 * MAX_VERBS
+            if not full:
+                self._threads.append(t)
+        if full:
+            _refuse(query, key(self.robot, "run"), Refused(
+                f"busy: the agent is serving {2 * MAX_VERBS} requests", "try again later"), False)
+        else:
+            t.start()
 
     # -- one verb --------------------------------------------------------------------------
 
     def _serve_query(self, query: Any) -> None:
+        """A request, checked (bounded, then judged by the CLI's own parse of its command
+        line), runs its verb; a bad one gets one error reply, and one line in the log."""
         run_key = key(self.robot, "run")
         as_json = False
         try:
-            request = json.loads(query.payload.to_bytes()) if query.payload else None
-            if not isinstance(request, dict):
-                raise InvalidInput("a run request is a JSON object {id, argv}")
-            rid, argv = str(request.get("id", "")), request.get("argv")
-            if not (0 < len(rid) <= 32 and set(rid) <= _RID):
+            request = read_request(query.payload.to_bytes() if query.payload else b"")
+            rid, argv = request.get("id"), request.get("argv")
+            if not (isinstance(rid, str) and 0 < len(rid) <= 32 and set(rid) <= _RID):
                 raise InvalidInput("a run request needs an id of hex digits")
             as_json = isinstance(argv, list) and "--json" in argv
-            verb = check_argv(argv, self.workdir)
+            verb = check_argv(argv, self.workdir, self.links)
             self._vet(verb, argv)
             running = self._launch(rid, verb, argv, beat_key(request))
-        except DeltoctlError as exc:
-            query.reply(run_key, ERR + _error_line(exc, as_json))
-            query.reply(run_key, EXIT + str(exc.exit_code).encode())
-            query.drop()
+        except Exception as exc:  # a bug too: one line and one reply, never a traceback
+            if not isinstance(exc, DeltoctlError):
+                exc = DeltoctlError(f"internal error: {type(exc).__name__}: {exc}")
+            log(f"robot {self.robot}: request refused (exit {exc.exit_code}): "
+                f"{exc.message[:200]}")
+            _refuse(query, run_key, exc, as_json)
             return
         try:
             self._pump(query, run_key, running)
@@ -466,12 +478,18 @@ class Agent:
             self.check(verb, argv)
 
     def _launch(self, rid: str, verb: str, argv: list[str], beat: bytes = b"") -> Running:
-        if {verb, verb.split(" ")[0]} & ACTUATING and not self.motion_allowed:  # calibrate ft
-            raise Refused(f"'{verb}' refused: {self.why_not}",
-                                "see the README (Remote robots: security)")
+        if verb in ACTUATING and not self.motion_allowed:  # undeclared commands too
+            what = ("a command deltoctl cannot classify (it counts as motion)"
+                    if verb == UNRESOLVED else f"'{verb}'")
+            raise Refused(f"{what} refused: {self.why_not}",
+                          "see the README (Remote robots: security)")
+        fits(self.links, argv)  # before any bookkeeping: the zygote takes it in one message
         with self.lock:
             if rid in self.running:
                 raise InvalidInput(f"request {rid} is running already")
+            if len(self.running) >= MAX_VERBS:
+                raise Refused(f"busy: {len(self.running)} verbs are running on this robot, "
+                              f"at most {MAX_VERBS} at once", "try again when one has ended")
             moving = [r for r in self.running.values() if r.verb in MOTION]
             if verb in MOTION and moving:
                 raise Refused(f"busy: '{moving[0].verb}' (request {moving[0].rid}) is moving "
@@ -481,7 +499,10 @@ class Agent:
                 running.caller_gone = True
             self.running[rid] = running
         self._set_state()
-        log(f"robot {self.robot}: {rid}: {verb}: {json.dumps(argv)}")
+        shown = json.dumps(argv)
+        if len(shown) > 2000:  # one readable line in the journal
+            shown = f"{shown[:2000]}… ({len(shown)} characters)"
+        log(f"robot {self.robot}: {rid}: {verb}: {shown}")
         return running
 
     def _pump(self, query: Any, run_key: str, r: Running) -> None:
@@ -582,6 +603,13 @@ class Agent:
         self.launcher.refill()
         log(f"robot {self.robot}: {r.rid}: {r.verb} killed; its blocks set safe by connect "
             f"(exit {proc.returncode})")
+
+
+def _refuse(query: Any, run_key: str, exc: DeltoctlError, as_json: bool) -> None:
+    """The only replies to a request that runs nothing: the error, then its exit code."""
+    query.reply(run_key, ERR + _error_line(exc, as_json))
+    query.reply(run_key, EXIT + str(exc.exit_code).encode())
+    query.drop()
 
 
 def _error_line(exc: DeltoctlError, as_json: bool) -> bytes:

@@ -1,0 +1,180 @@
+"""Every deltoctl verb and sub-command, declared once: the module of ``deltoctl.cli`` that adds
+it, what it does to the robot (reads, actuates an output or a setting, moves a joint), whether
+a robot's agent runs it for a remote caller, and the example its help shows.
+
+The CLI loads verbs and teaches their help from this table; the fleet agent judges a remote
+command line by it. Fail-closed: a command whose effect is not declared here counts as one that
+moves the robot. No typer or click here: the fleet reads the table without loading the CLI,
+and finds which command a command line runs through the resolver the CLI provides
+(``provide_resolver``), the very parse that will run it.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+READS, ACTUATES, MOVES = "reads", "actuates", "moves"
+UNRESOLVED = "?"  # the path of a command line no resolver could read: it counts as moving
+
+
+@dataclass(frozen=True)
+class Verb:
+    """A verb or a sub-command. A group's own effect is what it does with no sub-command
+    (show its help)."""
+
+    effect: str
+    example: str = ""
+    module: str = ""  # top-level verbs: the deltoctl.cli module whose register(app) adds it
+    remote: bool = True
+    subs: Mapping[str, Verb] = field(default_factory=dict)
+
+
+TABLE: dict[str, Verb] = {
+    "config": Verb(READS, "deltoctl -p mh5 config snapshot", "config_cmd", subs={
+        "snapshot": Verb(READS, "deltoctl -p mh5 config snapshot -o mh5.yaml"),
+        "diff": Verb(READS, "deltoctl -p mh5 config diff mh5.yaml"),
+        "restore": Verb(ACTUATES, "deltoctl -p mh5 config restore mh5.yaml --allow torque-off"),
+    }),
+    "info": Verb(READS, "deltoctl info run.mcap --json", "data_cmd"),
+    "plot": Verb(READS, "deltoctl plot run.mcap 'rj_dg_1_*/position' --out plot.png",
+                 "data_cmd"),
+    "profile": Verb(READS, "deltoctl profile show dg-5f-right rj_dg_1_2", "profile_cmd", subs={
+        "list": Verb(READS, "deltoctl profile list --json"),
+        "show": Verb(READS, "deltoctl profile show dg-5f-right rj_dg_1_2"),
+        "validate": Verb(READS, "deltoctl profile validate my_robot.yaml --strict"),
+        "import": Verb(READS, "deltoctl profile import robot.urdf.xacro -o robot.yaml"),
+        "export": Verb(READS, "deltoctl profile export dg-5f-right --format xacro -o dg5f.xacro"),
+    }),
+    "connect": Verb(READS, "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 connect",
+                    "device_cmd"),
+    "identify": Verb(READS, "deltoctl -p dg-5f-right --sim identify --json", "device_cmd"),
+    "detect": Verb(READS, "deltoctl -p mh5 --hardware upper_body detect", "device_cmd"),
+    "home": Verb(MOVES, "deltoctl -p bioscara-arm home -j j1 --yes", "motion_cmd"),
+    "jog": Verb(MOVES, "deltoctl -p dg-5f-right jog rj_dg_2_2 5deg -y", "motion_cmd"),
+    "calibrate": Verb(READS, "deltoctl -p dg-5f-right calibrate ft", "calibrate_cmd", subs={
+        "ft": Verb(ACTUATES, "deltoctl -p dg-5f-right calibrate ft --samples 200"),
+        "imu": Verb(ACTUATES, "deltoctl -p mh5 calibrate imu --tumble"),  # its self-test
+    }),
+    "gpio": Verb(READS, "deltoctl -p rrbot-gpio gpio set flange_vacuum/vacuum on", "device_cmd",
+                 subs={
+        "get": Verb(READS, "deltoctl -p dg-5f-right gpio get --json"),
+        "set": Verb(ACTUATES, "deltoctl -p rrbot-gpio gpio set flange_vacuum/vacuum on"),
+    }),
+    "stream": Verb(READS, "deltoctl -p dg-5f-right stream --rate 50 -i 'rj_dg_1_*/position'",
+                   "device_cmd"),
+    "record": Verb(READS, "deltoctl -p mh5 record run.mcap --duration 60 --foxglove",
+                   "record_cmd"),
+    # with --device it moves the robot along the recording
+    "replay": Verb(MOVES, "deltoctl replay fault.mcap --tolerance 1deg --json", "replay_cmd"),
+    "torque": Verb(ACTUATES, "deltoctl -p mh5 torque off left_arm", "servo_cmd"),
+    "reboot": Verb(ACTUATES, "deltoctl -p mh5 reboot head_y", "servo_cmd"),
+    "register": Verb(READS, "deltoctl -p mh5 register get head_y present_temperature",
+                     "servo_cmd", subs={
+        "get": Verb(READS, "deltoctl -p mh5 register get head_y present_temperature"),
+        "set": Verb(ACTUATES, "deltoctl -p mh5 register set head_y return_delay_time 0"),
+    }),
+    # the agent's own verbs, and a benchmark that would load the robot's computer while it
+    # moves, do not run remotely
+    "sim": Verb(READS, "deltoctl sim serve mh5 --missing head_y", "sim_cmd", remote=False,
+                subs={"serve": Verb(READS, "deltoctl sim serve dg-5f-right --firmware 2.7")}),
+    "bench": Verb(READS, "deltoctl bench loop --duration 2", "bench_cmd", remote=False, subs={
+        "loop": Verb(READS), "dynamixel": Verb(READS), "i2c": Verb(READS),
+    }),
+    "doctor": Verb(READS, "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 doctor",
+                   "doctor_cmd"),
+    "completion": Verb(READS, "deltoctl completion bash > "
+                              "~/.local/share/bash-completion/completions/deltoctl",
+                       "completion_cmd", remote=False),
+    "help": Verb(READS, "deltoctl help exit-codes", "help_cmd"),
+    "agent": Verb(READS, "deltoctl -p dg-5f-right agent --name hand-1 --sim", "agent_cmd",
+                  remote=False),
+    "fleet": Verb(READS, "deltoctl fleet run --robots 'hand-*' identify", "fleet_cmd",
+                  remote=False, subs={
+        "list": Verb(READS, "deltoctl --zenoh-config fleet.json5 fleet list --json"),
+        "run": Verb(MOVES, "deltoctl fleet run --robots 'hand-*' identify --json"),
+    }),
+}
+
+
+def lookup(path: str) -> Verb | None:
+    """The entry of a command path (``jog``, ``gpio set``), or None when it has none."""
+    words = path.split()
+    entry = TABLE.get(words[0]) if words else None
+    for word in words[1:]:
+        entry = entry.subs.get(word) if entry is not None else None
+    return entry
+
+
+def effect(path: str) -> str:
+    """What a command does to the robot; MOVES for one the table does not declare."""
+    entry = lookup(path)
+    return entry.effect if entry is not None else MOVES
+
+
+def remote(path: str) -> bool:
+    """Whether a robot's agent runs the command for a remote caller."""
+    entry = TABLE.get(path.split(" ", 1)[0])
+    return entry.remote if entry is not None else True  # undeclared: judged as motion
+
+
+class Effects:
+    """The command paths of some effects, as a set: ``"jog" in MOTION``. A path the table
+    does not declare is in every set that holds MOVES (fail-closed)."""
+
+    def __init__(self, *effects: str) -> None:
+        self.effects = frozenset(effects)
+
+    def __contains__(self, path: object) -> bool:
+        return isinstance(path, str) and effect(path) in self.effects
+
+    def declared(self) -> frozenset[str]:
+        """The declared paths of these effects."""
+        return frozenset(p for p, v in walk() if v.effect in self.effects)
+
+
+def walk() -> list[tuple[str, Verb]]:
+    """Every declared command path and its entry, verbs before their sub-commands."""
+    out: list[tuple[str, Verb]] = []
+
+    def visit(prefix: str, entries: Mapping[str, Verb]) -> None:
+        for name, entry in entries.items():
+            path = f"{prefix} {name}".strip()
+            out.append((path, entry))
+            visit(path, entry.subs)
+
+    visit("", TABLE)
+    return out
+
+
+def modules() -> dict[str, str]:
+    """verb → the module of deltoctl.cli that adds it."""
+    return {name: entry.module for name, entry in TABLE.items()}
+
+
+def examples() -> dict[str, str]:
+    """command path → the example its help shows."""
+    return {path: entry.example for path, entry in walk() if entry.example}
+
+
+# -- which command a command line runs --------------------------------------------------------
+
+Resolver = Callable[[Sequence[str]], tuple[str, ...]]
+_resolver: list[Resolver] = []
+_lock = threading.Lock()  # the CLI's command tree loads verbs as it resolves: one at a time
+
+
+def provide_resolver(resolver: Resolver) -> None:
+    """The CLI's resolution of a command line into its command path (``("gpio", "set")``):
+    click's own, as the command line will be parsed when it runs."""
+    _resolver[:] = [resolver]
+
+
+def resolve(args: Sequence[str]) -> str:
+    """The command path (``gpio set``) a command line runs, by the CLI's own parse; an empty
+    string when it names no verb, UNRESOLVED without a CLI to resolve it."""
+    if not _resolver:
+        return UNRESOLVED
+    with _lock:
+        return " ".join(_resolver[0](args))
