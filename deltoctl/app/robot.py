@@ -361,6 +361,18 @@ class Robot:
             yield Frame(time.time_ns(), {n: values.get(n) for n in names})
 
 
+    def record(self, output: str | Path, rate: float = 100.0, duration: float | None = None,
+               gpio_type: str = "group-values") -> dict[str, Any]:
+        """Record every block's state interfaces to MCAP until ``duration`` passes (or
+        Ctrl-C); the file is valid either way. A link still down at the end is
+        ``Unreachable``; one that came back is a warning."""
+        from deltoctl.app.recording import record
+
+        result, links = record(self.system, Path(output), rate, duration, gpio_type)
+        links.finish()
+        return result
+
+
 def check_loop(rate: float, duration: float | None) -> None:
     """A loop's rate and duration: finite and positive."""
     if not (math.isfinite(rate) and 0 < rate <= 100_000):

@@ -246,7 +246,7 @@ def jog(
             raise InvalidInput(f"{name} is given twice")
         comps[name] = comp
     speed = _speed(velocity)
-    from deltoctl.cli.record_cmd import new_output
+    from deltoctl.app.recording import new_output
 
     # a file that cannot be written is refused (exit 2) before anything opens
     with new_output(record) if record else contextlib.nullcontext(), \
@@ -283,7 +283,7 @@ def jog(
 def _recorded_move(opts: Options, system: Any, targets: dict[str, float],
                    velocity: float | None, label: str, output: Path) -> dict[str, Any]:
     """``_move`` while every move loop's cycles (states and setpoints) go to ``output``."""
-    from deltoctl.cli.record_cmd import recording_metadata
+    from deltoctl.app.recording import recording_metadata
     from deltoctl.core.replay import CommandLog
     from deltoctl.record.recorder_process import RecorderProcess
 

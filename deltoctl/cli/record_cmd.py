@@ -1,8 +1,6 @@
 """``deltoctl record OUT.mcap``: interface values to MCAP (ROS 2 encoding)."""
 
 import contextlib
-import json
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated, Any
@@ -13,17 +11,11 @@ from deltoctl.cli.context import options
 from deltoctl.cli.device_cmd import (
     AllowMismatch,
     DurationOpt,
-    LinkWatch,
     RateOpt,
-    check_loop,
     finish,
-    open_system,
+    open_robot,
 )
 from deltoctl.cli.output import emit_json, info, progress, warn
-from deltoctl.core.runner import Sink
-from deltoctl.errors import DeviceError, InvalidInput
-
-SHOW_PERIOD = 0.25  # s between updates of the status line people watch
 
 
 def _status(output: Path, cycles: int, link: float | None) -> str:
@@ -31,47 +23,6 @@ def _status(output: Path, cycles: int, link: float | None) -> str:
     size = output.stat().st_size if output.exists() else 0
     state = "" if link is None else " · link up" if link else " · [red]link lost[/]"
     return f"recording {output.name}: {cycles} cycles, {size / 1e6:.1f} MB{state}"
-
-
-def create_output(path: Path) -> None:
-    """The file a recording goes to, created empty; one that cannot be is invalid input."""
-    try:
-        path.open("wb").close()
-    except OSError as exc:
-        raise InvalidInput(f"cannot write {path}: {exc.strerror}") from None
-
-
-@contextlib.contextmanager
-def new_output(path: Path) -> Iterator[None]:
-    """``create_output`` before anything opens; the file is removed again when what follows
-    fails before writing to it (an unreachable device, a refused move)."""
-    create_output(path)
-    try:
-        yield
-    except BaseException:
-        with contextlib.suppress(OSError):
-            if path.stat().st_size == 0:
-                path.unlink()
-        raise
-
-
-def recording_metadata(system: Any) -> tuple[Any, dict[str, dict[str, str]]]:
-    """The profile of the blocks driven, and the metadata a recording of them carries: that
-    profile (YAML), each block's identity, deltoctl's version."""
-    import dataclasses
-
-    from deltoctl import __version__
-    from deltoctl.profile.exporter import to_yaml
-
-    recorded = dataclasses.replace(system.profile, hardware=[m.hw for m in system])
-    identities = {m.name: {"family": m.family.name, "target": m.url,
-                           "simulated": m.simulated is not None, **m.driver.identify()}
-                  for m in system.able("identify")}
-    return recorded, {
-        "profile": {"name": recorded.name, "yaml": to_yaml(recorded)},
-        "identify": {name: json.dumps(ident, default=str) for name, ident in identities.items()},
-        "deltoctl": {"version": __version__},
-    }
 
 
 FoxgloveOpt = Annotated[bool, typer.Option(
@@ -126,42 +77,6 @@ def foxglove_result(live: Any) -> dict[str, Any]:
     return {"url": live.url, "cycles_sent": live.sent, "cycles_dropped": live.dropped}
 
 
-class RecordSink(Sink):
-    """Frames to the recorder process; the loop's and buses' statistics to /diagnostics once a
-    second; the status line people watch."""
-
-    def __init__(self, recorder: Any, output: Path, duration: float | None, bar: Any) -> None:
-        self.recorder, self.output, self.bar = recorder, output, bar
-        self.task = bar.add_task(f"recording {output.name}", total=duration) if bar else None
-        self.started = time.monotonic()
-        self.next_show = self.started
-        self.cycles = 0
-
-    def frame(self, t_ns: int, values: dict[str, float]) -> None:
-        self.recorder.write(values, t_ns)
-        self.cycles += 1
-        if self.bar is not None and time.monotonic() >= self.next_show:
-            now = time.monotonic()
-            self.next_show = now + SHOW_PERIOD
-            self.bar.update(self.task, completed=now - self.started, description=_status(
-                self.output, self.cycles, values.get("system/connection_status")))
-
-    def periodic(self, t_ns: int, stats: Any, comm_loops: list[Any]) -> None:
-        from deltoctl.record.mcap_recorder import OK, WARN
-
-        self.recorder.diagnostics(t_ns, [
-            (OK, "loop", "record loop", stats.summary()),
-            *((OK if not c.errors else WARN, c.name, "bus loop", c.report())
-              for c in comm_loops)])
-
-    def close(self, stats: Any) -> None:
-        try:
-            if self.bar is not None:
-                self.bar.stop()
-        finally:
-            self.recorder.close(stats.summary())
-
-
 def record(
     ctx: typer.Context,
     output: Annotated[Path, typer.Argument(help="The .mcap file to write.")],
@@ -181,51 +96,46 @@ def record(
     """Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
     valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back, 1 when
     the file could not be written to the end (disk full, file too large, removed)."""
-    from deltoctl.core.runner import interrupted_by_signals, run_cycles
-    from deltoctl.record.recorder_process import RecorderProcess
+    from deltoctl.app.recording import check_record, driven_profile
+    from deltoctl.app.recording import record as record_robot
+    from deltoctl.core.runner import interrupted_by_signals
 
     opts = options(ctx)
-    check_loop(rate, duration)
-    from deltoctl.record.ros2_msgs import GPIO_TYPES
+    check_record(output, rate, duration, gpio_type)
+    bar = progress(opts, elapsed=True)
+    task = bar.add_task(f"recording {output.name}", total=duration) if bar else None
 
-    if gpio_type not in GPIO_TYPES:
-        raise InvalidInput(f"--gpio-type {gpio_type!r}: one of {', '.join(GPIO_TYPES)}")
-    if not output.parent.is_dir():
-        raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
+    def show(seconds: float, cycles: int, link: float | None) -> None:
+        bar.update(task, completed=seconds, description=_status(output, cycles, link))
+
     # the file is created once the devices answer: an unreachable one leaves no empty file;
     # SIGTERM and SIGHUP before the loop interrupt like Ctrl-C, so the file is finished too
-    with interrupted_by_signals(), \
-            foxglove_live(foxglove, foxglove_host, foxglove_port, foxglove_origin) as live, \
-            open_system(opts, allow_model_mismatch) as system:
-        create_output(output)
-        recorded, metadata = recording_metadata(system)
-        sinks: list[Sink] = []
-        if live is not None:
-            start_foxglove(live, recorded, tuple(system.extra_states()), gpio_type)
-            sinks.append(live)
-        with RecorderProcess(output, recorded, metadata, tuple(system.extra_states()),
-                             gpio_type=gpio_type) as recorder:
-            links = LinkWatch(system)
-            stats = run_cycles(system, rate, duration, [
-                RecordSink(recorder, output, duration, progress(opts, elapsed=True)), links,
-                *sinks])
-    if recorder.error:  # a write failed or the file was removed: the message says what is left
-        raise DeviceError(recorder.error)
-    summary = stats.summary()
-    result = {"output": str(output), "messages": recorder.counts,
-              "link_losses": recorder.link_losses, "loop": summary}
+    try:
+        with interrupted_by_signals(), \
+                foxglove_live(foxglove, foxglove_host, foxglove_port, foxglove_origin) as live, \
+                open_robot(opts, allow_model_mismatch) as robot:
+            sinks = []
+            if live is not None:
+                start_foxglove(live, driven_profile(robot.system),
+                               tuple(robot.system.extra_states()), gpio_type)
+                sinks.append(live)
+            result, links = record_robot(robot.system, output, rate, duration, gpio_type,
+                                         sinks, show if bar else None)
+    finally:
+        if bar is not None:
+            bar.stop()
+    summary, counts = result["loop"], result["messages"]
     if live is not None:
         result["foxglove"] = foxglove_result(live)
     if opts.json:
         emit_json(result)
     else:
-        info(f"wrote {output}: {sum(recorder.counts.values())} messages on "
-             f"{len(recorder.counts)} topics, {summary['cycles']} cycles at "
-             f"{summary['real_rate']} Hz")
-    if recorder.link_losses:
+        info(f"wrote {output}: {sum(counts.values())} messages on {len(counts)} topics, "
+             f"{summary['cycles']} cycles at {summary['real_rate']} Hz")
+    if result["link_losses"]:
         info("the gaps are marked on /diagnostics")
     links.finish()
-    finish(system)  # exit 3 on warnings (a servo that never answered, a link lost)
+    finish(robot.system)  # exit 3 on warnings (a servo that never answered, a link lost)
 
 
 def register(root: typer.Typer) -> None:

@@ -103,3 +103,12 @@ def test_config_round_trip_through_the_library(tmp_path):
         with pytest.raises(Refused, match="--allow"):
             robot.config_restore(path)
         assert robot.registers("head_y", ["Max Position Limit"])["items"][0]["value"] != 3000
+
+
+def test_record_through_the_library_on_several_links(tmp_path):
+    from deltoctl.record.reader import describe
+
+    with deltoctl.open_robot("mh5", sim=True) as robot:
+        result = robot.record(tmp_path / "mh5.mcap", rate=100, duration=0.3)
+    assert result["messages"]["/joint_states"] >= 10
+    assert describe(tmp_path / "mh5.mcap")["topics"]

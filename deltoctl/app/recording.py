@@ -1,0 +1,132 @@
+"""Recording a robot: every block's state interfaces at a fixed rate to MCAP (ROS 2
+encoding), written by a process of its own; the metadata a recording carries; the file a
+recording goes to."""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+import time
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from deltoctl.app.sinks import LinkWatch
+from deltoctl.core.runner import Sink
+from deltoctl.errors import DeviceError, InvalidInput
+
+if TYPE_CHECKING:
+    from deltoctl.core.system import System
+    from deltoctl.profile.model import Profile
+
+SHOW_PERIOD = 0.25  # s between two calls of a recording's ``show``
+# what a recording shows as it goes: seconds so far, cycles, the link's state (None: unknown)
+Show = Callable[[float, int, "float | None"], None]
+
+
+def create_output(path: Path) -> None:
+    """The file a recording goes to, created empty; one that cannot be is invalid input."""
+    try:
+        path.open("wb").close()
+    except OSError as exc:
+        raise InvalidInput(f"cannot write {path}: {exc.strerror}") from None
+
+
+@contextlib.contextmanager
+def new_output(path: Path) -> Iterator[None]:
+    """``create_output`` before anything opens; the file is removed again when what follows
+    fails before writing to it (an unreachable device, a refused move)."""
+    create_output(path)
+    try:
+        yield
+    except BaseException:
+        with contextlib.suppress(OSError):
+            if path.stat().st_size == 0:
+                path.unlink()
+        raise
+
+
+def driven_profile(system: System) -> Profile:
+    """The profile of the blocks the System drives (``--hardware`` narrows it)."""
+    return dataclasses.replace(system.profile, hardware=[m.hw for m in system])
+
+
+def recording_metadata(system: System) -> tuple[Profile, dict[str, dict[str, str]]]:
+    """The profile of the blocks driven, and the metadata a recording of them carries: that
+    profile (YAML), each block's identity, deltoctl's version."""
+    from deltoctl import __version__
+    from deltoctl.profile.exporter import to_yaml
+
+    recorded = driven_profile(system)
+    identities = {m.name: {"family": m.family.name, "target": m.url,
+                           "simulated": m.simulated is not None, **m.driver.identify()}
+                  for m in system.able("identify")}
+    return recorded, {
+        "profile": {"name": recorded.name, "yaml": to_yaml(recorded)},
+        "identify": {name: json.dumps(ident, default=str) for name, ident in identities.items()},
+        "deltoctl": {"version": __version__},
+    }
+
+
+class RecordSink(Sink):
+    """Frames to the recorder process; the loop's and buses' statistics to /diagnostics once a
+    second; ``show`` told how it goes a few times a second."""
+
+    def __init__(self, recorder: Any, show: Show | None = None) -> None:
+        self.recorder, self.show = recorder, show
+        self.started = self.next_show = time.monotonic()
+        self.cycles = 0
+
+    def frame(self, t_ns: int, values: dict[str, float]) -> None:
+        self.recorder.write(values, t_ns)
+        self.cycles += 1
+        if self.show is not None and time.monotonic() >= self.next_show:
+            now = time.monotonic()
+            self.next_show = now + SHOW_PERIOD
+            self.show(now - self.started, self.cycles, values.get("system/connection_status"))
+
+    def periodic(self, t_ns: int, stats: Any, comm_loops: list[Any]) -> None:
+        from deltoctl.record.mcap_recorder import OK, WARN
+
+        self.recorder.diagnostics(t_ns, [
+            (OK, "loop", "record loop", stats.summary()),
+            *((OK if not c.errors else WARN, c.name, "bus loop", c.report())
+              for c in comm_loops)])
+
+    def close(self, stats: Any) -> None:
+        self.recorder.close(stats.summary())
+
+
+def check_record(output: Path, rate: float, duration: float | None, gpio_type: str) -> None:
+    """A recording's options, checked before any device is opened."""
+    from deltoctl.app.robot import check_loop
+    from deltoctl.record.ros2_msgs import GPIO_TYPES
+
+    check_loop(rate, duration)
+    if gpio_type not in GPIO_TYPES:
+        raise InvalidInput(f"--gpio-type {gpio_type!r}: one of {', '.join(GPIO_TYPES)}")
+    if not output.parent.is_dir():
+        raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
+
+
+def record(system: System, output: Path, rate: float, duration: float | None,
+           gpio_type: str = "group-values", sinks: Sequence[Sink] = (),
+           show: Show | None = None) -> tuple[dict[str, Any], LinkWatch]:
+    """Record until ``duration`` passes or an interrupt (the file is valid either way);
+    ``sinks`` see every cycle too. Returns the result and the lost-link watch, whose
+    ``finish()`` says how the links ended (Unreachable when one is still down)."""
+    from deltoctl.core.runner import run_cycles
+    from deltoctl.record.recorder_process import RecorderProcess
+
+    check_record(output, rate, duration, gpio_type)
+    create_output(output)
+    recorded, metadata = recording_metadata(system)
+    with RecorderProcess(output, recorded, metadata, tuple(system.extra_states()),
+                         gpio_type=gpio_type) as recorder:
+        links = LinkWatch(system)
+        stats = run_cycles(system, rate, duration, [RecordSink(recorder, show), links, *sinks])
+    if recorder.error:  # a write failed or the file was removed: the message says what is left
+        raise DeviceError(recorder.error)
+    return {"output": str(output), "messages": recorder.counts,
+            "link_losses": recorder.link_losses, "loop": stats.summary()}, links
