@@ -58,7 +58,7 @@ def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
 
 
 def _move(opts: Options, system: Any, targets: dict[str, float], velocity: float | None,
-          label: str) -> dict[str, Any]:
+          label: str, jog: bool = True) -> dict[str, Any]:
     """Move on every block that holds a target (at the same time), stop them all on the way
     out, and report per block."""
     from deltoctl.core.runner import interrupted_by_signals
@@ -69,7 +69,8 @@ def _move(opts: Options, system: Any, targets: dict[str, float], velocity: float
         with interrupted_by_signals():
             result = system.move(
                 targets, velocity,
-                None if bar is None else lambda fraction: bar.update(task, completed=fraction))
+                None if bar is None else lambda fraction: bar.update(task, completed=fraction),
+                jog=jog)
     finally:
         system.stop()
         if bar is not None:
@@ -145,7 +146,7 @@ def home(
         if routine:
             report["blocks"] += _home_routine(opts, system, routine, force)
         if targets:
-            moved = _move(opts, system, targets, speed, "home")
+            moved = _move(opts, system, targets, speed, "home", jog=False)
             report["blocks"] += moved["blocks"]
             report["settled"], report["unsettled"] = moved["settled"], moved["unsettled"]
     report["cannot_home"] = unable
@@ -222,8 +223,6 @@ def jog(
 ) -> None:
     """Move one joint by DELTA (or --to POS), within its limits and the profile's jog step;
     more JOINT DELTA pairs move at the same time (blocks on several links at once)."""
-    from deltoctl.core.motion import check_target
-
     opts = options(ctx)
     profile = opts.load_profile()
     if (delta is None) == (to is None):
@@ -264,10 +263,10 @@ def jog(
                 start + _quantity(step or "", "DELTA")
             if not math.isfinite(target):
                 raise InvalidInput(f"the target of {name} must be finite")
-            check_target(profile, comps[name], target, start)
             targets[name] = target
             moves.append(f"{name} ({system.member(name).name}) from {start:.4f} to "
                          f"{target:.4f} ({math.degrees(target - start):+.1f}°)")
+        system.check_move(targets, speed)  # the System's envelope, before anyone is asked
         confirm_motion(opts, "jog " + "; ".join(moves))
         label = f"jog {', '.join(targets)}"
         if record is None:

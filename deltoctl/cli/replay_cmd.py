@@ -186,7 +186,7 @@ def replay(
                 for names in system.by_block(joints).values():
                     system.member(names[0]).driver.check_motion(names)  # e.g. not homed
                 if start:
-                    moved = system.move(start)
+                    moved = system.move(start, jog=False)  # a known pose, as home's
                     if not moved.settled:
                         raise DeviceError("the recorded start pose was not reached: "
                                           f"{', '.join(moved.unsettled)}; nothing replayed")

@@ -4,6 +4,9 @@ ros2_control's lifecycle (configure, activate, read, write, stop, deactivate, cl
 capabilities a verb may ask for (identify, detect, home, jog, calibrate_ft, gpio, registers,
 torque, reboot, config) — declared in the family's descriptor, so a verb asks what a block can
 do, never which family it is. Every driver is built the same way: ``DriverClass(block)``.
+
+The System checks the safety envelope (core/motion.py) before it calls ``move``, ``write``,
+``set_command`` or ``follow``: a driver sends what it is given.
 """
 
 from __future__ import annotations
@@ -154,13 +157,18 @@ class Driver:
     def check_motion(self, joints: list[str]) -> None:
         """Raise Refused when these joints may not move now (before anyone is asked)."""
 
+    def effort_cap(self) -> float | None:
+        """The largest effort (N·m) this family lets a command ask for, from the profile's
+        safety section (a current cap); None: the joints' effort limits alone bound it."""
+        return None
+
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:
         raise Unsupported(f"{self.hw.name} cannot move its joints")
 
     def follow(self, setpoints: dict[str, Setpoint]) -> None:
         """Send one cycle's recorded setpoints (``replay``) the way this family's move loop
-        sent them; the caller checked them against the profile's limits first. By default,
+        sent them; the System checked them against the envelope first. By default,
         each field that is one of the joint's command interfaces goes to ``write`` (NaN: not
         commanded); a family whose move sends goals rather than setpoints overrides it."""
         commands = self._follow_plan

@@ -530,8 +530,7 @@ class Replay:
                         result.seconds = elapsed
                         raise Deviated(f"at {elapsed:.3f} s: {joint} at {position:.4f} "
                                        f"{problem}; every block was stopped", result)
-            for driver, setpoints in blocks:
-                driver.follow(setpoints)
+            self.system.follow(recorded.setpoints[i])  # checked against the envelope
             result.rows = i + 1
             if progress is not None:
                 progress((i + 1) / total)

@@ -6,16 +6,22 @@ A cycle sends every block's read request first, then takes the replies, so block
 links wait for their devices at the same time. Blocks on one link (I2C devices on one bus) share
 its transport. Whatever happens, closing leaves every block safe (duty 0, stop, torque as found)
 and releases its link.
+
+The safety envelope is the System's, whoever calls it: a move, a command to a joint's
+position, velocity or effort interface and a replayed setpoint are checked against the joint's
+limits and soft limits, its velocity and effort limits and ``max_jog_step`` (core/motion.py)
+before a byte is sent to any block; a target outside is ``Refused`` (exit 5).
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from typing import Any
 
 from deltoctl import registry, trace
-from deltoctl.core.driver import Block, Driver, Links, MoveResult, Progress
+from deltoctl.core import motion
+from deltoctl.core.driver import Block, Driver, Links, MoveResult, Progress, Setpoint
 from deltoctl.core.lifecycle import Lifecycle
 from deltoctl.errors import DeltoctlError, InvalidInput, Unreachable
 from deltoctl.profile.model import Component, Hardware, Profile
@@ -142,6 +148,7 @@ class System:
                                f"({'; '.join(self.notes) or 'the profile has no blocks'})")
         self._owner: dict[str, Member] = {c.name: m for m in self.members
                                           for c in m.hw.components()}
+        self._followed: dict[str, float] = {}  # each joint's last replayed position setpoint
 
     def _url(self, hw: Hardware, family: Family, named: dict, bare: list) -> str:
         if not family.schemes:
@@ -306,9 +313,20 @@ class System:
         return values
 
     def set_command(self, name: str, value: float) -> None:
-        self.member(name).driver.set_command(name, value)
+        """One command interface by name (``joint/position``, ``gpio/output_1``). A joint's
+        position, velocity or effort command is checked against the envelope first: a
+        position as a move from where the joint is (``max_jog_step``)."""
+        m = self.member(name)
+        part, _, interface = name.rpartition("/")
+        comp = self.component(part or name)
+        if comp.kind == "joint":
+            present = self._positions([part]) if interface == "position" else {}
+            motion.check_command(self.profile, comp, interface, value, present.get(part),
+                                 m.driver.effort_cap())
+        m.driver.write({name: value})
 
     def stop(self) -> None:
+        self._followed.clear()
         for m in self.members:
             m.driver.stop()
 
@@ -320,12 +338,65 @@ class System:
             groups.setdefault(self.member(j).name, []).append(j)
         return {m.name: groups[m.name] for m in self.members if m.name in groups}
 
+    def _positions(self, joints: Iterable[str]) -> dict[str, float]:
+        """Each joint's position as last read (read first when one is not known yet); a
+        joint whose position is still unknown is left out."""
+        keys = {j: f"{j}/position" for j in joints}
+        if any(k not in self.values for k in keys.values()):
+            self.read()
+        return {j: self.values[k] for j, k in keys.items() if k in self.values}
+
+    def _joint(self, name: str) -> Component:
+        comp = self.component(name)
+        if comp.kind != "joint":
+            raise InvalidInput(f"{name} is a {comp.kind}, not a joint: it does not move")
+        return comp
+
+    def check_move(self, targets: Mapping[str, float], velocity: float | None = None, *,
+                   jog: bool = True) -> None:
+        """Refuse (``Refused``, exit 5) a move that leaves the envelope, before anything is
+        sent: a target outside a joint's limits or soft limits, a velocity beyond its limit,
+        a step beyond ``max_jog_step`` from where the joint is (its last read). ``jog``
+        False: a move to a known pose (``home``, a replay's start pose), within the limits
+        but not bounded by ``max_jog_step``."""
+        bounded = jog and self.profile.safety.max_jog_step is not None
+        present = self._positions(targets) if bounded else {}
+        for joint, target in targets.items():
+            motion.check_move(self.profile, self._joint(joint), target, present.get(joint),
+                              velocity, jog)
+
+    def follow(self, setpoints: Mapping[str, Setpoint]) -> None:
+        """One cycle's setpoints (a replay's row) to the blocks that hold their joints, once
+        every one is within the envelope: its position a ``max_jog_step`` at most from the
+        setpoint before (the first: from where the joint is), its velocity and effort within
+        the joint's limits (the family clamps an effort to its cap, as its moves do).
+        ``stop`` forgets the setpoints before."""
+        before = self._followed
+        fresh = [j for j in setpoints if j not in before]
+        present = self._positions(fresh) if fresh else {}
+        members = []
+        for joint, setpoint in setpoints.items():
+            m = self.member(joint)
+            motion.check_setpoint(self.profile, self._joint(joint), setpoint,
+                                  before.get(joint, present.get(joint)))
+            if m not in members:
+                members.append(m)
+        for m in members:
+            m.driver.follow({j: sp for j, sp in setpoints.items() if self._owner[j] is m})
+        before.update((j, sp[0]) for j, sp in setpoints.items() if sp[0] == sp[0])
+
     def move(self, targets: dict[str, float], velocity: float | None = None,
-             progress: Progress | None = None) -> MoveResult:
+             progress: Progress | None = None, *, jog: bool = True) -> MoveResult:
         """Each block moves its joints; blocks on different links move at the same time.
-        Ctrl-C or an error in one block halts them all."""
+        Ctrl-C or an error in one block halts them all. Every target is checked first
+        (``check_move``), and every block's motion rules (homed first): a refused one sends
+        nothing to any block."""
+        self.check_move(targets, velocity, jog=jog)
+        self._followed.clear()
         groups = self.by_block(targets)
         members = {m.name: m for m in self.members}
+        for name, joints in groups.items():
+            members[name].driver.check_motion(joints)
         for m in self.members:
             m.driver.halted.clear()
         if len(groups) == 1:

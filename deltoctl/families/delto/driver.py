@@ -424,12 +424,16 @@ class DeltoDriver(Driver):
 
         return move_to(self, targets, velocity=velocity, progress=progress)
 
+    def effort_cap(self) -> float:
+        """The profile's current cap as an effort: what a move commands at most."""
+        from deltoctl.families.delto.motion import effort_cap
+
+        return effort_cap(self)
+
     def follow(self, setpoints: dict[str, tuple[float, float, float]]) -> None:
         """Recorded efforts (``replay``), clamped to the current cap as a move's are; a joint
         without one (NaN) gets duty 0."""
-        from deltoctl.families.delto.motion import effort_cap
-
-        cap = effort_cap(self)
+        cap = self.effort_cap()
         self.write_efforts({j: max(-cap, min(cap, sp[2])) for j, sp in setpoints.items()
                             if isfinite(sp[2])})
 
