@@ -20,7 +20,7 @@ GROUP = "deltoctl.families"
 # what a verb may ask of a driver, beyond the lifecycle and read/write
 CAPABILITIES = frozenset({
     "identify", "detect", "home", "jog", "calibrate_ft", "gpio", "registers", "torque",
-    "reboot", "config",
+    "reboot", "config", "calibrate_imu",
 })
 
 

@@ -1,7 +1,8 @@
-"""``deltoctl calibrate ft``: tare the fingertip F/T sensors and check what is left."""
+"""``deltoctl calibrate ft``: tare the fingertip F/T sensors and check what is left;
+``deltoctl calibrate imu``: the IMU's self-test, gravity check and six-position tumble."""
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -50,6 +51,62 @@ def calibrate_ft(
         raise DeviceError(f"residual over tolerance after the tare on: {', '.join(bad)}",
                           hint="check the firmware (OFFSET needs v2.3 or later) and that "
                                "nothing touches the fingertips")
+    finish(robot.system)
+
+
+def check_rows(checks: list[dict[str, Any]], *first: str) -> list[list[Any]]:
+    """One table row per check: its id, value, unit, limit and verdict."""
+    def limit(c: dict[str, Any]) -> str:
+        low, high = c["limit"]["min"], c["limit"]["max"]
+        return ("" if low is None and high is None else f"≤ {high:g}" if low is None
+                else f"≥ {low:g}" if high is None else f"{low:g} … {high:g}")
+
+    return [[*first, c["id"], c["value"], c["unit"], limit(c),
+             c["verdict"].upper() if c["verdict"] == "fail" else c["verdict"]] for c in checks]
+
+
+@app.command("imu")
+def calibrate_imu(
+    ctx: typer.Context,
+    samples: Annotated[int, typer.Option("--samples", "-n", min=10, max=100000,
+                                         help="Samples of the gravity check.")] = 100,
+    tumble: Annotated[bool, typer.Option(
+        "--tumble", help="Then the six-position tumble: the terminal says which face to put "
+                         "down and waits until the readings settle; saves the calibration.")
+    ] = False,
+    timeout: Annotated[float, typer.Option(help="Seconds to wait for each position.")] = 120.0,
+    output_dir: Annotated[Path, typer.Option(
+        "--output-dir", "-o", help="Where the calibration file goes.")] = Path("."),
+    allow_model_mismatch: AllowMismatch = False,
+) -> None:
+    """Verify every IMU: the chip's built-in self-test against its datasheet's limits and a
+    gravity check at rest (|a| = 9.81 m/s², gyro at its zero-rate level); with --tumble, each
+    axis's bias and scale from six positions, saved as
+    calibration-<chip>-<address>-<time>.json — name it in the sensor's `calibration` param
+    and stream and record apply it. Exit 1 when a check fails."""
+    from deltoctl.app.imu_calibration import calibrate_imu as run
+    from deltoctl.app.imu_calibration import check_options
+
+    opts = options(ctx)
+    check_options(samples, timeout, output_dir)
+    with open_robot(opts, allow_model_mismatch) as robot:
+        result = run(robot.system, samples, (lambda text: typer.echo(f"{text} …", err=True))
+                     if tumble else None, timeout, output_dir)
+    blocks = result["blocks"]
+    if opts.json:
+        emit_json(result)
+    else:
+        table(None, ["sensor", "check", "value", "unit", "limit", "verdict"],
+              [row for b in blocks for row in check_rows(b["checks"], b["sensor"])])
+        for b in blocks:
+            if "calibration_file" in b:
+                info(f"calibration: {b['calibration_file']} (name it in {b['sensor']}'s "
+                     "calibration param)")
+    bad = [c["id"] for b in blocks for c in b["checks"] if c["verdict"] == "fail"]
+    if bad:
+        raise DeviceError(f"IMU checks failed: {', '.join(bad)}",
+                          hint="a failed self-test is a faulty part; a failed rest check "
+                               "wants the IMU still")
     finish(robot.system)
 
 

@@ -13,6 +13,6 @@ FAMILY = Family(
     address_range=(0x08, 0x77),
     address_kind="I2C address",
     address_format="#04x",
-    capabilities=frozenset({"identify", "detect", "config"}),
+    capabilities=frozenset({"identify", "detect", "config", "calibrate_imu"}),
     serve_options=("who_am_i", "orientation"),
 )

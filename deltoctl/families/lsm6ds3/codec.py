@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import struct
+from dataclasses import dataclass
 
 from deltoctl.errors import InvalidInput, ProtocolError
 
@@ -15,12 +16,15 @@ WHO_AM_I = 0x0F
 CTRL1_XL = 0x10
 CTRL2_G = 0x11
 CTRL4_C = 0x13
+CTRL5_C = 0x14  # self-test: ST_XL bits 1:0, ST_G bits 3:2
+STATUS_REG = 0x1E  # XLDA bit 0, GDA bit 1: a new sample is ready
 ORIENT_CFG_G = 0x0B
 OUT_TEMP_L = 0x20  # temperature, then gyro X/Y/Z (0x22) and accelerometer X/Y/Z (0x28)
 OUTX_L_G = 0x22
 OUTX_L_XL = 0x28
 REGISTERS = {WHO_AM_I: "WHO_AM_I", CTRL1_XL: "CTRL1_XL", CTRL2_G: "CTRL2_G",
-             CTRL4_C: "CTRL4_C", ORIENT_CFG_G: "ORIENT_CFG_G", OUT_TEMP_L: "OUT_TEMP_L",
+             CTRL4_C: "CTRL4_C", CTRL5_C: "CTRL5_C", STATUS_REG: "STATUS_REG",
+             ORIENT_CFG_G: "ORIENT_CFG_G", OUT_TEMP_L: "OUT_TEMP_L",
              OUTX_L_G: "OUTX_L_G", OUTX_L_XL: "OUTX_L_XL"}
 BLOCK = 14  # bytes from OUT_TEMP_L to OUTZ_H_XL
 BW_SCAL_ODR = 0x80  # CTRL4_C: the accelerometer bandwidth comes from CTRL1_XL's BW bits
@@ -37,6 +41,26 @@ G = 9.80665
 MG_PER_LSB_2G = 0.061
 MDPS_PER_LSB_125 = 4.375
 RAW = struct.Struct("<7h")
+
+
+# The built-in self-test (ST's LSM6DS3TR-C procedure): the accelerometer at 52 Hz ±4 g, the
+# gyroscope at 208 Hz 2000 dps; each axis's output must move by the datasheet's range when the
+# self-test force is on.
+ST_XL_POSITIVE, ST_XL_NEGATIVE = 0x01, 0x02
+ST_G_POSITIVE, ST_G_NEGATIVE = 0x04, 0x0C
+ST_MASK = 0x0F
+XLDA, GDA = 0x01, 0x02
+SELF_TEST_ACCEL = (52, 4)  # Hz, ±g
+SELF_TEST_GYRO = (208, 2000)  # Hz, dps
+SELF_TEST_ACCEL_MG = (90.0, 1700.0)  # |output change| per axis, mg
+SELF_TEST_GYRO_DPS = (150.0, 700.0)  # |output change| per axis at 2000 dps, dps
+SELF_TEST_WAIT = {"accel": 0.1, "gyro": 0.15, "gyro_on": 0.05}  # s for the output to settle
+SELF_TEST_SAMPLES = 5  # averaged, after one discarded
+ZERO_RATE_DPS = 10.0  # the gyroscope's zero-rate level at rest, |dps| per axis
+# What the datasheets consulted do not confirm: these values are taken as the LSM6DS3TR-C's.
+UNVERIFIED = ("the self-test limits of the original LSM6DS3 (WHO_AM_I 0x69)",
+              "the zero-rate level (10 dps)")
+RAW_AXES = struct.Struct("<3h")
 
 
 def frame_name(data: bytes) -> str | None:
@@ -81,6 +105,13 @@ def chip_name(who_am_i: int) -> str:
     return CHIPS[who_am_i]
 
 
+def raw_axes(data: bytes) -> tuple[int, int, int]:
+    """X, Y, Z of one sensor's output registers, in the chip's own axes (the self-test's)."""
+    if len(data) != RAW_AXES.size:
+        raise ProtocolError(f"expected {RAW_AXES.size} bytes of X/Y/Z, got {len(data)}")
+    return RAW_AXES.unpack(data)
+
+
 def decode(block: bytes, accel: float, gyro: float) -> tuple[float, tuple, tuple]:
     """Temperature (°C), angular velocity and linear acceleration in the MH5's ROS frame:
     ang_vel = (−gz, gy, −gx), lin_acc = (−az, ay, −ax)."""
@@ -118,3 +149,49 @@ class LowPass:
         self.state = [new if old == 0.0 else old * (1 - f) + new * f
                       for old, new in zip(self.state, values)]
         return tuple(self.state)
+
+
+CALIBRATION_KIND = "imu_calibration"
+# what a calibration file may hold at all (its own checks are tighter): beyond, it is refused
+CALIBRATION_BOUNDS = {"accel_bias": (-0.5 * G, 0.5 * G), "accel_scale": (0.5, 1.5),
+                      "gyro_bias": (-0.5, 0.5)}
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Per-axis corrections in the ROS frame: accel = (raw − bias) / scale (m/s²), gyro =
+    raw − bias (rad/s). Written by ``calibrate imu --tumble``, named by a sensor's
+    ``calibration`` param."""
+
+    accel_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    accel_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def apply(self, gyro: tuple, accel: tuple) -> tuple[tuple, tuple]:
+        return (tuple(w - b for w, b in zip(gyro, self.gyro_bias)),
+                tuple((a - b) / s for a, b, s in zip(accel, self.accel_bias, self.accel_scale)))
+
+    def to_data(self) -> dict[str, list[float]]:
+        return {"accel_bias": [round(v, 6) for v in self.accel_bias],
+                "accel_scale": [round(v, 6) for v in self.accel_scale],
+                "gyro_bias": [round(v, 6) for v in self.gyro_bias]}
+
+    @classmethod
+    def from_data(cls, data: object) -> Calibration:
+        """A calibration file's contents, checked: three finite numbers per correction within
+        CALIBRATION_BOUNDS, from a calibration that passed its checks. Raises InvalidInput."""
+        if not isinstance(data, dict) or data.get("kind") != CALIBRATION_KIND:
+            raise InvalidInput(f"not an IMU calibration (expected kind: {CALIBRATION_KIND})")
+        if data.get("pass") is not True:
+            raise InvalidInput("this calibration failed its checks; run calibrate imu --tumble "
+                               "again")
+        values = {}
+        for key, (low, high) in CALIBRATION_BOUNDS.items():
+            axes = data.get(key)
+            if not (isinstance(axes, list) and len(axes) == 3 and all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool)
+                    and math.isfinite(v) and low <= v <= high for v in axes)):
+                raise InvalidInput(f"{key} must be three numbers from {low:g} to {high:g}, "
+                                   f"got {axes!r}"[:200])
+            values[key] = tuple(float(v) for v in axes)
+        return cls(**values)

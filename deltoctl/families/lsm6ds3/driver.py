@@ -1,8 +1,15 @@
 """The LSM6DS3 on an I2C bus: detect by WHO_AM_I, configure rate and range, read gyro,
-accelerometer and temperature into a sensor's interfaces (``imu/angular_velocity.x`` …)."""
+accelerometer and temperature into a sensor's interfaces (``imu/angular_velocity.x`` …),
+corrected by the calibration file the sensor's ``calibration`` param names; the built-in
+self-test."""
 
 from __future__ import annotations
 
+import hashlib
+import json
+import math
+import time
+from pathlib import Path
 from typing import Any
 
 from deltoctl.core.driver import Block, Driver
@@ -11,12 +18,15 @@ from deltoctl.families.lsm6ds3 import codec
 from deltoctl.transport.i2c import I2CBus, shared_bus
 
 AXES = ("x", "y", "z")
+ZERO_RATE = math.radians(codec.ZERO_RATE_DPS)  # rad/s: the gyroscope at rest, per axis
 # no orientation estimate: the MH5 reports a fixed quaternion
 ORIENTATION = {"orientation.x": 0.0, "orientation.y": 0.0, "orientation.z": 0.0,
                "orientation.w": 1.0}
 
 
 class Lsm6ds3Driver(Driver):
+    zero_rate = ZERO_RATE
+
     def __init__(self, block: Block) -> None:
         super().__init__(block)
         hw = block.hw
@@ -38,6 +48,8 @@ class Lsm6ds3Driver(Driver):
         self.gyro = codec.gyro_scale(self.range_dps)
         self.bus: I2CBus | None = None
         self.chip = ""
+        self.calibration = codec.Calibration()
+        self.calibration_source: dict[str, str] | None = None  # the file applied, and its hash
         self._request = bytes([codec.OUT_TEMP_L])
 
     @property
@@ -63,18 +75,52 @@ class Lsm6ds3Driver(Driver):
         ctrl4 = self._register(codec.CTRL4_C)
         self.bus.write(self.address, bytes([codec.CTRL4_C, ctrl4 | codec.BW_SCAL_ODR]))
         self.bus.write(self.address, bytes([codec.ORIENT_CFG_G, 0]))  # remap in software
+        self._load_calibration()
         self.connected = True
+
+    def _load_calibration(self) -> None:
+        """The calibration file the sensor's ``calibration`` param names (beside the profile's
+        file when relative): bounded, checked, refused with one message when wrong."""
+        name = self.sensor.params.get("calibration")
+        if not name:
+            return
+        from deltoctl.profile.yaml_loader import read_text
+
+        path = Path(str(name))
+        source = self.profile.source
+        if not path.is_absolute() and source and Path(source).is_file():
+            path = Path(source).parent / path
+        text = read_text(path, "JSON", limit=64 * 1024, kind="calibration file")
+        try:
+            self.calibration = codec.Calibration.from_data(json.loads(text))
+        except (ValueError, InvalidInput) as exc:
+            why = exc.message if isinstance(exc, InvalidInput) else f"not JSON ({exc})"
+            raise InvalidInput(f"{self.sensor.name}: calibration {path}: {why}") from None
+        self.calibration_source = {"file": str(path),
+                                   "sha256": hashlib.sha256(text.encode()).hexdigest()}
+
+    def _sample(self) -> tuple[float, tuple, tuple]:
+        """Temperature, angular velocity and acceleration, neither calibrated nor filtered."""
+        assert self.bus is not None
+        block = self.bus.transfer(self.address, self._request, codec.BLOCK)
+        return codec.decode(block, self.accel, self.gyro)
+
+    def sample(self, calibrated: bool = True) -> tuple[tuple, tuple]:
+        """One unfiltered reading (angular velocity, acceleration), calibrated or raw: what
+        the IMU checks average."""
+        _, gyro, accel = self._sample()
+        return self.calibration.apply(gyro, accel) if calibrated else (gyro, accel)
 
     def read(self) -> dict[str, float]:
         assert self.bus is not None
         name = self.sensor.name
         try:
-            block = self.bus.transfer(self.address, self._request, codec.BLOCK)
-            temperature, gyro, accel = codec.decode(block, self.accel, self.gyro)
+            temperature, gyro, accel = self._sample()
         except DeltoctlError:
             self.connected = False
             return self.values
         self.connected = True
+        gyro, accel = self.calibration.apply(gyro, accel)
         filtered = self.lpf((*gyro, *accel))
         for i, axis in enumerate(AXES):
             self.values[f"{name}/angular_velocity.{axis}"] = filtered[i]
@@ -94,7 +140,71 @@ class Lsm6ds3Driver(Driver):
     def identify(self) -> dict:
         return {"bus": self.url, "address": f"{self.address:#04x}", "chip": self.chip,
                 "output_rate_hz": self.odr, "accel_range_g": self.range_g,
-                "gyro_range_dps": self.range_dps}
+                "gyro_range_dps": self.range_dps,
+                "calibration": ({**self.calibration_source, "applied": True}
+                                if self.calibration_source else {"applied": False})}
+
+    @staticmethod
+    def calibration_data(accel_bias: list[float], accel_scale: list[float],
+                         gyro_bias: list[float]) -> dict[str, Any]:
+        """What a calibration file holds (``calibrate imu --tumble`` adds its provenance)."""
+        return {"kind": codec.CALIBRATION_KIND, **codec.Calibration(
+            tuple(accel_bias), tuple(accel_scale), tuple(gyro_bias)).to_data()}
+
+    # -- the built-in self-test ------------------------------------------------------------------
+    def _average(self, register: int, ready: int) -> tuple[float, ...]:
+        """The mean raw X/Y/Z of SELF_TEST_SAMPLES new samples, one discarded first."""
+        assert self.bus is not None
+        total = [0.0, 0.0, 0.0]
+        for i in range(codec.SELF_TEST_SAMPLES + 1):
+            for _ in range(100):  # at 52 Hz a sample is ready within 20 ms
+                if self._register(codec.STATUS_REG) & ready:
+                    break
+                time.sleep(0.002)
+            else:
+                raise DeviceError(f"{self.sensor.name}: no new sample during the self-test")
+            xyz = codec.raw_axes(self.bus.transfer(self.address, bytes([register]), 6))
+            if i:
+                total = [t + v for t, v in zip(total, xyz)]
+        return tuple(t / codec.SELF_TEST_SAMPLES for t in total)
+
+    def _self_test_one(self, ctrl: int, setting: int, output: int, ready: int, on: int,
+                       waits: tuple[float, float]) -> tuple[float, ...]:
+        """|output change| per chip axis in LSB when the self-test bits ``on`` are set."""
+        assert self.bus is not None
+        self.bus.write(self.address, bytes([ctrl, setting]))
+        time.sleep(waits[0])
+        off = self._average(output, ready)
+        self.bus.write(self.address, bytes([codec.CTRL5_C, on]))
+        time.sleep(waits[1])
+        on_values = self._average(output, ready)
+        self.bus.write(self.address, bytes([codec.CTRL5_C, 0]))
+        return tuple(abs(a - b) for a, b in zip(on_values, off))
+
+    def self_test(self) -> dict[str, Any]:
+        """The datasheet's self-test of both sensors: each chip axis's output change against
+        its range; the rates, ranges and CTRL5_C are restored whatever happens."""
+        assert self.bus is not None
+        saved = {r: self._register(r) for r in (codec.CTRL1_XL, codec.CTRL2_G, codec.CTRL5_C)}
+        wait = codec.SELF_TEST_WAIT
+        try:
+            accel = self._self_test_one(
+                codec.CTRL1_XL, codec.ctrl1_xl(*codec.SELF_TEST_ACCEL, bandwidth=400),
+                codec.OUTX_L_XL, codec.XLDA, codec.ST_XL_POSITIVE, (wait["accel"],) * 2)
+            gyro = self._self_test_one(
+                codec.CTRL2_G, codec.ctrl2_g(*codec.SELF_TEST_GYRO), codec.OUTX_L_G,
+                codec.GDA, codec.ST_G_POSITIVE, (wait["gyro"], wait["gyro_on"]))
+        finally:
+            for register, value in saved.items():
+                self.bus.write(self.address, bytes([register, value]))
+        mg = codec.accel_scale(codec.SELF_TEST_ACCEL[1]) / codec.G * 1000.0
+        dps = codec.MDPS_PER_LSB_125 * codec.SELF_TEST_GYRO[1] / 125 / 1000.0
+        return {"sensor": self.sensor.name, "chip": self.chip,
+                "accel_mg": {a: round(v * mg, 2) for a, v in zip(AXES, accel)},
+                "gyro_dps": {a: round(v * dps, 2) for a, v in zip(AXES, gyro)},
+                "limits": {"accel_mg": codec.SELF_TEST_ACCEL_MG,
+                           "gyro_dps": codec.SELF_TEST_GYRO_DPS},
+                "unverified": [codec.UNVERIFIED[0]] if self.chip == "LSM6DS3" else []}
 
     # -- configuration ---------------------------------------------------------------------------
     def _config_registers(self) -> dict[int, tuple[str, str]]:
