@@ -13,22 +13,24 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
 
 READS, ACTUATES, MOVES = "reads", "actuates", "moves"
 UNRESOLVED = "?"  # the path of a command line no resolver could read: it counts as moving
 
 
-@dataclass(frozen=True)
 class Verb:
     """A verb or a sub-command. A group's own effect is what it does with no sub-command
-    (show its help)."""
+    (show its help). (A plain class: the table is read at every start-up.)"""
 
-    effect: str
-    example: str = ""
-    module: str = ""  # top-level verbs: the deltoctl.cli module whose register(app) adds it
-    remote: bool = True
-    subs: Mapping[str, Verb] = field(default_factory=dict)
+    __slots__ = ("effect", "example", "module", "remote", "subs")
+
+    def __init__(self, effect: str, example: str = "", module: str = "", remote: bool = True,
+                 subs: Mapping[str, Verb] | None = None) -> None:
+        self.effect = effect
+        self.example = example
+        self.module = module  # top-level verbs: the deltoctl.cli module whose register(app) adds it
+        self.remote = remote
+        self.subs: Mapping[str, Verb] = subs or {}
 
 
 TABLE: dict[str, Verb] = {
