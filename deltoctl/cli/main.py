@@ -269,7 +269,10 @@ def command_path(args: Sequence[str]) -> tuple[str, ...]:
             word = rest[0]
             name, command, rest = ctx.command.resolve_command(ctx, rest)
             if command is None:
-                raise InvalidInput(f"no command {' '.join([*path, word])!r}")
+                from deltoctl.suggest import did_you_mean
+
+                raise InvalidInput(f"no command {' '.join([*path, word])!r}"
+                                   + did_you_mean(word, ctx.command.list_commands(ctx)))
             path.append(name)
             ctx = command.make_context(name, rest, parent=ctx, resilient_parsing=True)
             rest = [*ctx._protected_args, *ctx.args]
