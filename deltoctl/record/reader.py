@@ -43,6 +43,7 @@ from typing import Any, BinaryIO
 
 from deltoctl.core.replay import COMMAND_SUFFIX, COMMANDS_TOPIC
 from deltoctl.errors import InvalidInput
+from deltoctl.profile.catalog import MAX_PROFILE_BYTES
 
 MAGIC = b"\x89MCAP0\r\n"
 FOOTER_AND_MAGIC = 1 + 8 + 8 + 8 + 4 + 8  # opcode, length, two offsets, crc; the magic
@@ -53,9 +54,11 @@ MAX_WORKERS = 8  # processes that unpack chunks for ``series``
 # a chunk unpacked: the recorder writes chunks of 1 MiB, rosbag2 and mcap's tools a few MiB
 MAX_CHUNK_BYTES = 64 << 20
 MAX_RECORD_BYTES = 2 * MAX_CHUNK_BYTES  # any record as stored: a chunk, compressed or not
-MAX_SUMMARY_BYTES = 16 << 20  # the summary: the index of ~200,000 chunks (an hour: ~10,000)
-MAX_METADATA_BYTES = 32 << 20  # metadata, channel and schema records: twice a profile's 16 MiB
-MAX_KEPT_BYTES = 16 << 20  # messages a file without a summary keeps; beyond, read again
+# the summary (the index of ~200,000 chunks; an hour's has ~10,000), and the messages a file
+# without one keeps in memory (beyond, they are read again): the bound of a profile file
+MAX_SUMMARY_BYTES = MAX_KEPT_BYTES = MAX_PROFILE_BYTES
+MAX_METADATA_BYTES = 2 * MAX_PROFILE_BYTES  # metadata, channel and schema records: a profile
+# is recorded twice (YAML and JSON)
 CHUNK_HINT = ("a recording from another tool may use larger chunks: rewrite it with smaller ones "
               "(`mcap compress --chunk-size`, the mcap CLI)")
 CHUNKS_PER_WORKER = 64  # fewer chunks than this a process: not worth starting one
