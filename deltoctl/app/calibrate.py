@@ -7,6 +7,7 @@ import json
 import math
 import statistics
 import time
+from collections.abc import Callable
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -123,3 +124,102 @@ def tare_ft(system: System, samples: int = 50, force_tolerance: float = 0.3,
             report["report_file"] = str(path)
         reports.append(report)
     return {"pass": all(r["pass"] for r in reports), "blocks": reports}
+
+
+# -- after the tare: the residual, a known mass, the drift -------------------------------------
+
+G = 9.80665
+SETTLE_STD = 0.1  # N of spread on a force axis: more, and the load is still moving
+SETTLE_WINDOW = 40  # samples (0.2 s) a load must hold before it is read
+MASS_TOLERANCE = 0.02  # of the expected weight, on top of the force tolerance
+
+
+def _force(values: dict[str, float], sensor: str) -> tuple[float, float, float]:
+    return (values[f"{sensor}/force.x"], values[f"{sensor}/force.y"],
+            values[f"{sensor}/force.z"])
+
+
+def _mean_force(system: System, sensor: str, count: int) -> tuple[float, ...]:
+    samples = _collect(system, [sensor], count)[sensor]
+    return tuple(statistics.fmean(samples[a]) for a in AXES[:3])
+
+
+def _settled_load(system: System, sensor: str, least: float,
+                  timeout: float) -> tuple[float, ...]:
+    """The mean force once a load of at least ``least`` N holds still for SETTLE_WINDOW."""
+    from collections import deque
+
+    window: deque[tuple[float, float, float]] = deque(maxlen=SETTLE_WINDOW)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        values = system.read()
+        if not system.connected:
+            raise DeviceError("the link was lost during the check")
+        window.append(_force(values, sensor))
+        time.sleep(1.0 / RATE)
+        if len(window) == SETTLE_WINDOW:
+            columns = list(zip(*window))
+            mean = tuple(statistics.fmean(c) for c in columns)
+            if max(statistics.pstdev(c) for c in columns) <= SETTLE_STD and \
+                    math.sqrt(sum(v * v for v in mean)) >= least:
+                return mean
+    raise DeviceError(f"no steady load on {sensor} within {timeout:g} s",
+                      hint="put the mass on the fingertip and let it rest; --timeout gives "
+                           "more time")
+
+
+def check_verify(mass: float | None, watch: float | None, timeout: float) -> None:
+    if mass is not None and not (math.isfinite(mass) and 0.01 <= mass <= 50):
+        raise InvalidInput(f"--mass must be 0.01 to 50 kg, got {mass:g}")
+    if watch is not None and not (math.isfinite(watch) and 0 < watch <= 3600):
+        raise InvalidInput(f"--watch must be a positive number of seconds up to 3600, "
+                           f"got {watch:g}")
+    if not (math.isfinite(timeout) and 0 < timeout <= 3600):
+        raise InvalidInput(f"--timeout must be a positive number of seconds up to 3600, "
+                           f"got {timeout:g}")
+
+
+def verify_ft(system: System, tare: dict[str, Any], mass: float | None = None,
+              sensor: str | None = None, watch: float | None = None,
+              ask: Callable[[str], None] | None = None, timeout: float = 60.0,
+              samples: int = 50) -> list[dict[str, Any]]:
+    """Checks after ``tare_ft``: each sensor's residual force and torque against the
+    tolerance; with ``watch``, how far the residual force drifts in that many seconds (against
+    the same tolerance); with ``mass`` (kg), the load read once the operator (``ask``) put it
+    on ``sensor`` (the first F/T sensor by default) against its weight."""
+    from deltoctl.app.checks import check
+
+    check_verify(mass, watch, timeout)
+    tolerance = tare["blocks"][0]["tolerance"]
+    sensors = [s for block in tare["blocks"] for s in block["sensors"]]
+    checks = []
+    for block in tare["blocks"]:
+        for name, r in block["sensors"].items():
+            checks += [check(f"{name}.residual_force", "residual force after the tare",
+                             r["residual_force_n"], "N", None, tolerance["force_n"]),
+                       check(f"{name}.residual_torque", "residual torque after the tare",
+                             r["residual_torque_nm"], "N·m", None, tolerance["torque_nm"])]
+    if watch is not None:
+        start = {s: _mean_force(system, s, samples) for s in sensors}
+        time.sleep(watch)
+        for s in sensors:
+            end = _mean_force(system, s, samples)
+            drift = math.dist(start[s], end)
+            checks.append(check(f"{s}.drift", f"residual force drift over {watch:g} s", drift,
+                                "N", None, tolerance["force_n"],
+                                note=f"{drift / watch:.4f} N/s"))
+    if mass is not None:
+        sensor = sensor or sensors[0]
+        if sensor not in sensors:
+            raise InvalidInput(f"--sensor {sensor}: not an F/T sensor of {system.profile.name} "
+                               f"(its sensors: {', '.join(sensors)})")
+        weight = mass * G
+        before = _mean_force(system, sensor, samples)
+        if ask is not None:
+            ask(f"put {mass:g} kg on {sensor} and let it rest")
+        loaded = _settled_load(system, sensor, weight / 2, timeout)
+        change = math.dist(before, loaded)
+        margin = tolerance["force_n"] + MASS_TOLERANCE * weight
+        checks.append(check(f"{sensor}.known_mass", f"the weight of {mass:g} kg", change, "N",
+                            weight - margin, weight + margin))
+    return checks

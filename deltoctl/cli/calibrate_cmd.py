@@ -25,25 +25,48 @@ def calibrate_ft(
         help="Largest residual torque after the tare, N·m (norm of the mean).")] = 0.03,
     output_dir: Annotated[Path, typer.Option(
         "--output-dir", "-o", help="Where the JSON reports go.")] = Path("."),
+    verify: Annotated[bool, typer.Option(
+        "--verify", help="After the tare, judge each residual as a check (implied by --mass "
+                         "and --watch).")] = False,
+    mass: Annotated[float | None, typer.Option(
+        help="A known mass, kg: the terminal asks for it on --sensor and checks its weight "
+             "once the reading settles.")] = None,
+    sensor: Annotated[str | None, typer.Option(
+        help="The fingertip the mass goes on (the first F/T sensor by default).")] = None,
+    watch: Annotated[float | None, typer.Option(
+        help="Seconds to watch the residual drift (it must stay within the force "
+             "tolerance).")] = None,
+    timeout: Annotated[float, typer.Option(
+        help="Seconds to wait for the mass to settle.")] = 60.0,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Tare the F/T sensors of every block that has them (SET_FT_SENSOR_OFFSET), then check
     the residual over N samples; exit 1 when over tolerance. One report per block, saved as
-    calibration-<model>-<address>-<time>.json."""
-    from deltoctl.app.calibrate import check_tare
+    calibration-<model>-<address>-<time>.json. --verify reports each check (id, value,
+    limit, verdict); --watch S the drift over S seconds; --mass KG a known mass's weight."""
+    from deltoctl.app.calibrate import check_tare, check_verify, verify_ft
 
     opts = options(ctx)
     check_tare(samples, force_tolerance, torque_tolerance, output_dir)
+    check_verify(mass, watch, timeout)
+    verify = verify or mass is not None or watch is not None
     with open_robot(opts, allow_model_mismatch) as robot:
         result = robot.calibrate_ft(samples, force_tolerance, torque_tolerance, output_dir)
+        if verify:
+            result["checks"] = verify_ft(
+                robot.system, result, mass, sensor, watch,
+                lambda text: typer.echo(f"{text} …", err=True), timeout, samples)
     reports = result["blocks"]
     if opts.json:
         emit_json(result)
+    elif verify:
+        table(None, ["check", "value", "unit", "limit", "verdict"], check_rows(result["checks"]))
     else:
         table(None, ["block", "sensor", "residual force N", "residual torque N·m", "pass"],
               [[r["block"], s, v["residual_force_n"], v["residual_torque_nm"],
                 "yes" if v["pass"] else "NO"]
                for r in reports for s, v in r["sensors"].items()])
+    if not opts.json:
         for r in reports:
             info(f"report: {r['report_file']}")
     bad = [s for r in reports for s, v in r["sensors"].items() if not v["pass"]]
@@ -51,6 +74,12 @@ def calibrate_ft(
         raise DeviceError(f"residual over tolerance after the tare on: {', '.join(bad)}",
                           hint="check the firmware (OFFSET needs v2.3 or later) and that "
                                "nothing touches the fingertips")
+    failed = [c["id"] for c in result.get("checks", []) if c["verdict"] == "fail"
+              and not c["id"].endswith(("residual_force", "residual_torque"))]
+    if failed:
+        raise DeviceError(f"F/T checks failed: {', '.join(failed)}",
+                          hint="a known mass read wrong is a scale or mounting fault; drift "
+                               "wants the sensor warmed up")
     finish(robot.system)
 
 

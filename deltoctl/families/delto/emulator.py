@@ -90,6 +90,9 @@ class DeltoFirmware:
         self.rng = random.Random(seed)
         self.ft_offset = [[self.rng.uniform(-2, 2) for _ in range(6)] for _ in range(model.fingers)]
         self.ft_tare = [[0.0] * 6 for _ in range(model.fingers)]
+        # what a test puts on a fingertip (N, from ``put_mass``) and a steady offset creep (N/s)
+        self.ft_load = [[0.0, 0.0, 0.0] for _ in range(model.fingers)]
+        self.ft_creep = (0.0, 0.0, 0.0)
         self.faults = Faults()
         self.direction = model.direction(firmware)  # the motors' wiring for this firmware
         self.lock = threading.Lock()
@@ -155,6 +158,8 @@ class DeltoFirmware:
             for offset in self.ft_offset:
                 for k in range(6):
                     offset[k] += self.rng.gauss(0.0, sigma)
+                for k, creep in enumerate(self.ft_creep):
+                    offset[k] += creep * self._drift_dt
             self._drift_dt = 0.0
 
     # -- the protocol ------------------------------------------------------------------------
@@ -193,9 +198,15 @@ class DeltoFirmware:
                 return None
             raise ProtocolError(f"unknown command {cmd:#04x}")
 
+    def put_mass(self, finger: int, kg: float) -> None:
+        """A mass on fingertip ``finger`` (0-based), its weight along the sensor's −z."""
+        with self.lock:
+            self.ft_load[finger] = [0.0, 0.0, -kg * 9.80665]
+
     def _ft_raw(self, finger: int, noise: bool = True) -> tuple[float, ...]:
-        o = self.ft_offset[finger]
-        base = (GRAVITY[0] + o[0], GRAVITY[1] + o[1], GRAVITY[2] + o[2], o[3], o[4], o[5])
+        o, load = self.ft_offset[finger], self.ft_load[finger]
+        base = (GRAVITY[0] + o[0] + load[0], GRAVITY[1] + o[1] + load[1],
+                GRAVITY[2] + o[2] + load[2], o[3], o[4], o[5])
         if not noise:
             return base
         at = self._noise_at
