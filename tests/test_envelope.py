@@ -257,3 +257,23 @@ def test_a_cell_refuses_a_move_of_both_blocks_and_sends_nothing_to_either():
         system.stop()
         assert result.settled
         assert arm.count() > sent[0] and hand.count() > sent[1]
+
+
+def test_a_snapshot_cannot_put_a_mock_joint_outside_its_envelope(cli, tmp_path):
+    """A config snapshot is untrusted: a joint position in it is a command like any other."""
+    import yaml
+
+    with System(load_profile("rrbot-gpio")) as system:
+        before = dict(system.read())
+        with pytest.raises(Refused, match=r"joint1 target 5.0000 is outside its limits"):
+            system.member("joint1").driver.config_write({
+                "flange_analog_IOs": {"analog_output1": 1.5}, "joint1": {"position": 5.0}})
+        assert system.read() == before  # refused whole: not even the analog output
+    path = tmp_path / "snap.yaml"
+    assert cli("-p", "rrbot-gpio", "config", "snapshot", "-o", str(path)).exit_code == 0
+    doc = yaml.safe_load(path.read_text())
+    doc["blocks"]["RRBotSystemMutipleGPIOs"]["parts"]["joint1"]["position"]["value"] = 5.0
+    path.write_text(yaml.safe_dump(doc))
+    result = cli("-p", "rrbot-gpio", "config", "restore", str(path), "-y")
+    assert result.exit_code == 5, result.stderr
+    assert "joint1 target 5.0000 is outside its limits" in result.stdout

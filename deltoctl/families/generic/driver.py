@@ -117,9 +117,14 @@ class GenericDriver(Driver):
 
     def config_write(self, changes: dict[str, dict[str, Any]],
                      allow: frozenset[str] = frozenset()) -> dict[str, dict[str, Any]]:
-        """Each value as a command, mirrored to its state as the mock does; read back."""
+        """Each value as a command, mirrored to its state as the mock does; read back. A
+        joint's position, velocity or effort is a command like any other: outside the safety
+        envelope it is refused before anything is written (a snapshot is untrusted)."""
         import math
 
+        from deltoctl.core.motion import check_command
+
+        joints = {j.name: j for j in self.hw.joints}
         for part, items in changes.items():
             for name, value in items.items():
                 if f"{part}/{name}" not in self.commands:
@@ -128,6 +133,9 @@ class GenericDriver(Driver):
                 if (not isinstance(value, (int, float)) or isinstance(value, bool)
                         or not math.isfinite(value)):
                     raise InvalidInput(f"{part}/{name} takes a number, not {value!r}")
+                if part in joints:
+                    check_command(self.profile, joints[part], name, float(value),
+                                  self.values.get(f"{part}/position"))
         for part, items in changes.items():
             for name, value in items.items():
                 self.set_command(f"{part}/{name}", float(value))
