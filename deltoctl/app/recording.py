@@ -130,3 +130,24 @@ def record(system: System, output: Path, rate: float, duration: float | None,
         raise DeviceError(recorder.error)
     return {"output": str(output), "messages": recorder.counts,
             "link_losses": recorder.link_losses, "loop": stats.summary()}, links
+
+
+def recorded_moves(system: System, output: Path,
+                   moves: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+    """Run ``moves`` (a move procedure returning its report) while every move loop's cycles,
+    states and setpoints, go to ``output`` (for ``deltoctl replay``); the report gains
+    ``recording``."""
+    from deltoctl.core.replay import CommandLog
+    from deltoctl.record.recorder_process import RecorderProcess
+
+    profile, metadata = recording_metadata(system)
+    with RecorderProcess(output, profile, metadata, tuple(system.extra_states()),
+                         commands=True) as recorder:
+        with CommandLog(system, recorder) as log:
+            report = moves()
+        recorder.close()  # the move loops have no loop statistics of their own to write
+    if recorder.error:  # a write failed or the file was removed: the message says what is left
+        raise DeviceError(recorder.error)
+    report["recording"] = {"output": str(output), "cycles": log.rows,
+                           "messages": recorder.counts}
+    return report

@@ -225,30 +225,27 @@ class Robot:
         at once; every block is stopped on the way out. A target outside the envelope is
         refused (``Refused``) before anything is sent. Returns the report a ``jog --json``
         prints."""
-        from deltoctl.core.runner import interrupted_by_signals
+        from deltoctl.app.motion import move
 
-        targets = dict(targets)
-        try:
-            with interrupted_by_signals():
-                result = self.system.move(targets, velocity, progress)
-        finally:
-            self.system.stop()
-        values = self.system.read()
-        return {
-            "settled": result.settled,
-            "seconds": round(result.seconds, 3),
-            "blocks": [{"name": name, "joints": {
-                j: {"target": targets[j], "position": values.get(f"{j}/position"),
-                    "settled": j not in result.unsettled} for j in joints}}
-                for name, joints in self.system.by_block(targets).items()],
-            "unsettled": result.unsettled,
-        }
+        return move(self.system, targets, velocity, progress)
+
+    def home(self, joints: Sequence[str] = (), force: bool = False,
+             velocity: float | None = None) -> dict[str, Any]:
+        """Home the robot's joints (or ``joints``): homing routines into their hard stops,
+        the others to the profile's home pose."""
+        from deltoctl.app.motion import home, plan_home
+
+        hardware = [m.name for m in self.system]
+        return home(self.system, plan_home(self.profile, hardware, joints), force, velocity)
 
     def jog_targets(self, deltas: Mapping[str, float]) -> dict[str, float]:
         """Each joint's target ``delta`` from where it is now."""
+        from deltoctl.app.motion import moving_joints, ready_to_jog
+
+        moving_joints(self.profile, list(deltas))
+        ready_to_jog(self.system, list(deltas))
         values = self.system.read()
-        return {j: values[f"{self.system.component(j).name}/position"] + d
-                for j, d in deltas.items()}
+        return {j: values[f"{j}/position"] + d for j, d in deltas.items()}
 
     def jog(self, deltas: Mapping[str, float], velocity: float | None = None,
             progress: Callable[[float], None] | None = None) -> dict[str, Any]:

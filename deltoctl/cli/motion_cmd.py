@@ -10,9 +10,9 @@ from typing import Annotated, Any
 import typer
 
 from deltoctl.cli.context import Options, options
-from deltoctl.cli.device_cmd import AllowMismatch, finish, open_system
+from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import emit_json, info, progress, say
-from deltoctl.errors import DeviceError, InvalidInput, Refused
+from deltoctl.errors import InvalidInput, Refused
 from deltoctl.units import parse_quantity
 
 VelocityOpt = Annotated[str | None, typer.Option(
@@ -59,43 +59,21 @@ def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
 
 def _move(opts: Options, system: Any, targets: dict[str, float], velocity: float | None,
           label: str, jog: bool = True) -> dict[str, Any]:
-    """Move on every block that holds a target (at the same time), stop them all on the way
-    out, and report per block."""
-    from deltoctl.core.runner import interrupted_by_signals
+    """The app's move with a progress bar, and its outcome said."""
+    from deltoctl.app.motion import move
 
     bar = progress(opts)
     task = bar.add_task(label, total=1.0) if bar else None
     try:
-        with interrupted_by_signals():
-            result = system.move(
-                targets, velocity,
-                None if bar is None else lambda fraction: bar.update(task, completed=fraction),
-                jog=jog)
+        report = move(system, targets, velocity, None if bar is None else
+                      lambda fraction: bar.update(task, completed=fraction), jog=jog)
     finally:
-        system.stop()
         if bar is not None:
             bar.stop()
-    values = system.read()
-    groups = system.by_block(targets)
-    report = {
-        "settled": result.settled,
-        "seconds": round(result.seconds, 3),
-        "blocks": [{"name": name, "joints": {
-            j: {"target": targets[j], "position": values.get(f"{j}/position"),
-                "settled": j not in result.unsettled} for j in joints}}
-            for name, joints in groups.items()],
-        "unsettled": result.unsettled,
-    }
     if not opts.json:
-        say(f"{label}: {'settled' if result.settled else 'did not settle'} in "
-            f"{result.seconds:.2f} s")
+        say(f"{label}: {'settled' if report['settled'] else 'did not settle'} in "
+            f"{report['seconds']:.2f} s")
     return report
-
-
-def _fail_unsettled(report: dict[str, Any]) -> None:
-    if report["unsettled"]:
-        raise DeviceError(f"{len(report['unsettled'])} joint(s) did not settle: "
-                          f"{', '.join(report['unsettled'])}")
 
 
 def home(
@@ -113,95 +91,60 @@ def home(
     Joints with a `home` command interface (the Bioscara arm) run into their hard stops one at
     a time, in the profile's homing order; the others go to safety.home_pose (zero unless the
     profile says otherwise). Blocks that cannot home are named."""
-    from deltoctl.core.motion import check_target
-    from deltoctl.core.system import select_blocks
+    from deltoctl.app.motion import fail_unsettled, home, plan_home
 
     opts = options(ctx)
     profile = opts.load_profile()
-    blocks = select_blocks(profile, opts.hardware)
-    chosen = _known(profile, joint or [])
-    routine = [j.name for hw in blocks for j in hw.joints if j.command("home")
-               and (not chosen or j.name in chosen)]
-    posed = [j for hw in blocks for j in hw.joints if not j.command("home")
-             and (j.command("effort") or j.command("position")) and j.mimic is None
-             and (not chosen or j.name in chosen)]
-    targets = {j.name: profile.safety.home_pose.get(j.name, 0.0) for j in posed}
-    for comp in posed:
-        check_target(profile, comp, targets[comp.name], None)
+    plan = plan_home(profile, opts.hardware, joint or [])
     speed = _speed(velocity)
-    what = []
-    if routine:
-        what.append(f"home {', '.join(routine)} one at a time, each running into its hard stop")
-    if targets:
-        what.append(f"move {len(targets)} joints to the home pose")
-    if not what:
-        raise InvalidInput(f"nothing to home in {profile.name}: no joint with a home, effort "
-                           "or position command interface")
-    confirm_motion(opts, f"{profile.name}: " + "; then ".join(what))
-    report: dict[str, Any] = {"blocks": []}
-    with open_system(opts, allow_model_mismatch, profile) as system:
-        unable = [m.name for m in system if not m.can("home")
-                  and any(j.name in targets or j.name in routine for j in m.hw.joints)]
-        targets = {j: t for j, t in targets.items() if system.member(j).can("home")}
-        if routine:
-            report["blocks"] += _home_routine(opts, system, routine, force)
-        if targets:
-            moved = _move(opts, system, targets, speed, "home", jog=False)
-            report["blocks"] += moved["blocks"]
-            report["settled"], report["unsettled"] = moved["settled"], moved["unsettled"]
-    report["cannot_home"] = unable
+    confirm_motion(opts, plan.describe())
+    bars = _Bars(opts, plan.routine)
+    with open_robot(opts, allow_model_mismatch, profile) as robot:
+        try:
+            report = home(robot.system, plan, force, speed, bars.move, bars.show)
+        finally:
+            bars.stop()
+    if plan.targets and not opts.json:
+        say(f"home: {'settled' if report['settled'] else 'did not settle'} in "
+            f"{report['seconds']:.2f} s")
     if opts.json:
         emit_json(report)
-    if targets:
-        _fail_unsettled(report)
-    finish(system, [f"{', '.join(unable)}: cannot home"] if unable else None)
+    if plan.targets:
+        fail_unsettled(report)
+    finish(robot.system)
 
 
-def _known(profile: Any, names: list[str]) -> list[str]:
-    joints = [j.name for j in profile.joints()]
-    for name in names:
-        if name not in joints:
-            raise InvalidInput(f"{profile.name} has no joint {name!r}" + _near(name, joints))
-    return names
+class _Bars:
+    """Homing on a terminal: a bar per joint that runs its routine (its steps on stderr
+    otherwise), then one for the way to the home pose, started when that begins."""
 
+    def __init__(self, opts: Options, joints: list[str]) -> None:
+        self.opts = opts
+        self.bar = progress(opts, transient=False) if joints else None
+        self.tasks = {j: self.bar.add_task(f"{j}: waiting", total=1.0)
+                      for j in joints} if self.bar else {}
+        self.posing = False
 
-def _near(name: str, names: list[str]) -> str:
-    from deltoctl.suggest import did_you_mean
-
-    return did_you_mean(name, names)
-
-
-def _home_routine(opts: Options, system: Any, homing: list[str],
-                  force: bool) -> list[dict[str, Any]]:
-    """Each joint runs into its hard stop, one at a time, in the profile's homing order,
-    block by block."""
-    from deltoctl.core.runner import interrupted_by_signals
-
-    order = [j for j in system.profile.safety.homing_order if j in homing]
-    order += [j for j in homing if j not in order]
-    bar = progress(opts, transient=False)
-    tasks = {j: bar.add_task(f"{j}: waiting", total=1.0) for j in order} if bar else {}
-
-    def show(name: str, status: str, fraction: float) -> None:
-        if bar is not None:
-            bar.update(tasks[name], completed=fraction, description=f"{name}: {status}")
-        elif not opts.json:
+    def show(self, name: str, status: str, fraction: float) -> None:
+        if self.bar is not None:
+            self.bar.update(self.tasks[name], completed=fraction,
+                            description=f"{name}: {status}")
+        elif not self.opts.json:
             info(f"{name}: {status}")
 
-    blocks = []
-    try:
-        with interrupted_by_signals():
-            for name, joints in system.by_block(order).items():
-                m = system.member(joints[0])
-                outcome = m.driver.home(joints, force, show)
-                values = system.read()
-                blocks.append({"name": name, "joints": {
-                    j: {"outcome": outcome.get(j), "position": values.get(f"{j}/position")}
-                    for j in joints}})
-    finally:
-        if bar is not None:
-            bar.stop()
-    return blocks
+    def move(self, fraction: float) -> None:
+        if not self.posing:
+            self.stop()
+            self.posing = True
+            self.bar = progress(self.opts)
+            self.tasks = {"home": self.bar.add_task("home", total=1.0)} if self.bar else {}
+        if self.bar is not None:
+            self.bar.update(self.tasks["home"], completed=fraction)
+
+    def stop(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+            self.bar = None
 
 
 def jog(
@@ -223,6 +166,9 @@ def jog(
 ) -> None:
     """Move one joint by DELTA (or --to POS), within its limits and the profile's jog step;
     more JOINT DELTA pairs move at the same time (blocks on several links at once)."""
+    from deltoctl.app.motion import fail_unsettled, moving_joints, ready_to_jog
+    from deltoctl.app.recording import new_output, recorded_moves
+
     opts = options(ctx)
     profile = opts.load_profile()
     if (delta is None) == (to is None):
@@ -232,29 +178,14 @@ def jog(
         if to is not None or len(more) % 2:
             raise InvalidInput("more joints come as JOINT DELTA pairs (and not with --to)")
         pairs += list(zip(more[0::2], more[1::2]))
-    comps = {}
-    for name, _ in pairs:
-        comp = profile.component(name)
-        if comp is None or comp.kind != "joint":
-            raise InvalidInput(f"{profile.name} has no joint {name!r}"
-                               + _near(name, [j.name for j in profile.joints()]))
-        if comp.command("effort") is None and comp.command("position") is None:
-            raise InvalidInput(f"{name} has no effort or position command interface to move "
-                               "it")
-        if name in comps:
-            raise InvalidInput(f"{name} is given twice")
-        comps[name] = comp
+    moving_joints(profile, [name for name, _ in pairs])
     speed = _speed(velocity)
-    from deltoctl.app.recording import new_output
 
     # a file that cannot be written is refused (exit 2) before anything opens
     with new_output(record) if record else contextlib.nullcontext(), \
-            open_system(opts, allow_model_mismatch, profile) as system:
-        for joints in system.by_block(list(comps)).values():
-            m = system.member(joints[0])
-            if not m.can("jog"):
-                raise InvalidInput(f"{m.name} cannot move its joints")
-            m.driver.check_motion(joints)  # e.g. not homed: refused before asking
+            open_robot(opts, allow_model_mismatch, profile) as robot:
+        system = robot.system
+        ready_to_jog(system, [name for name, _ in pairs])  # e.g. not homed: before asking
         values = system.read()
         targets, moves = {}, []
         for name, step in pairs:
@@ -272,30 +203,12 @@ def jog(
         if record is None:
             report = _move(opts, system, targets, speed, label)
         else:
-            report = _recorded_move(opts, system, targets, speed, label, record)
+            report = recorded_moves(system, record,
+                                    lambda: _move(opts, system, targets, speed, label))
+            if not opts.json:
+                info(f"wrote {record}: {report['recording']['cycles']} cycles of states and "
+                     "commands")
     if opts.json:
         emit_json(report)
-    _fail_unsettled(report)
-    finish(system)
-
-
-def _recorded_move(opts: Options, system: Any, targets: dict[str, float],
-                   velocity: float | None, label: str, output: Path) -> dict[str, Any]:
-    """``_move`` while every move loop's cycles (states and setpoints) go to ``output``."""
-    from deltoctl.app.recording import recording_metadata
-    from deltoctl.core.replay import CommandLog
-    from deltoctl.record.recorder_process import RecorderProcess
-
-    profile, metadata = recording_metadata(system)
-    with RecorderProcess(output, profile, metadata, tuple(system.extra_states()),
-                         commands=True) as recorder:
-        with CommandLog(system, recorder) as log:
-            report = _move(opts, system, targets, velocity, label)
-        recorder.close()  # the move loops have no loop statistics of their own to write
-    if recorder.error:  # a write failed or the file was removed: the message says what is left
-        raise DeviceError(recorder.error)
-    report["recording"] = {"output": str(output), "cycles": log.rows,
-                           "messages": recorder.counts}
-    if not opts.json:
-        info(f"wrote {output}: {log.rows} cycles of states and commands")
-    return report
+    fail_unsettled(report)
+    finish(robot.system)

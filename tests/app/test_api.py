@@ -43,7 +43,7 @@ def test_jog_is_relative_and_names_are_checked():
         start = robot.read()["rj_dg_2_2/position"]
         robot.jog({"rj_dg_2_2": 0.1})
         assert robot.read()["rj_dg_2_2/position"] == pytest.approx(start + 0.1, abs=0.05)
-        with pytest.raises(InvalidInput, match="no joint, sensor or GPIO"):
+        with pytest.raises(InvalidInput, match="has no joint .rj_dg_9_9."):
             robot.jog({"rj_dg_9_9": 0.1})
 
 
@@ -112,3 +112,15 @@ def test_record_through_the_library_on_several_links(tmp_path):
         result = robot.record(tmp_path / "mh5.mcap", rate=100, duration=0.3)
     assert result["messages"]["/joint_states"] >= 10
     assert describe(tmp_path / "mh5.mcap")["topics"]
+
+
+def test_home_runs_routines_and_poses_on_a_cell_of_several_blocks():
+    with deltoctl.open_robot("bioscara-dg-3f-m", sim=True) as robot:
+        report = robot.home()
+        values = robot.read()
+    outcomes = [j["outcome"] for b in report["blocks"] for j in b["joints"].values()
+                if "outcome" in j]
+    assert outcomes and all(outcomes)
+    assert report["settled"] and not report["cannot_home"]
+    assert all(abs(values[f"{j}/position"]) < 0.05
+               for b in report["blocks"] for j, r in b["joints"].items() if "target" in r)

@@ -1,0 +1,167 @@
+"""Motion procedures: the homing plan and its run, moves with their report, jogs. The System
+holds the envelope (every target checked before a byte is sent); these decide what to move
+and report what happened. Confirmation is the caller's."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from deltoctl.errors import DeviceError, InvalidInput
+
+if TYPE_CHECKING:
+    from deltoctl.core.system import System
+    from deltoctl.profile.model import Component, Profile
+
+Progress = Callable[[float], None]
+# a homing joint's progress: its name, what it does now, how far (0 to 1)
+HomeProgress = Callable[[str, str, float], None]
+
+
+def _near(name: str, names: list[str]) -> str:
+    from deltoctl.suggest import did_you_mean
+
+    return did_you_mean(name, names)
+
+
+def moving_joints(profile: Profile, names: Sequence[str]) -> dict[str, Component]:
+    """The joints a jog names, each once and each with a command interface that moves it."""
+    comps: dict[str, Component] = {}
+    for name in names:
+        comp = profile.component(name)
+        if comp is None or comp.kind != "joint":
+            raise InvalidInput(f"{profile.name} has no joint {name!r}"
+                               + _near(name, [j.name for j in profile.joints()]))
+        if comp.command("effort") is None and comp.command("position") is None:
+            raise InvalidInput(f"{name} has no effort or position command interface to move "
+                               "it")
+        if name in comps:
+            raise InvalidInput(f"{name} is given twice")
+        comps[name] = comp
+    return comps
+
+
+def ready_to_jog(system: System, joints: Sequence[str]) -> None:
+    """Every block holding one of ``joints`` can move them now (homed first …)."""
+    for names in system.by_block(list(joints)).values():
+        m = system.member(names[0])
+        if not m.can("jog"):
+            raise InvalidInput(f"{m.name} cannot move its joints")
+        m.driver.check_motion(names)
+
+
+def move(system: System, targets: Mapping[str, float], velocity: float | None = None,
+         progress: Progress | None = None, *, jog: bool = True) -> dict[str, Any]:
+    """Move joints to ``targets``, the blocks on several links at once, and stop every block
+    on the way out; the report a ``jog --json`` prints."""
+    from deltoctl.core.runner import interrupted_by_signals
+
+    targets = dict(targets)
+    try:
+        with interrupted_by_signals():
+            result = system.move(targets, velocity, progress, jog=jog)
+    finally:
+        system.stop()
+    values = system.read()
+    return {
+        "settled": result.settled,
+        "seconds": round(result.seconds, 3),
+        "blocks": [{"name": name, "joints": {
+            j: {"target": targets[j], "position": values.get(f"{j}/position"),
+                "settled": j not in result.unsettled} for j in joints}}
+            for name, joints in system.by_block(targets).items()],
+        "unsettled": result.unsettled,
+    }
+
+
+def fail_unsettled(report: Mapping[str, Any]) -> None:
+    """A move whose joints did not all settle failed (exit 1), naming them."""
+    if report.get("unsettled"):
+        raise DeviceError(f"{len(report['unsettled'])} joint(s) did not settle: "
+                          f"{', '.join(report['unsettled'])}")
+
+
+@dataclass
+class HomePlan:
+    """What ``home`` will do: joints with a homing routine (into their hard stops, one at a
+    time), and the others' home poses."""
+
+    profile: str
+    routine: list[str] = field(default_factory=list)
+    targets: dict[str, float] = field(default_factory=dict)
+
+    def describe(self) -> str:
+        what = []
+        if self.routine:
+            what.append(f"home {', '.join(self.routine)} one at a time, each running into its "
+                        "hard stop")
+        if self.targets:
+            what.append(f"move {len(self.targets)} joints to the home pose")
+        return f"{self.profile}: " + "; then ".join(what)
+
+
+def plan_home(profile: Profile, hardware: Sequence[str] = (),
+              joints: Sequence[str] = ()) -> HomePlan:
+    """The homing plan of the selected blocks (or of ``joints`` only), each home pose within
+    the envelope — checked before anyone is asked."""
+    from deltoctl.core import motion
+    from deltoctl.core.system import select_blocks
+
+    known = [j.name for j in profile.joints()]
+    for name in joints:
+        if name not in known:
+            raise InvalidInput(f"{profile.name} has no joint {name!r}" + _near(name, known))
+    chosen = [j for hw in select_blocks(profile, hardware) for j in hw.joints
+              if not joints or j.name in joints]
+    plan = HomePlan(profile.name, [j.name for j in chosen if j.command("home")])
+    for j in chosen:
+        if not j.command("home") and (j.command("effort") or j.command("position")) \
+                and j.mimic is None:
+            plan.targets[j.name] = profile.safety.home_pose.get(j.name, 0.0)
+            motion.check_move(profile, j, plan.targets[j.name], None, None, jog=False)
+    if not plan.routine and not plan.targets:
+        raise InvalidInput(f"nothing to home in {profile.name}: no joint with a home, effort "
+                           "or position command interface")
+    return plan
+
+
+def _home_routine(system: System, homing: list[str], force: bool,
+                  show: HomeProgress | None) -> list[dict[str, Any]]:
+    """Each joint runs into its hard stop, one at a time, in the profile's homing order,
+    block by block."""
+    from deltoctl.core.runner import interrupted_by_signals
+
+    order = [j for j in system.profile.safety.homing_order if j in homing]
+    order += [j for j in homing if j not in order]
+    blocks = []
+    with interrupted_by_signals():
+        for name, joints in system.by_block(order).items():
+            outcome = system.member(joints[0]).driver.home(joints, force,
+                                                           show or (lambda *_: None))
+            values = system.read()
+            blocks.append({"name": name, "joints": {
+                j: {"outcome": outcome.get(j), "position": values.get(f"{j}/position")}
+                for j in joints}})
+    return blocks
+
+
+def home(system: System, plan: HomePlan, force: bool = False, velocity: float | None = None,
+         progress: Progress | None = None, show: HomeProgress | None = None) -> dict[str, Any]:
+    """Run a homing plan: the routines first (``show`` follows each joint), then the home
+    pose (``progress``); a block that cannot home is a warning (``cannot_home``)."""
+    unable = [m.name for m in system if not m.can("home")
+              and any(j.name in plan.targets or j.name in plan.routine for j in m.hw.joints)]
+    if unable:
+        system.notes.append(f"{', '.join(unable)}: cannot home")
+    targets = {j: t for j, t in plan.targets.items() if system.member(j).can("home")}
+    report: dict[str, Any] = {"blocks": []}
+    if plan.routine:
+        report["blocks"] += _home_routine(system, plan.routine, force, show)
+    if targets:
+        moved = move(system, targets, velocity, progress, jog=False)
+        report["blocks"] += moved["blocks"]
+        report["settled"], report["unsettled"] = moved["settled"], moved["unsettled"]
+        report["seconds"] = moved["seconds"]
+    report["cannot_home"] = unable
+    return report
