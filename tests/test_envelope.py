@@ -16,10 +16,11 @@ from deltoctl.families.bioscara import codec as bioscara
 from deltoctl.families.delto import codec as delto
 from deltoctl.families.delto.emulator import DeltoServer, firmware_for_block
 from deltoctl.families.dynamixel import codec as dynamixel
+from deltoctl.families.dynamixel.control_table import item_named as dynamixel_item
 from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
 from deltoctl.profile.catalog import load_profile
 from deltoctl.sim.i2c_bus import I2CSocketServer
-from tests.conftest import sim_i2c_bus
+from tests.conftest import mh5_targets, sim_i2c_bus
 
 NAN = float("nan")
 DELTO_WRITES = {delto.SET_DUTY, delto.SET_GPIO, delto.SET_FT_SENSOR_OFFSET}
@@ -157,6 +158,34 @@ def test_a_servo_moves_within_its_envelope(servos):
     system.stop()
     assert result.settled and received.count() > before
     assert system.read()["head_y/position"] == pytest.approx(start + 0.1, abs=math.radians(2))
+
+
+def test_a_servo_goal_written_as_a_register_keeps_to_the_envelope(servos):
+    """A Goal Position or Goal Velocity register is a command like a move's."""
+    system, received = servos
+    driver = system.member("head_y").driver
+    here = driver.read_register(52, dynamixel_item("Present Position"))
+    refused_without_a_write(system, received,
+                            lambda: driver.write_register("head_y", "Goal Position", 4095),
+                            r"head_y target 3.1416 is outside its limits")
+    refused_without_a_write(system, received,
+                            lambda: driver.write_register("head_y", "Goal Position", here + 300),
+                            "max_jog_step")
+    refused_without_a_write(system, received,
+                            lambda: driver.write_register("head_y", "Goal Velocity", 300),
+                            r"head_y velocity command 7.1942 is beyond its limit 5.0000")
+    assert driver.write_register("head_y", "Goal Position", here + 50) == here + 50
+    system.stop()
+
+
+def test_register_set_of_a_goal_outside_the_envelope_is_refused(cli, mh5_buses):
+    servo = mh5_buses["upper_body"].bus.servos[52]
+    goal = servo.get("Goal Position")
+    result = cli("-p", "mh5", *mh5_targets(mh5_buses), "--yes", "register", "set", "head_y",
+                 "Goal Position", "4095")
+    assert result.exit_code == 5, result.stderr
+    assert "head_y target 3.1416 is outside its limits" in result.stderr
+    assert servo.get("Goal Position") == goal
 
 
 # -- Bioscara arm (I2C over loopback TCP) ----------------------------------------------------

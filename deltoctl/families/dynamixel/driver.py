@@ -522,15 +522,31 @@ class DynamixelDriver(Driver):
              "access": ("EEPROM " if i.eeprom else "RAM ") + i.access} for i in chosen]}
 
     def write_register(self, joint: str, item: str, value: int) -> int:
-        """Write one item and return what it reads back."""
+        """Write one item and return what it reads back. A goal position or velocity is a
+        command like a move's: outside the joint's envelope it is refused, nothing written."""
         from deltoctl.families.dynamixel.control_table import item_named
 
         chosen = item_named(item)
         if chosen.access != "RW":
             raise InvalidInput(f"{chosen.name} is read-only")
         device_id = self.servo(joint)
+        self._check_goal(device_id, chosen.name, value)
         self.write_register_item(device_id, chosen, value)
         return self.read_register(device_id, chosen)
+
+    def _check_goal(self, device_id: int, item: str, raw: int) -> None:
+        """A Goal Position (a step from the Present Position) or Goal Velocity in the units
+        of the profile, checked against the joint's envelope."""
+        from deltoctl.core.motion import check_command
+
+        joint = self.joints[device_id]
+        if item == "Goal Position":
+            here = self.read_register(device_id, BY_NAME["Present Position"])
+            check_command(self.profile, joint, "position",
+                          (raw - CENTER) * RAD_PER_RAW + joint.offset,
+                          (here - CENTER) * RAD_PER_RAW + joint.offset)
+        elif item == "Goal Velocity":
+            check_command(self.profile, joint, "velocity", raw * RAD_S_PER_RAW, None)
 
     # -- configuration ---------------------------------------------------------------------------
     def config_read(self) -> dict[str, dict[str, dict[str, Any]]]:
