@@ -350,7 +350,7 @@ def test_a_recording_with_too_many_commands_is_refused_before_they_are_read(
         cli, tmp_path, monkeypatch):
     """The count comes from the file's summary: not one command row is read (the bound is
     lowered here; the real one, millions of rows, would take a test minutes to write)."""
-    import deltoctl.core.replay as replay
+    import deltoctl.app.replay as replay
 
     out = tmp_path / "jog.mcap"
     run_json(cli, "-p", "dg-3f-m", "--sim", "jog", "j_dg_1_2", "10deg", "--yes", "--record",

@@ -7,8 +7,9 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import re
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -25,21 +26,77 @@ SHOW_PERIOD = 0.25  # s between two calls of a recording's ``show``
 Show = Callable[[float, int, "float | None"], None]
 
 
-def create_output(path: Path) -> None:
-    """The file a recording goes to, created empty; one that cannot be is invalid input."""
+SERIAL = "{serial}"  # in a recording's name: the serial (else the address) of each block
+TIME = "{time}"  # in a recording's name: when it started, UTC (20261125T211400Z)
+
+
+def block_serial(name: str, target: str | None, identity: Mapping[str, Any]) -> str:
+    """A block's part of ``{serial}``: the serial number its device reports (``serial`` or
+    ``serial_number`` in its identity), else its target's address (``127.0.0.1-502``,
+    ``ttyUSB0``, ``i2c-1``), else the block's name (an in-process mock); safe in a file name."""
+    serial = identity.get("serial") or identity.get("serial_number")
+    if not serial and target:
+        where = target.partition("://")[2].partition("?")[0] or target
+        serial = where.rstrip("/").rsplit("/", 1)[-1] if "/" in where else where
+    return re.sub(r"[^A-Za-z0-9._-]+", "-", str(serial or name)).strip("-.") or name
+
+
+def output_path(template: Path, serials: Sequence[str] = ()) -> Path:
+    """A recording's file name with ``{time}`` filled (UTC, compact) and, given the blocks'
+    serials, ``{serial}`` (joined by ``+``); only the name is filled, never the directory."""
+    name = template.name.replace(TIME, time.strftime("%Y%m%dT%H%M%SZ", time.gmtime()))
+    if serials:
+        name = name.replace(SERIAL, "+".join(serials))
+    return template.with_name(name)
+
+
+def system_serials(system: System) -> list[str]:
+    """Each driven block's part of ``{serial}``."""
+    return [block_serial(m.name, m.url, m.driver.identify() if m.can("identify") else {})
+            for m in system]
+
+
+def planned_output(template: Path, force: bool = False) -> Path:
+    """A recording's file before anything opens: ``{time}`` filled, and refused (exit 2) when
+    its directory is missing or it exists without ``force`` (a ``{serial}`` name is judged once
+    the blocks answer)."""
+    path = output_path(template)
+    if not path.parent.is_dir():
+        raise InvalidInput(f"cannot write {path}: {path.parent} is not a directory")
+    if SERIAL not in path.name:
+        _refuse_existing(path, force)
+    return path
+
+
+def _refuse_existing(path: Path, force: bool) -> None:
+    if not force and (path.exists() or path.is_symlink()):
+        raise InvalidInput(f"{path} exists: a recording does not overwrite a file",
+                           "pass --force to overwrite it, or put {time} in the name")
+
+
+def create_output(path: Path, force: bool = False) -> None:
+    """The file a recording goes to, created empty; one that exists (without ``force``) or
+    cannot be written is invalid input."""
+    _refuse_existing(path, force)
     try:
-        path.open("wb").close()
+        path.open("wb" if force else "xb").close()
+    except FileExistsError:
+        _refuse_existing(path, force)
     except OSError as exc:
         raise InvalidInput(f"cannot write {path}: {exc.strerror}") from None
 
 
 @contextlib.contextmanager
-def new_output(path: Path) -> Iterator[None]:
-    """``create_output`` before anything opens; the file is removed again when what follows
-    fails before writing to it (an unreachable device, a refused move)."""
-    create_output(path)
+def new_output(path: Path, system: System | None = None,
+               force: bool = False) -> Iterator[Path]:
+    """``create_output`` before the recording starts (``{serial}`` filled from ``system``);
+    yields the file's path. The file is removed again when what follows fails before writing
+    to it (an unreachable device, a refused move)."""
+    if system is not None and SERIAL in path.name:
+        path = output_path(path, system_serials(system))
+    create_output(path, force)
     try:
-        yield
+        yield path
     except BaseException:
         with contextlib.suppress(OSError):
             if path.stat().st_size == 0:
@@ -112,15 +169,17 @@ def check_record(output: Path, rate: float, duration: float | None, gpio_type: s
 
 def record(system: System, output: Path, rate: float, duration: float | None,
            gpio_type: str = "group-values", sinks: Sequence[Sink] = (),
-           show: Show | None = None) -> tuple[dict[str, Any], LinkWatch]:
+           show: Show | None = None, force: bool = False) -> tuple[dict[str, Any], LinkWatch]:
     """Record until ``duration`` passes or an interrupt (the file is valid either way);
-    ``sinks`` see every cycle too. Returns the result and the lost-link watch, whose
+    ``sinks`` see every cycle too. ``output`` may hold ``{time}`` and ``{serial}``; an existing
+    file is refused unless ``force``. Returns the result and the lost-link watch, whose
     ``finish()`` says how the links ended (Unreachable when one is still down)."""
     from deltoctl.core.runner import run_cycles
     from deltoctl.record.recorder_process import RecorderProcess
 
+    output = output_path(output, system_serials(system) if SERIAL in output.name else ())
     check_record(output, rate, duration, gpio_type)
-    create_output(output)
+    create_output(output, force)
     recorded, metadata = recording_metadata(system)
     with RecorderProcess(output, recorded, metadata, tuple(system.extra_states()),
                          gpio_type=gpio_type) as recorder:
@@ -137,7 +196,7 @@ def recorded_moves(system: System, output: Path,
     """Run ``moves`` (a move procedure returning its report) while every move loop's cycles,
     states and setpoints, go to ``output`` (for ``deltoctl replay``); the report gains
     ``recording``."""
-    from deltoctl.core.replay import CommandLog
+    from deltoctl.app.replay import CommandLog
     from deltoctl.record.recorder_process import RecorderProcess
 
     profile, metadata = recording_metadata(system)

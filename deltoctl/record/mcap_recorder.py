@@ -80,7 +80,7 @@ class McapRecorder:
         ``gpio_type``: /gpio's message type, a key of ``GPIO_TYPES``. ``writer``: what takes
         the records instead of mcap's Writer on ``stream`` (the same methods: the live view's
         ``FoxgloveWriter``). ``commands``: a /joint_commands topic too, each cycle's
-        setpoints (``core.replay``: ``<joint>/position_command`` …)."""
+        setpoints (``record.commands``: ``<joint>/position_command`` …)."""
         from deltoctl import __version__
 
         if gpio_type not in GPIO_TYPES:
@@ -156,7 +156,7 @@ class McapRecorder:
 
     def _plan_commands(self) -> None:
         """/joint_commands: a JointState of each joint's setpoints (NaN: not commanded)."""
-        from deltoctl.core.replay import COMMANDS_TOPIC, command_key, commanded_joints
+        from deltoctl.record.commands import COMMANDS_TOPIC, command_key, commanded_joints
 
         names = [j.name for j in commanded_joints(self.profile)]
         js = CdrTemplate().header().const_strings(names)

@@ -41,9 +41,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from deltoctl.core.replay import COMMAND_SUFFIX, COMMANDS_TOPIC
 from deltoctl.errors import InvalidInput
 from deltoctl.profile.catalog import MAX_PROFILE_BYTES
+from deltoctl.record.commands import COMMAND_SUFFIX, COMMANDS_TOPIC
 
 MAGIC = b"\x89MCAP0\r\n"
 FOOTER_AND_MAGIC = 1 + 8 + 8 + 8 + 4 + 8  # opcode, length, two offsets, crc; the magic
@@ -118,7 +118,7 @@ class Cdr:
 Layout = list[tuple[str, int]]
 
 
-def _joint_state(c: Cdr, topic: str) -> Layout:
+def joint_state(c: Cdr, topic: str) -> Layout:
     """/joint_commands' fields are named ``<joint>/position_command`` …, apart from the
     states'."""
     c.stamp()
@@ -166,7 +166,7 @@ _IMU = ("orientation.x", "orientation.y", "orientation.z", "orientation.w", *[""
         "linear_acceleration.x", "linear_acceleration.y", "linear_acceleration.z")
 
 LAYOUTS: dict[str, Callable[[Cdr, str], Layout]] = {
-    "sensor_msgs/msg/JointState": _joint_state,
+    "sensor_msgs/msg/JointState": joint_state,
     "control_msgs/msg/DynamicJointState": _interface_values,
     "control_msgs/msg/DynamicInterfaceGroupValues": _interface_values,
     "geometry_msgs/msg/WrenchStamped": _fixed(_WRENCH),
@@ -272,7 +272,7 @@ class Recording:
                 yield t, _data(batch.records, at)
 
 
-def _damaged(path: Path, what: str) -> InvalidInput:
+def damaged(path: Path, what: str) -> InvalidInput:
     return InvalidInput(f"{path} is damaged: {what}",
                         "a copy cut short or a disk error; `mcap recover` (the mcap CLI) "
                         "rebuilds what it can")
@@ -304,7 +304,7 @@ def open_recording(path: Path, keep: Iterable[str] | None = (DIAGNOSTICS,)) -> R
         except InvalidInput:
             raise
         except Exception as exc:  # mcap's errors, struct's, a record cut short: one sentence
-            raise _damaged(path, f"{type(exc).__name__}: {exc}") from None
+            raise damaged(path, f"{type(exc).__name__}: {exc}") from None
     recording.chunks = sorted(summary.chunk_indexes, key=lambda c: c.message_start_time)
     if stats is not None:
         recording.messages = stats.message_count
@@ -375,7 +375,7 @@ def _metadata(f: BinaryIO, path: Path, indexes: list[Any]) -> dict[str, dict[str
         f.seek(index.offset)
         opcode, length = struct.unpack("<BQ", f.read(9))
         if opcode != Opcode.METADATA:
-            raise _damaged(path, f"no metadata record at byte {index.offset}")
+            raise damaged(path, f"no metadata record at byte {index.offset}")
         left -= length
         if left < 0:
             raise InvalidInput(f"{path}: metadata records of more than "
@@ -398,11 +398,11 @@ def _batches(path: Path, chunks: list[Any], channel_id: int) -> Iterator[Batch]:
         for chunk in chunks:
             end = chunk.chunk_start_offset + chunk.chunk_length + chunk.message_index_length
             if end > len(mapped):
-                raise _damaged(path, f"it ends inside the chunk at byte {chunk.chunk_start_offset}")
+                raise damaged(path, f"it ends inside the chunk at byte {chunk.chunk_start_offset}")
             try:
                 batch = _batch(whole[chunk.chunk_start_offset:end], chunk, channel_id, path)
             except (struct.error, IndexError, ValueError, UnicodeDecodeError) as exc:
-                raise _damaged(path, f"the chunk at byte {chunk.chunk_start_offset}: "
+                raise damaged(path, f"the chunk at byte {chunk.chunk_start_offset}: "
                                      f"{type(exc).__name__}: {exc}") from None
             yield batch
     finally:
@@ -414,7 +414,7 @@ def _batches(path: Path, chunks: list[Any], channel_id: int) -> Iterator[Batch]:
 def _batch(raw: memoryview, chunk: Any, channel_id: int, path: Path) -> Batch:
     """The channel's messages in a chunk (``raw``: the chunk and its message indexes)."""
     if raw[0] != OP_CHUNK:
-        raise _damaged(path, f"no chunk at byte {chunk.chunk_start_offset}")
+        raise damaged(path, f"no chunk at byte {chunk.chunk_start_offset}")
     pos = 9 + 8 + 8  # opcode, length, start and end time
     uncompressed_size, _crc, name_length = struct.unpack_from("<QII", raw, pos)
     pos += 16
@@ -425,10 +425,10 @@ def _batch(raw: memoryview, chunk: Any, channel_id: int, path: Path) -> Batch:
                       chunk.chunk_start_offset)
     at = chunk.message_index_offsets[channel_id] - chunk.chunk_start_offset
     if raw[at] != OP_MESSAGE_INDEX:
-        raise _damaged(path, f"no message index at byte {chunk.message_index_offsets[channel_id]}")
+        raise damaged(path, f"no message index at byte {chunk.message_index_offsets[channel_id]}")
     (entries,) = struct.unpack_from("<I", raw, at + 9 + 2)
     if entries % 16 or entries // 16 > len(records) // MESSAGE_HEAD:
-        raise _damaged(path, f"the message index at byte {chunk.message_index_offsets[channel_id]}"
+        raise damaged(path, f"the message index at byte {chunk.message_index_offsets[channel_id]}"
                              f" lists more messages than its chunk holds")
     pairs = array("Q")
     pairs.frombytes(raw[at + 15:at + 15 + entries])
@@ -436,7 +436,7 @@ def _batch(raw: memoryview, chunk: Any, channel_id: int, path: Path) -> Batch:
         pairs.byteswap()
     offsets = pairs[1::2]
     if offsets and max(offsets) > len(records) - MESSAGE_HEAD:
-        raise _damaged(path, f"the message index at byte {chunk.message_index_offsets[channel_id]}"
+        raise damaged(path, f"the message index at byte {chunk.message_index_offsets[channel_id]}"
                              " points past the end of its chunk")
     return Batch(records, pairs[0::2], offsets)
 
@@ -450,7 +450,7 @@ def _unpack(data: memoryview, compression: str, size: int, path: Path, at: int) 
     try:
         records = _decompress(data, compression, size, path)
     except (RuntimeError, ValueError, MemoryError) as exc:  # lz4's, zstandard's ZstdError
-        raise _damaged(path, f"the chunk at byte {at} does not unpack: {exc}") from None
+        raise damaged(path, f"the chunk at byte {at} does not unpack: {exc}") from None
     if len(records) != size:
         more = "more" if len(records) > size else "fewer"
         raise InvalidInput(f"{path}: the chunk at byte {at} unpacks to {more} than the {size} "
@@ -571,7 +571,7 @@ def _chunk_records(chunk: Any, path: Path, at: int) -> Iterator[Any]:
 
     data = _unpack(memoryview(chunk.data), chunk.compression, chunk.uncompressed_size, path, at)
     if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
-        raise _damaged(path, f"the chunk at byte {at} fails its CRC check")
+        raise damaged(path, f"the chunk at byte {at} fails its CRC check")
     stream = ReadDataStream(io.BytesIO(data))
     while stream.count < len(data):
         opcode, length = stream.read1(), stream.read8()
@@ -602,7 +602,7 @@ def read_recording(path: Path, keep: Iterable[str] | None = (DIAGNOSTICS,)) -> R
     except InvalidInput:
         raise
     except Exception as exc:
-        raise _damaged(path, f"{type(exc).__name__}: {exc}") from None
+        raise damaged(path, f"{type(exc).__name__}: {exc}") from None
 
 
 # -- info ----------------------------------------------------------------------------------------

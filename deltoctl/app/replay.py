@@ -20,22 +20,25 @@ import bisect
 import math
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from deltoctl.core.driver import SETPOINT_FIELDS, Setpoint
 from deltoctl.errors import DeviceError, InvalidInput, Refused
+from deltoctl.record.commands import (
+    COMMANDS_TOPIC,
+    STATES_TOPIC,
+    command_key,
+    commanded_joints,
+)
 
 if TYPE_CHECKING:
     from deltoctl.core.driver import Driver
     from deltoctl.core.system import System
     from deltoctl.profile.model import Component, Profile
 
-COMMANDS_TOPIC = "/joint_commands"
-STATES_TOPIC = "/joint_states"
-COMMAND_SUFFIX = "_command"
 NAN = float("nan")
 # a replay is of a fault, minutes at most, and is read whole before anything moves: 200,000
 # rows (16 minutes at the 200 Hz a jog records) of 500,000 joint setpoints in all (2 minutes
@@ -43,18 +46,6 @@ NAN = float("nan")
 MAX_COMMAND_ROWS = 200_000
 MAX_COMMAND_SETPOINTS = 500_000
 MAX_HOLD_S = 0.5  # s: the longest a recording may leave one setpoint to stand
-
-
-def command_key(joint: str, field: str) -> str:
-    """The interface name a setpoint is recorded under: ``j1/position_command``."""
-    return f"{joint}/{field}{COMMAND_SUFFIX}"
-
-
-def commanded_joints(profile: Profile) -> list[Component]:
-    """The joints /joint_commands carries: a position state and a position, velocity or
-    effort command interface (mimic joints follow another one: never commanded)."""
-    return [j for j in profile.joints() if j.state("position") and j.mimic is None
-            and any(j.command(f) for f in SETPOINT_FIELDS)]
 
 
 # -- recording -----------------------------------------------------------------------------------
@@ -135,7 +126,7 @@ def _rows(rec: Any, topic: str) -> Iterator[tuple[int, dict[str, float]]]:
     about its count, and a file without one gives none)."""
     import struct
 
-    from deltoctl.record.reader import Cdr, _damaged, _joint_state
+    from deltoctl.record.reader import Cdr, damaged, joint_state
 
     channel = rec.channel(topic)
     if channel is None:
@@ -145,11 +136,11 @@ def _rows(rec: Any, topic: str) -> Iterator[tuple[int, dict[str, float]]]:
         if count > MAX_COMMAND_ROWS:
             raise _too_many(rec.path, f"more than {MAX_COMMAND_ROWS} {topic} messages")
         try:
-            layout = _joint_state(Cdr(data), topic)
+            layout = joint_state(Cdr(data), topic)
             row = {names.setdefault(name, name): struct.unpack_from("<d", data, at)[0]
                    for name, at in layout}
         except (struct.error, IndexError, ValueError):
-            raise _damaged(rec.path, f"a {topic} message at {t} ns is not a "
+            raise damaged(rec.path, f"a {topic} message at {t} ns is not a "
                                      "sensor_msgs/JointState") from None
         yield t, row
 
@@ -551,3 +542,125 @@ class Replay:
                     f"{expected:.4f}, more than the {self.max_deviation:g} allowed "
                     "(--max-deviation)")
         return None
+
+
+# -- the procedure -------------------------------------------------------------------------------
+
+@dataclass
+class ReplayPlan:
+    """A recording checked and ready to replay: its commands, the profile whose limits apply,
+    what differs in the recorded profile (warnings), and the blocks it commands."""
+
+    recorded: Recorded
+    profile: Profile
+    notes: list[str]
+    blocks: list[str]
+
+
+def plan_replay(path: Path, named: Profile | None, device: bool,
+                hardware: Sequence[str] = ()) -> ReplayPlan:
+    """Read and check a recording before anything is opened: on a device the limits are
+    ``named``'s or the catalog's (never the file's; a looser recorded profile is refused),
+    every command within them (exit 5), every commanded joint in the profile (exit 2)."""
+    recorded = read_recording_commands(path)
+    if device:
+        profile, theirs = device_profile(recorded, named)
+    else:
+        profile, theirs = named or recorded_profile(recorded), None
+    commanded_components(profile, recorded)
+    notes = check_recorded_profile(profile, theirs, path)
+    check_commands(profile, recorded)
+    joints = recorded.joints
+    blocks = [hw.name for hw in profile.hardware if any(j.name in joints for j in hw.joints)]
+    left_out = [b for b in blocks if hardware and b not in hardware]
+    if left_out:
+        raise InvalidInput(f"the recording commands block(s) {', '.join(left_out)}, which "
+                           "--hardware leaves out")
+    return ReplayPlan(recorded, profile, notes, blocks)
+
+
+def check_device_targets(profile: Profile, blocks: Sequence[str],
+                         targets: Sequence[str]) -> None:
+    """Every bus a replay on a device drives is named by a target (a simulated block
+    aside): neither the recording's bus URLs nor a profile's choose a device."""
+    from deltoctl import registry
+    from deltoctl.core.system import mock_blocks, parse_targets
+
+    mock = mock_blocks(profile, blocks)
+    buses = {hw.bus or hw.name for hw in profile.hardware if hw.name in blocks
+             and hw.name not in mock and (f := registry.of_block(profile.family_of(hw),
+                                                                 hw.plugin)) and f.schemes}
+    named, bare = parse_targets(profile, targets)
+    missing = sorted(buses - set(named)) if not bare else []
+    if missing:
+        raise InvalidInput(f"replay --device: name the device of {', '.join(missing)} with "
+                           f"-t {missing[0]}=URL (or rehearse with --sim); a replay never "
+                           "takes a device from the recording or from a profile's bus URLs")
+
+
+def _home_simulated(system: System, joints: list[str],
+                    notice: Callable[[str], None] | None) -> None:
+    """A simulator starts unhomed: joints with a homing routine run it first, so that
+    positions mean what they meant on the robot (a device is refused instead)."""
+    for block, names in system.by_block(joints).items():
+        m = system.member(names[0])
+        routine = [j for j in names if system.component(j).command("home")]
+        if not routine or not m.can("home"):
+            continue
+        try:
+            m.driver.check_motion(routine)
+        except Refused:
+            if notice is not None:
+                notice(f"{block}: homing {', '.join(routine)} on the simulator first")
+            m.driver.home(routine)
+
+
+def run_replay(system: System, recorded: Recorded, max_deviation: float,
+               on_simulator: bool, progress: Callable[[float], None] | None = None,
+               notice: Callable[[str], None] | None = None) -> tuple[ReplayResult,
+                                                                      Deviated | None]:
+    """Move to the recorded start pose, then play the commands at their recorded timing;
+    every block is stopped on the way out. Returns the result, and why the replay was
+    stopped (a joint outside its limits or too far from its recording) or None."""
+    from deltoctl.core.runner import interrupted_by_signals
+
+    joints = recorded.joints
+    for block, names in system.by_block(joints).items():
+        if not system.member(names[0]).can("jog"):
+            raise InvalidInput(f"{block} cannot move its joints")
+    player = Replay(system, recorded, max_deviation)
+    try:
+        with interrupted_by_signals():
+            if on_simulator:
+                _home_simulated(system, joints, notice)
+            for names in system.by_block(joints).values():
+                system.member(names[0]).driver.check_motion(names)  # e.g. not homed
+            start = recorded.start_pose()
+            if start:
+                moved = system.move(start, jog=False)  # a known pose, as home's
+                if not moved.settled:
+                    raise DeviceError("the recorded start pose was not reached: "
+                                      f"{', '.join(moved.unsettled)}; nothing replayed")
+            try:
+                return player.run(progress), None
+            except Deviated as exc:  # the finally below stops every block first
+                return exc.result, exc
+    finally:
+        system.stop()
+
+
+def replay_report(path: Path, system: System, recorded: Recorded, result: ReplayResult,
+                  tolerance: float | None, on_device: bool) -> dict[str, Any]:
+    """Per joint, RMS and max of replayed against recorded position; ``exceeded``: the
+    joints beyond ``tolerance``."""
+    joints = {j: {"block": d.block, "samples": d.samples, "rms": round(d.rms, 6),
+                  "max": round(d.largest, 6)} for j, d in result.joints.items()}
+    exceeded = [j for j, d in result.joints.items()
+                if tolerance is not None and d.largest > tolerance]
+    return {
+        "file": str(path), "profile": system.profile.name,
+        "on": "device" if on_device else "simulator", "target": system.url,
+        "commands": result.rows, "recorded_seconds": round(recorded.seconds, 3),
+        "seconds": round(result.seconds, 3), "late_max_ms": round(result.late_max_ms, 3),
+        "joints": joints, "tolerance": tolerance, "exceeded": exceeded,
+    }
