@@ -370,6 +370,26 @@ class Robot:
         return result
 
 
+    def replay(self, recording: str | Path, max_deviation: float = 0.2,
+               tolerance: float | None = None) -> dict[str, Any]:
+        """Play a recording's commands (``jog --record``) back on this robot under its own
+        profile's limits (a looser recorded profile is refused; differences are warnings):
+        first to the recorded start pose, then at the recorded timing. A joint outside its
+        limits or further than ``max_deviation`` from the recording stops every block
+        (``Deviated``, exit 5). Returns the per-joint comparison."""
+        from deltoctl.app.replay import plan_replay, replay_report, run_replay
+
+        path = Path(recording)
+        plan = plan_replay(path, self.profile, True, [m.name for m in self.system])
+        self.system.notes.extend(plan.notes)
+        simulated = all(m.simulated for m in self.system.members)
+        result, stopped = run_replay(self.system, plan.recorded, max_deviation, simulated)
+        if stopped is not None:
+            raise stopped
+        return replay_report(path, self.system, plan.recorded, result, tolerance,
+                             not simulated)
+
+
 def check_loop(rate: float, duration: float | None) -> None:
     """A loop's rate and duration: finite and positive."""
     if not (math.isfinite(rate) and 0 < rate <= 100_000):

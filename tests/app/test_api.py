@@ -124,3 +124,15 @@ def test_home_runs_routines_and_poses_on_a_cell_of_several_blocks():
     assert report["settled"] and not report["cannot_home"]
     assert all(abs(values[f"{j}/position"]) < 0.05
                for b in report["blocks"] for j, r in b["joints"].items() if "target" in r)
+
+
+def test_a_recorded_jog_replays_through_the_library(tmp_path):
+    from deltoctl.app.recording import recorded_moves
+
+    path = tmp_path / "jog.mcap"
+    with deltoctl.open_robot("dg-5f-right", sim=True) as robot:
+        recorded_moves(robot.system, path, lambda: robot.jog({"rj_dg_2_2": 0.2}))
+    with deltoctl.open_robot("dg-5f-right", sim=True) as robot:
+        report = robot.replay(path, tolerance=0.1)
+    assert report["commands"] > 10 and report["on"] == "simulator"
+    assert report["joints"]["rj_dg_2_2"]["max"] < 0.1 and not report["exceeded"]
