@@ -70,6 +70,9 @@ TABLE: dict[str, Verb] = {
                    "record_cmd"),
     # with --device it moves the robot along the recording
     "replay": Verb(MOVES, "deltoctl replay fault.mcap --tolerance 1deg --json", "replay_cmd"),
+    # the acceptance sequence: with --yes its motion checks move the joints
+    "report": Verb(MOVES, "deltoctl -p dg-5f-right report -o acceptance.html --record 5",
+                   "report_cmd"),
     "torque": Verb(ACTUATES, "deltoctl -p mh5 torque off left_arm", "servo_cmd"),
     "reboot": Verb(ACTUATES, "deltoctl -p mh5 reboot head_y", "servo_cmd"),
     "register": Verb(READS, "deltoctl -p mh5 register get head_y present_temperature",

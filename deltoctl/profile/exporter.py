@@ -446,6 +446,8 @@ def profile_data(profile: Profile) -> dict[str, Any]:
     safety = {k: v for k, v in vars(profile.safety).items() if v not in (None, {}, [])}
     if safety:
         data["safety"] = safety
+    if profile.report:
+        data["report"] = dict(profile.report)
     blocks = []
     for hw in profile.hardware:
         block: dict[str, Any] = {"name": hw.name, "type": hw.type, "plugin": hw.plugin}

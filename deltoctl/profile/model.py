@@ -257,6 +257,8 @@ class Profile:
     buses: dict[str, str] = field(default_factory=dict)
     safety: Safety = field(default_factory=Safety)
     hardware: list[Hardware] = field(default_factory=list)
+    # the commissioning report's limits (REPORT_LIMITS names them), over its defaults
+    report: dict[str, float] = field(default_factory=dict)
     source: str | None = field(default=None, compare=False, repr=False)
     warnings: list[ProfileWarning] = field(default_factory=list, compare=False, repr=False)
 

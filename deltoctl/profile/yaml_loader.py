@@ -317,6 +317,12 @@ _TRANSMISSION_KEYS = {"name", "type", "joints", "actuators", "params"}
 _END_KEYS = {"name", "role", "mechanical_reduction", "offset", "read_only"}
 _PROFILE_KEYS = {
     "name", "description", "family", "model", "status", "buses", "safety", "ros2_control",
+    "report",
+}
+# the limits of `deltoctl report` a profile may set
+REPORT_LIMITS = {
+    "rtt_p50_ms", "rtt_p99_ms", "error_rate_perc", "loop_rate_ratio", "jitter_p99_ms",
+    "homes", "home_repeatability", "following_error",
 }
 _SAFETY_KEYS = {
     "home_pose", "max_jog_step", "current_cap", "home_tolerance", "home_timeout",
@@ -473,6 +479,9 @@ def profile_from_data(data: Any, source: str) -> Profile:
     profile.buses = buses
     if "safety" in d:
         profile.safety = _safety(r, d)
+    if "report" in d:
+        limits = r.mapping(d["report"], "report", d.lines["report"], REPORT_LIMITS)
+        profile.report = {str(k): r.number(limits, k, "report") or 0.0 for k in limits}
     blocks = r.sequence(d, "ros2_control", "the profile")
     if not blocks:
         raise r.fail("the profile needs at least one block under 'ros2_control'", d.line)

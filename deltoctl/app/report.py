@@ -1,0 +1,427 @@
+"""The commissioning report: one acceptance sequence on a robot, one document — identity of
+every block, the bus scan, the configuration's fingerprint (and its differences from an
+approved snapshot), link quality, motion checks where allowed, the sensors verified, plots of
+a recording — each check with an id, a limit, a value, a unit and a verdict. ``run_report``
+returns the JSON; ``render_html`` makes the self-contained HTML twin (Jinja2, inline CSS and
+SVG: nothing is fetched when it is opened)."""
+
+from __future__ import annotations
+
+import getpass
+import hashlib
+import json
+import math
+import socket
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from deltoctl.app.checks import FAIL, PASS, SEVERITY, SKIP, WARN, check, failed, overall
+from deltoctl.errors import DeltoctlError, InvalidInput, Refused
+
+if TYPE_CHECKING:
+    from deltoctl.app.robot import Robot
+    from deltoctl.core.system import Member
+
+FORMAT = 1
+# the limits a profile's `report:` section may change
+# (home_repeatability and following_error: from the moves' settling tolerance, below)
+DEFAULTS = {"rtt_p50_ms": 10.0, "rtt_p99_ms": 25.0, "error_rate_perc": 1.0,
+            "loop_rate_ratio": 0.9, "jitter_p99_ms": 5.0, "homes": 3}
+LINK_RATE = 100.0  # Hz of the link-quality stream
+PLOTS = (("positions", "*/position"), ("forces", "*/force.*"),
+         ("accelerations", "*/linear_acceleration.*"))
+MAX_SERIES = 8  # per plot
+MAX_POINTS = 400  # per series, drawn
+SVG_SIZE = (640.0, 220.0)
+
+
+@dataclass
+class Plan:
+    """What the operator asked for."""
+
+    golden: Path | None = None
+    record_seconds: float | None = None
+    record_path: Path | None = None
+    operator: str = ""
+    motion: bool = False  # confirmed (--yes)
+    link_seconds: float = 1.0
+
+
+def check_plan(plan: Plan) -> None:
+    if plan.record_seconds is not None and not (
+            math.isfinite(plan.record_seconds) and 0 < plan.record_seconds <= 3600):
+        raise InvalidInput(f"--record must be a positive number of seconds up to 3600, got "
+                           f"{plan.record_seconds:g}")
+    if plan.golden is not None and not plan.golden.is_file():
+        raise InvalidInput(f"--golden {plan.golden}: no such file")
+    if len(plan.operator) > 200:
+        raise InvalidInput("--operator: at most 200 characters")
+
+
+def limits_of(robot: Robot) -> dict[str, float]:
+    """The profile's `report:` limits over the defaults. A move settles within the
+    profile's home_tolerance, so two returns home may differ by twice it, and a move may end
+    up to it away (half as much again for what the joint does after the stop)."""
+    from deltoctl.core.motion import DEFAULT_TOLERANCE
+
+    tolerance = robot.profile.safety.home_tolerance or DEFAULT_TOLERANCE
+    limits = {**DEFAULTS, "home_repeatability": 2 * tolerance,
+              "following_error": 1.5 * tolerance, **robot.profile.report}
+    bad = [k for k, v in limits.items() if not (math.isfinite(v) and v > 0)]
+    if bad or not 1 <= limits["homes"] <= 20:
+        raise InvalidInput(f"{robot.profile.name}: report: {', '.join(bad) or 'homes'} must be "
+                           "positive (homes: 1 to 20)")
+    return limits
+
+
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
+# -- identity and the bus scan -------------------------------------------------------------------
+
+def identity_section(robot: Robot) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    ident = {b["name"]: b for b in robot.identify()["blocks"]}
+    detected = robot.detect()["blocks"]
+    checks = []
+    for b in detected:
+        for i, c in enumerate(b["checks"]):
+            checks.append(check(f"detect.{b['name']}.{i + 1}", f"{b['name']}: {c['what']}",
+                                str(c["device"]), verdict=PASS if c["match"] else FAIL,
+                                note=f"profile: {c['profile']}"))
+    blocks = [{"name": m.name, "family": m.family.name, "target": m.url or None,
+               "simulated": m.simulated is not None,
+               "identity": ident.get(m.name, {}).get("identity", {}),
+               "detect": next((b["summary"] for b in detected if b["name"] == m.name), None)}
+              for m in robot.blocks]
+    return {"blocks": blocks}, checks
+
+
+# -- the configuration ---------------------------------------------------------------------------
+
+def fingerprint(live: dict[str, dict[str, Any]]) -> str:
+    """The SHA-256 of the configuration's canonical form: every item's value (readings and
+    commands left out) by block/part/item, as sorted compact JSON."""
+    from deltoctl.app.config import live_values
+
+    values = {"/".join(k): v.value for k, v in live_values(live).items() if not v.state}
+    return _sha256(json.dumps(values, sort_keys=True, separators=(",", ":"),
+                              default=str).encode())
+
+
+def configuration_section(robot: Robot, golden: Path | None
+                          ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The live configuration's fingerprint; with ``golden``, each difference from that
+    approved snapshot is a failed check."""
+    from deltoctl.app.config import check_against, differences, live_values, load_snapshot
+
+    live, unable = read_config(robot)
+    section: dict[str, Any] = {"fingerprint": fingerprint(live), "blocks": sorted(live),
+                               "not_reported": unable}
+    checks = []
+    if golden is not None:
+        snap = load_snapshot(golden)
+        section["golden"] = {"file": str(golden), "sha256": _sha256(golden.read_bytes()),
+                             "notes": check_against(snap, live, robot.profile)}
+        rows = differences(snap.values, live_values(live), both_ways=False)
+        for r in rows:
+            where = f"{r['block']}/{r['part']}/{r['item']}"
+            checks.append(check(f"config.{where}", f"{where} as approved", r["other"],
+                                r["unit"] or "", verdict=FAIL,
+                                note=f"approved: {r['snapshot']}"))
+        checks.append(check("config.golden", "items that differ from the approved snapshot",
+                            len(rows), "", None, 0))
+    return section, checks
+
+
+def read_config(robot: Robot) -> tuple[dict[str, dict[str, Any]], list[str]]:
+    from deltoctl.app.config import read_live
+
+    return read_live(robot.system)
+
+
+# -- link quality --------------------------------------------------------------------------------
+
+def link_checks(m: Member, limits: dict[str, float], seconds: float) -> list[dict[str, Any]]:
+    """One block read at LINK_RATE for ``seconds``: round trip p50/p99, error rate, the loop's
+    rate and jitter, each against its limit."""
+    from deltoctl.core.loop import CycleLoop, Histogram
+
+    before = dict(m.driver.stats)
+    rtt = Histogram()
+    loop = CycleLoop(LINK_RATE, seconds)
+    for _ in loop:
+        start = time.perf_counter()
+        m.driver.read()
+        rtt.add(time.perf_counter() - start)
+    s = loop.stats.summary()
+    after = m.driver.stats
+    packets = after["packets"] - before["packets"]
+    errors = after["errors"] - before["errors"]
+    rate = 100.0 * errors / packets if packets else 0.0
+    n = m.name
+    return [
+        check(f"link.{n}.rtt_p50", f"{n}: round trip, median", rtt.percentile(50) * 1e3, "ms",
+              None, limits["rtt_p50_ms"]),
+        check(f"link.{n}.rtt_p99", f"{n}: round trip, p99", rtt.percentile(99) * 1e3, "ms",
+              None, limits["rtt_p99_ms"]),
+        check(f"link.{n}.error_rate", f"{n}: errors per packet", rate, "%", None,
+              limits["error_rate_perc"], note=f"{errors} of {packets}"),
+        check(f"link.{n}.loop_rate", f"{n}: loop rate at {LINK_RATE:g} Hz asked", s["real_rate"],
+              "Hz", LINK_RATE * limits["loop_rate_ratio"], None),
+        check(f"link.{n}.jitter_p99", f"{n}: period jitter, p99", s["period_jitter_p99_ms"],
+              "ms", None, limits["jitter_p99_ms"]),
+    ]
+
+
+# -- motion --------------------------------------------------------------------------------------
+
+def _range(joint: Any) -> tuple[float, float] | None:
+    """Where a jog may go: the soft limits, else the limits, 2 % inside."""
+    soft, hard = joint.soft_limits, joint.limits
+    low = soft.lower if soft and soft.lower is not None else hard.lower if hard else None
+    high = soft.upper if soft and soft.upper is not None else hard.upper if hard else None
+    if low is None or high is None or not high > low:
+        return None
+    margin = 0.02 * (high - low)
+    return low + margin, high - margin
+
+
+def _move_in_steps(robot: Robot, targets: dict[str, float], step: float) -> dict[str, float]:
+    """Move to ``targets`` in moves no larger than ``step``; each joint's final |error|."""
+    while True:
+        here = robot.read()
+        moves = {j: here[f"{j}/position"] + max(-step, min(step, t - here[f"{j}/position"]))
+                 for j, t in targets.items()}
+        result = robot.move(moves)
+        if all(abs(targets[j] - moves[j]) < 1e-9 for j in targets) or not result["settled"]:
+            return {j: abs(v["target"] - v["position"]) for b in result["blocks"]
+                    for j, v in b["joints"].items() if v["position"] is not None}
+
+
+def motion_checks(robot: Robot, limits: dict[str, float]) -> list[dict[str, Any]]:
+    """Every block that can jog: N returns to the home pose, each from a step away (their
+    spread per joint), then each joint to its soft limits and back (the error where each
+    move ends)."""
+    profile, checks = robot.profile, []
+    step = profile.safety.max_jog_step or 0.2
+    for m in robot.system.able("jog"):
+        ranges = {j.name: r for j in m.hw.joints if (r := _range(j)) is not None}
+        if not ranges:
+            continue
+        try:
+            m.driver.check_motion(list(ranges))
+        except Refused as exc:
+            checks.append(check(f"motion.{m.name}", f"{m.name}: motion", None, verdict=SKIP,
+                                note=exc.message))
+            continue
+        home = {j: min(max(profile.safety.home_pose.get(j, 0.0), lo), hi)
+                for j, (lo, hi) in ranges.items()}
+        seen: dict[str, list[float]] = {j: [] for j in ranges}
+        for i in range(int(limits["homes"])):
+            away = {j: min(max(h + (step / 2 if i % 2 else -step / 2), ranges[j][0]),
+                           ranges[j][1]) for j, h in home.items()}
+            _move_in_steps(robot, away, step)
+            _move_in_steps(robot, home, step)
+            values = robot.read()
+            for j in ranges:
+                seen[j].append(values[f"{j}/position"])
+        errors: dict[str, float] = {}
+        for side in (0, 1):
+            ends = _move_in_steps(robot, {j: r[side] for j, r in ranges.items()}, step)
+            errors = {j: max(errors.get(j, 0.0), e) for j, e in ends.items()}
+        ends = _move_in_steps(robot, home, step)
+        for j in ranges:
+            checks.append(check(f"motion.{j}.home_repeatability",
+                                f"{j}: spread of {len(seen[j])} returns home",
+                                max(seen[j]) - min(seen[j]), "rad", None,
+                                limits["home_repeatability"]))
+            checks.append(check(f"motion.{j}.following_error",
+                                f"{j}: error at its soft limits and back",
+                                max(errors.get(j, 0.0), ends.get(j, 0.0)), "rad", None,
+                                limits["following_error"]))
+    return checks
+
+
+# -- sensors -------------------------------------------------------------------------------------
+
+def sensor_checks(robot: Robot) -> list[dict[str, Any]]:
+    """Each IMU's self-test and gravity check; each F/T sensor's residual after a tare."""
+    from deltoctl.app import imu_calibration
+    from deltoctl.app.calibrate import tare_ft, verify_ft
+
+    checks = []
+    for m in robot.system.able("calibrate_imu"):
+        checks += imu_calibration.self_test_checks(m.driver)
+        checks += imu_calibration.gravity_checks(m.driver, 50)
+    if any(s.state("force.x") for m in robot.system.able("calibrate_ft") for s in m.hw.sensors):
+        checks += verify_ft(robot.system, tare_ft(robot.system, samples=20))
+    return checks
+
+
+# -- the recording and its plots -----------------------------------------------------------------
+
+def _points(times: Any, values: Any, t0: int, t1: int, low: float, high: float) -> str:
+    width, height = SVG_SIZE
+    stride = max(1, len(times) // MAX_POINTS)
+    span, rise = max(t1 - t0, 1), (high - low) or 1.0
+    return " ".join(f"{(t - t0) / span * width:.1f},{height - (v - low) / rise * height:.1f}"
+                    for t, v in zip(times[::stride], values[::stride]) if math.isfinite(v))
+
+
+def plots(path: Path) -> list[dict[str, Any]]:
+    """A figure per kind of interface the recording carries (positions, forces,
+    accelerations): each series's polyline in SVG coordinates, with its range."""
+    from deltoctl.record.reader import interfaces, read_recording, select, series
+
+    rec = read_recording(path, keep=None)
+    available = interfaces(rec)
+    figures = []
+    for title, glob in PLOTS:
+        wanted = select(available, [glob])[:MAX_SERIES]
+        if not wanted:
+            continue
+        data = series(rec, wanted)
+        finite = [float(v) for t, vs in data.values() for v in vs if math.isfinite(v)]
+        times = [int(t) for ts, _ in data.values() for t in ts[:1]] + \
+                [int(t) for ts, _ in data.values() for t in ts[-1:]]
+        if not finite or not times:
+            continue
+        low, high, t0, t1 = min(finite), max(finite), min(times), max(times)
+        figures.append({"title": title, "low": low, "high": high,
+                        "seconds": round((t1 - t0) / 1e9, 3),
+                        "series": [{"name": n, "points": _points(*data[n], t0, t1, low, high)}
+                                   for n in wanted]})
+    return figures
+
+
+def recording_section(robot: Robot, seconds: float, path: Path) -> dict[str, Any]:
+    result = robot.record(path, 100.0, seconds)
+    section = {"file": str(path), "seconds": seconds, "sha256": _sha256(path.read_bytes()),
+               "cycles": result.get("stats", {}).get("cycles") if isinstance(
+                   result.get("stats"), dict) else None}
+    try:
+        section["plots"] = plots(path)
+    except ImportError:
+        section["plots"] = []
+        section["note"] = "no plots: pip install 'deltoctl[plot]' (numpy)"
+    return section
+
+
+# -- the whole sequence ---------------------------------------------------------------------------
+
+def _stage(name: str, run: Any, checks: list[dict[str, Any]]) -> Any:
+    """One stage; a device error in it is that stage's failed check, and the sequence goes
+    on (invalid input and refusals end it)."""
+    try:
+        return run()
+    except (InvalidInput, Refused):
+        raise
+    except DeltoctlError as exc:
+        checks.append(check(f"{name}.ran", f"the {name} stage ran", exc.message,
+                            verdict=FAIL))
+        return None
+
+
+def run_report(robot: Robot, plan: Plan) -> dict[str, Any]:
+    """The acceptance sequence; the report's JSON, its own hash last."""
+    from deltoctl import __version__
+
+    check_plan(plan)
+    limits = limits_of(robot)
+    start, start_ns = _now(), time.time_ns()
+    sections: dict[str, Any] = {}
+    checks: list[dict[str, Any]] = []
+
+    found = _stage("identity", lambda: identity_section(robot), checks)
+    if found:
+        sections["identity"], more = found
+        checks += more
+    found = _stage("configuration", lambda: configuration_section(robot, plan.golden), checks)
+    if found:
+        sections["configuration"], more = found
+        checks += more
+    for m in robot.blocks:
+        checks += _stage("link", lambda m=m: link_checks(m, limits, plan.link_seconds),
+                         checks) or []
+    if plan.motion:
+        checks += _stage("motion", lambda: motion_checks(robot, limits), checks) or []
+    else:
+        checks.append(check("motion", "motion checks", None, verdict=SKIP,
+                            note="not asked for (--yes runs them where the profile allows)"))
+    checks += _stage("sensors", lambda: sensor_checks(robot), checks) or []
+    if plan.record_seconds is not None and plan.record_path is not None:
+        sections["recording"] = _stage(
+            "recording", lambda: recording_section(robot, plan.record_seconds,
+                                                   plan.record_path), checks)
+    warnings = robot.warnings()
+    verdict = overall(checks)
+    if verdict == PASS and warnings:
+        verdict = WARN
+    source = robot.profile.source
+    profile_hash = _sha256(Path(source).read_bytes()) if source and Path(source).is_file() \
+        else None
+    doc = {
+        "kind": "deltoctl_report", "format": FORMAT,
+        "header": {"profile": {"name": robot.profile.name, "file": source,
+                               "sha256": profile_hash},
+                   "deltoctl": __version__, "host": socket.gethostname(),
+                   "operator": plan.operator or _user(), "start": start, "end": _now(),
+                   "start_ns": start_ns, "limits": limits},
+        "verdict": verdict, "failed": failed(checks), "warnings": warnings,
+        "sections": sections,
+        "checks": sorted(checks, key=lambda c: SEVERITY[c["verdict"]]),
+    }
+    doc["report_sha256"] = report_hash(doc)
+    return doc
+
+
+def report_hash(doc: dict[str, Any]) -> str:
+    """The SHA-256 of the report's canonical JSON, its own hash left out."""
+    body = {k: v for k, v in doc.items() if k != "report_sha256"}
+    return _sha256(json.dumps(body, sort_keys=True, separators=(",", ":"),
+                              default=str).encode())
+
+
+def _user() -> str:
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):
+        return "unknown"
+
+
+# -- the HTML twin -------------------------------------------------------------------------------
+
+def render_html(doc: dict[str, Any]) -> str:
+    """The report as one self-contained HTML5 page (the template ships in the package)."""
+    import jinja2
+
+    env = jinja2.Environment(loader=jinja2.PackageLoader("deltoctl.app", "templates"),
+                             autoescape=True, trim_blocks=True, lstrip_blocks=True)
+    counts = {v: sum(c["verdict"] == v for c in doc["checks"]) for v in (PASS, FAIL, WARN,
+                                                                          SKIP)}
+    return env.get_template("report.html.j2").render(r=doc, counts=counts, size=SVG_SIZE)
+
+
+def fleet_report(reports: dict[str, dict[str, Any] | None]) -> dict[str, Any]:
+    """Each robot's report in one document, the worst first."""
+    robots = []
+    for name, doc in reports.items():
+        verdict = doc.get("verdict", FAIL) if isinstance(doc, dict) else FAIL
+        robots.append({"robot": name, "verdict": verdict,
+                       "failed": doc.get("failed", []) if isinstance(doc, dict) else [],
+                       "report": doc})
+    robots.sort(key=lambda r: (SEVERITY.get(r["verdict"], 0), r["robot"]))
+    verdicts = [r["verdict"] for r in robots]
+    verdict = FAIL if FAIL in verdicts else WARN if WARN in verdicts else PASS
+    doc = {"kind": "deltoctl_fleet_report", "format": FORMAT, "verdict": verdict,
+           "time": _now(), "robots": robots}
+    doc["report_sha256"] = report_hash(doc)
+    return doc

@@ -1,0 +1,83 @@
+"""``deltoctl report``: the commissioning report — the acceptance sequence on a robot, one
+self-contained HTML file and its JSON twin."""
+
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from deltoctl.cli.context import options
+from deltoctl.cli.device_cmd import AllowMismatch, open_robot
+from deltoctl.cli.output import emit_json, info, say, table, warn
+from deltoctl.errors import DeviceError, InvalidInput
+
+WARNINGS = 3
+
+
+def register(root: typer.Typer) -> None:
+    root.command("report")(report)
+
+
+def _paths(output: Path | None, profile: str) -> tuple[Path, Path, Path]:
+    """The HTML, its JSON twin and the recording: beside each other, named from -o or from
+    the profile and the time."""
+    if output is None:
+        stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+        output = Path(f"report-{profile}-{stamp}.html")
+    if output.suffix.lower() not in (".html", ".htm"):
+        raise InvalidInput(f"-o {output}: the report is an .html file (its JSON twin goes "
+                           "beside it)")
+    if not output.parent.is_dir():
+        raise InvalidInput(f"-o {output}: {output.parent} is not a directory")
+    return output, output.with_suffix(".json"), output.with_suffix(".mcap")
+
+
+def report(
+    ctx: typer.Context,
+    output: Annotated[Path | None, typer.Option(
+        "--output", "-o", metavar="FILE.html",
+        help="The HTML report; its JSON twin is FILE.json (default: "
+             "report-<profile>-<time>.html).")] = None,
+    golden: Annotated[Path | None, typer.Option(
+        metavar="SNAPSHOT", help="An approved config snapshot: each difference fails.")] = None,
+    record: Annotated[float | None, typer.Option(
+        metavar="SECONDS", help="Record that long (FILE.mcap) and plot it in the report.")
+    ] = None,
+    operator: Annotated[str, typer.Option(
+        help="Who ran the acceptance (default: the user).")] = "",
+    allow_model_mismatch: AllowMismatch = False,
+) -> None:
+    """Run the acceptance sequence and write one self-contained HTML report and its JSON
+    twin: identity of every block and the bus scan, the configuration's fingerprint (and with
+    --golden its differences), link quality per block, the sensors verified (IMU self-test
+    and gravity, F/T residuals after a tare), plots of a recording, a sign-off block and the
+    report's hash. With --yes, motion checks where the profile allows motion: returns home
+    and each joint to its soft limits and back. Limits come from the profile's `report:`
+    section. Exit 0 when every check passes, 1 when one fails (named), 3 with warnings."""
+    from deltoctl.app.report import Plan, check_plan, render_html, run_report
+    from deltoctl.cli.calibrate_cmd import check_rows
+
+    opts = options(ctx)
+    profile = opts.load_profile()
+    html, twin, mcap = _paths(output, profile.name)
+    plan = Plan(golden, record, mcap if record is not None else None, operator, opts.yes)
+    check_plan(plan)
+    with open_robot(opts, allow_model_mismatch, profile) as robot:
+        doc = run_report(robot, plan)
+    import json
+
+    html.write_text(render_html(doc), encoding="utf-8")
+    twin.write_text(json.dumps(doc, indent=2, default=str) + "\n", encoding="utf-8")
+    if opts.json:
+        emit_json(doc)
+    else:
+        table(None, ["check", "value", "unit", "limit", "verdict"], check_rows(doc["checks"]))
+        say(f"verdict: {doc['verdict']}")
+    info(f"report: {html} and {twin.name}")
+    if doc["failed"]:
+        raise DeviceError(f"acceptance failed: {', '.join(doc['failed'])}")
+    if doc["verdict"] == "warn":
+        for w in doc["warnings"]:
+            warn(w)
+        raise typer.Exit(WARNINGS)
