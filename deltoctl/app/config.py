@@ -306,25 +306,30 @@ def show(value: Any) -> str:
     return str(value)
 
 
+def _compared(a: Value | None, b: Value | None, both_ways: bool) -> bool:
+    """Whether an item held as ``a`` and ``b`` counts as a difference."""
+    if (a and a.state) or (b and b.state):  # a reading or a command
+        return False
+    if a is None or b is None:
+        return both_ways
+    return not same(a.value, b.value)
+
+
 def differences(snap: dict[Key, Value], other: dict[Key, Value],
                 both_ways: bool) -> list[dict[str, Any]]:
     """The items whose values differ (readings and commands left out); ``both_ways``: items
     only one side holds count too (two files), else only items both hold (the snapshot's
     names are checked against the live ones first, see ``check_against``)."""
-    keys = list(snap)
-    if both_ways:
-        keys += [k for k in other if k not in snap]
+    keys = list(snap) + ([k for k in other if k not in snap] if both_ways else [])
     rows = []
     for key in keys:
         a, b = snap.get(key), other.get(key)
-        if (not both_ways and (a is None or b is None)) or (a and a.state) or (b and b.state):
+        if not _compared(a, b, both_ways):
             continue
-        if a is not None and b is not None and same(a.value, b.value):
-            continue
-        unit = a.unit if a is not None else b.unit if b is not None else None
-        row = {"block": key[0], "part": key[1], "item": key[2], "unit": unit,
-               "snapshot": a.value if a is not None else None,
-               "other": b.value if b is not None else None}
+        held = a or b
+        row = {"block": key[0], "part": key[1], "item": key[2],
+               "unit": held.unit if held else None,
+               "snapshot": a.value if a else None, "other": b.value if b else None}
         if both_ways:
             row["absent"] = None if a and b else ("snapshot" if b else "other")
         rows.append(row)
