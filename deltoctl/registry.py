@@ -1,27 +1,173 @@
 """The device families deltoctl can drive, found through the ``deltoctl.families`` entry-point
 group (the built-in ones are registered in ``pyproject.toml``; a third party adds one by
-installing a package that names its descriptor there).
+installing a package that names its descriptor there), and the transports their buses use,
+by URL scheme: the built-in ones of ``deltoctl.transport`` and those of the
+``deltoctl.transports`` entry-point group (a family's package may bring its own link).
+
+A family owns everything about itself, declared in its descriptor: its codec, driver and
+emulator, the schemes of its links, its ``sim serve`` faults (``SimOption``), its restore
+permissions (``Permission``), its identity fields and register names. Nothing outside its
+folder names it.
 
 A descriptor is data and strings: reading the registry imports each family's small
 ``__init__`` only; its driver and emulator modules are imported when a block of that family is
-opened (``Family.driver_class()``, ``Family.emulator()``), the way python-can loads an
-interface only when a bus of that kind is opened.
+opened (``Family.driver_class()``, ``Family.emulator()``), and a transport's module when a link
+of its scheme is opened or checked, the way python-can loads an interface only when a bus of
+that kind is opened.
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable
+import math
+import re
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+from deltoctl.errors import DeltoctlError, InvalidInput
+
+if TYPE_CHECKING:
+    from deltoctl.transport import Transport
 
 GROUP = "deltoctl.families"
+TRANSPORTS = "deltoctl.transports"
 
-# what a verb may ask of a driver, beyond the lifecycle and read/write
-CAPABILITIES = frozenset({
-    "identify", "detect", "home", "jog", "calibrate_ft", "gpio", "registers", "torque",
-    "reboot", "config", "calibrate_imu",
-})
+# what a verb may ask of a driver, beyond the lifecycle and read/write, and the driver
+# methods each one calls (a family declaring a capability must have them; "home" moves to
+# the home pose, and runs a joint's homing routine where its profile gives it one)
+CAPABILITIES: dict[str, tuple[str, ...]] = {
+    "identify": ("identify",), "detect": ("detect",), "home": ("move",), "jog": ("move",),
+    "calibrate_ft": ("tare_ft",), "gpio": ("set_command",),
+    "registers": ("read_registers", "write_register"), "torque": ("set_torque",),
+    "reboot": ("reboot",), "config": ("config_read", "config_write"),
+    "calibrate_imu": ("sample", "self_test"),
+}
+
+SIM_KINDS = ("flag", "text", "int", "number", "numbers", "joints")
+_NAME = re.compile(r"[a-z][a-z0-9_]{0,31}")
+RESERVED = frozenset({"host", "port", "profile"})  # the options every `sim serve` has
+
+
+@dataclass(frozen=True)
+class SimOption:
+    """A fault or setting of a family's simulated device: ``deltoctl sim serve --NAME``,
+    ``open_robot(sim={"NAME": value})`` and the pytest fixtures' ``NAME=value``. Its emulator
+    reads the value as ``ctx.options.NAME`` (the default when not given), and the joints a
+    ``joints`` option names as ``ctx.named("NAME", hw)``.
+
+    kind: ``flag`` (on when given), ``text``, ``int`` (0x6A or 106), ``number``, ``numbers``
+    (comma-separated, ``count`` of them) or ``joints`` (repeatable joint names of the
+    profile); ``low``/``high`` bound a number."""
+
+    name: str
+    kind: str
+    help: str
+    default: Any = None
+    low: float | None = None
+    high: float | None = None
+    count: tuple[int, int] = (1, 16)  # how many numbers a ``numbers`` option takes
+    metavar: str | None = None
+
+    def __post_init__(self) -> None:
+        if not _NAME.fullmatch(self.name) or self.name in RESERVED:
+            raise ValueError(f"sim option {self.name!r}: a name of lowercase letters, digits "
+                             f"and _ (not {', '.join(sorted(RESERVED))})")
+        if self.kind not in SIM_KINDS:
+            raise ValueError(f"sim option {self.name!r}: kind must be one of "
+                             f"{', '.join(SIM_KINDS)}, got {self.kind!r}")
+
+    @property
+    def flag(self) -> str:
+        return "--" + self.name.replace("_", "-")
+
+    def value(self, given: Any) -> Any:
+        """A value given (a command line's text or a program's value) as the emulator takes
+        it; anything else is one InvalidInput naming the option and what it takes."""
+        try:
+            return _CONVERT[self.kind](self, given)
+        except (TypeError, ValueError, OverflowError):
+            raise InvalidInput(f"{self.flag} takes {_TAKES[self.kind]}"
+                               f"{self._bounds()}, got {given!r}") from None
+
+    def _bounds(self) -> str:
+        if self.kind == "numbers":
+            low, high = self.count
+            return f", {low}" + (f" to {high}" if high != low else "") + " of them"
+        if self.low is None and self.high is None:
+            return ""
+        return f" from {_show(self.low)} to {_show(self.high)}"
+
+    def _bounded(self, x: float) -> float:
+        if not math.isfinite(x) or (self.low is not None and x < self.low) or \
+                (self.high is not None and x > self.high):
+            raise ValueError(x)
+        return x
+
+
+def _show(bound: float | None) -> str:
+    return "…" if bound is None else format(bound, "g")
+
+
+def _flag(o: SimOption, v: Any) -> bool:
+    if not isinstance(v, bool):
+        raise TypeError(v)
+    return v
+
+
+def _int(o: SimOption, v: Any) -> int | None:
+    if v is None and o.default is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, str)):
+        raise TypeError(v)
+    number = int(v, 0) if isinstance(v, str) else v
+    o._bounded(number)
+    return number
+
+
+def _number(o: SimOption, v: Any) -> float:
+    if isinstance(v, bool):
+        raise TypeError(v)
+    return o._bounded(float(v))
+
+
+def _numbers(o: SimOption, v: Any) -> tuple[float, ...]:
+    items = v.split(",") if isinstance(v, str) else list(v)
+    if not o.count[0] <= len(items) <= o.count[1] or any(isinstance(x, bool) for x in items):
+        raise ValueError(v)
+    return tuple(o._bounded(float(x)) for x in items)
+
+
+def _joints(o: SimOption, v: Any) -> tuple[str, ...]:
+    names = (v,) if isinstance(v, str) else tuple(v)
+    if not all(isinstance(n, str) for n in names):
+        raise TypeError(v)
+    return names
+
+
+def _text(o: SimOption, v: Any) -> str:
+    if not isinstance(v, str):
+        raise TypeError(v)
+    return v
+
+
+_CONVERT: dict[str, Callable[[SimOption, Any], Any]] = {
+    "flag": _flag, "text": _text, "int": _int, "number": _number, "numbers": _numbers,
+    "joints": _joints}
+_TAKES = {"flag": "true or false", "text": "a text", "int": "an integer (106 or 0x6A)",
+          "number": "a number", "numbers": "comma-separated numbers",
+          "joints": "joint names"}
+
+
+@dataclass(frozen=True)
+class Permission:
+    """What ``config restore --allow NAME`` permits, declared by the family whose drivers ask
+    for it (an entry's ``needs`` or ``opt_in``)."""
+
+    name: str
+    why: str = ""  # why a restore asks for it; "" for a safety setting, written when named
+    given: str = ""  # what the restore then does, for the confirmation
+    hint: str = ""  # the way on when it is missing
 
 
 @dataclass(frozen=True)
@@ -39,7 +185,11 @@ class Family:
     endpoint_params: tuple[str, str, int] | None = None
     capabilities: frozenset[str] = frozenset()
     emulator: str | None = None  # "module:function" serving a simulated device (sim/serve.py)
-    serve_options: tuple[str, ...] = ()  # the `sim serve` faults and settings it takes
+    serve_options: tuple[SimOption, ...] = ()  # the `sim serve` faults and settings it takes
+    permissions: tuple[Permission, ...] = ()  # what `config restore --allow` names for it
+    # how a table (fleet list) shows a block's identify report: (key, template), in order,
+    # e.g. ("reported_model", "{}"), ("firmware", "fw {}"), ("servos", "({} servos)")
+    identity_fields: tuple[tuple[str, str], ...] = ()
     summary: str = ""
     refused_hint: str = ""  # what to do when its TCP target refuses the connection
     register_items: str | None = None  # "module:function" → the register names it takes
@@ -51,16 +201,30 @@ class Family:
     mock_param: str | None = None
     # "module:function" of its codec naming a frame in the -vv trace: bytes → "GET_DATA" | None
     frame_names: str | None = None
+    # "module:function" (profile, block) → None: reads a block written for one of its plugins
+    # (their own params and tags) into deltoctl's model when a URDF is loaded
+    import_block: str | None = None
 
     def __post_init__(self) -> None:
-        unknown = self.capabilities - CAPABILITIES
+        unknown = self.capabilities - CAPABILITIES.keys()
         if unknown:  # a third party's typo would otherwise hide a verb without a word
             known = ", ".join(sorted(CAPABILITIES))
             raise ValueError(f"family {self.name!r}: unknown capabilities "
                              f"{', '.join(sorted(unknown))} (known: {known})")
+        names = [o.name for o in self.serve_options]
+        if len(set(names)) != len(names):
+            raise ValueError(f"family {self.name!r}: a sim option is declared twice")
 
     def driver_class(self) -> type:
-        return _load(self.driver)
+        """Its driver class, checked on first use: a capability without its method is one
+        clear error, not an AttributeError in the middle of a verb."""
+        cls = _load(self.driver)
+        missing = unimplemented(self, cls)
+        if missing:
+            raise DeltoctlError(f"family {self.name!r}: {missing}",
+                                hint="the family's package declares what its driver lacks: "
+                                     "report it to its authors")
+        return cls
 
     def emulator_function(self) -> Callable[..., Any] | None:
         return _load(self.emulator) if self.emulator else None
@@ -83,6 +247,21 @@ class Family:
         return self.mock_param is not None and params.get(self.mock_param) in ("true", "True")
 
 
+def unimplemented(family: Family, cls: type) -> str:
+    """What the driver class lacks of the capabilities its family declares ("" when it has
+    everything): each capability's methods must be its own, not the base class's refusal."""
+    from deltoctl.core.driver import Driver
+
+    missing = [f"{capability} needs {method}()" for capability in sorted(family.capabilities)
+               for method in CAPABILITIES[capability]
+               if getattr(cls, method, None) is None
+               or getattr(cls, method) is getattr(Driver, method, None)]
+    if not missing:
+        return ""
+    return (f"its driver {cls.__name__} declares capabilities it does not implement: "
+            f"{'; '.join(missing)}")
+
+
 def _load(ref: str) -> Any:
     module, _, attr = ref.partition(":")
     return getattr(importlib.import_module(module), attr)
@@ -93,7 +272,11 @@ _added: dict[str, Family] = {}
 
 
 def register(family: Family) -> None:
-    """Add a family at run time (tests, or a program embedding deltoctl)."""
+    """Add a family at run time (tests, or a program embedding deltoctl); its driver is
+    checked now against the capabilities it declares (ValueError)."""
+    missing = unimplemented(family, _load(family.driver))
+    if missing:
+        raise ValueError(f"family {family.name!r}: {missing}")
     _added[family.name] = family
     if _families is not None:
         _families[family.name] = family
@@ -138,3 +321,145 @@ def for_plugin(plugin: str) -> str | None:
 def of_block(family_name: str | None, plugin: str) -> Family | None:
     """A block's family: the one it names (or its profile names), else its plugin's."""
     return get(family_name or for_plugin(plugin))
+
+
+# -- what the families declare, merged ------------------------------------------------------
+
+def sim_options(names: Sequence[str] | None = None) -> dict[str, SimOption]:
+    """The `sim serve` options of every family (or of those ``names``), by option name; an
+    option several families declare (``missing``, ``stall``) is one, the first family's
+    declaration; one declared again of another kind is left out with a warning."""
+    merged: dict[str, SimOption] = {}
+    for family in families().values():
+        if names is not None and family.name not in names:
+            continue
+        for option in family.serve_options:
+            first = merged.setdefault(option.name, option)
+            if first.kind != option.kind:
+                _warn(f"family {family.name!r}: sim option {option.flag} is another family's "
+                      f"{first.kind} option: left out")
+    return merged
+
+
+def permissions() -> dict[str, Permission]:
+    """Every ``--allow`` name a family declares, with why and the way on."""
+    found: dict[str, Permission] = {}
+    for family in families().values():
+        for permission in family.permissions:
+            found.setdefault(permission.name, permission)
+    return found
+
+
+def _warn(message: str) -> None:
+    import sys
+
+    print(f"deltoctl: warning: {message}", file=sys.stderr)
+
+
+# -- transports, by URL scheme --------------------------------------------------------------
+
+_transport_refs: dict[str, str] | None = None
+_added_transports: dict[str, str] = {}
+_loaded_transports: dict[str, Transport] = {}
+
+
+def register_transport(scheme: str, ref: str) -> None:
+    """Add a transport at run time: ``scheme`` → ``"module:attr"`` of its ``Transport``."""
+    _added_transports[scheme] = ref
+    _loaded_transports.pop(scheme, None)
+    if _transport_refs is not None:
+        _transport_refs[scheme] = ref
+
+
+def unregister_transport(scheme: str) -> None:
+    _added_transports.pop(scheme, None)
+    _loaded_transports.pop(scheme, None)
+    if _transport_refs is not None:
+        _transport_refs.pop(scheme, None)
+
+
+def transport_refs() -> dict[str, str]:
+    """scheme → "module:attr": the built-in transports, the entry points' (read once a
+    process), then those registered. Nothing is imported."""
+    global _transport_refs
+    if _transport_refs is None:
+        from importlib.metadata import entry_points
+
+        from deltoctl.transport import BUILTIN
+
+        found = dict(BUILTIN)
+        found.update({ep.name: ep.value for ep in entry_points(group=TRANSPORTS)})
+        _transport_refs = {**found, **_added_transports}
+    return _transport_refs
+
+
+def transport(scheme: str) -> Transport:
+    """The transport of a URL scheme, its module imported now; an unknown scheme is one
+    InvalidInput naming the known ones."""
+    loaded = _loaded_transports.get(scheme)
+    if loaded is not None:
+        return loaded
+    refs = transport_refs()
+    if scheme not in refs:
+        raise InvalidInput(f"unknown scheme {scheme!r} (known: {', '.join(refs)})",
+                           hint="use " + ", ".join(_examples()))
+    from deltoctl.transport import Transport
+
+    try:
+        found = _load(refs[scheme])
+    except Exception as exc:  # a broken third-party package: one clear error
+        raise DeltoctlError(f"transport {scheme!r} ({refs[scheme]}) did not load: "
+                            f"{type(exc).__name__}: {exc}") from None
+    if not isinstance(found, Transport) or found.scheme != scheme:
+        raise DeltoctlError(f"transport {scheme!r} ({refs[scheme]}) is not a deltoctl "
+                            f"Transport of scheme {scheme!r}")
+    _loaded_transports[scheme] = found
+    return found
+
+
+def _examples() -> list[str]:
+    """How each transport's URL looks, for a message (the built-in ones: imported anyway)."""
+    examples = []
+    for scheme in transport_refs():
+        try:
+            examples.append(transport(scheme).example)
+        except DeltoctlError:
+            continue
+    return examples
+
+
+def transports() -> dict[str, Transport]:
+    """Every transport that loads, by scheme (imports them all: doctor without a target)."""
+    found = {}
+    for scheme in transport_refs():
+        try:
+            found[scheme] = transport(scheme)
+        except DeltoctlError as exc:
+            _warn(exc.message)
+    return found
+
+
+def scheme_of(url: str) -> str:
+    return url.partition("://")[0] if "://" in url else ""
+
+
+def transport_of(url: str) -> Transport:
+    """The transport a target URL names by its scheme."""
+    scheme = scheme_of(url)
+    if not scheme:
+        raise InvalidInput(f"{url!r} is not a target URL (no scheme)",
+                           hint="use " + ", ".join(_examples()))
+    try:
+        return transport(scheme)
+    except InvalidInput as exc:
+        raise InvalidInput(f"{url!r}: {exc.message}", hint=exc.hint) from None
+
+
+def open_link(url: str, links: Any = None, **options: Any) -> Any:
+    """The open link to ``url``, by its scheme's transport; a transport whose links are
+    shared (an I2C bus: several blocks' devices on it) is opened once per System's
+    ``links``."""
+    chosen = transport_of(url)
+    if chosen.shared and links is not None:
+        return links.shared(url, lambda: chosen.open(url, **options))
+    return chosen.open(url, **options)

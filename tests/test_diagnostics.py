@@ -111,16 +111,16 @@ def test_doctor_names_a_refused_target_and_the_fix(cli):
 
 
 def test_doctor_finds_a_host_without_a_link_local_address(cli, monkeypatch):
-    from deltoctl.cli import doctor_cmd
+    from deltoctl.transport import doctor
 
-    monkeypatch.setattr(doctor_cmd, "source_address", lambda host, port: "192.168.1.20")
-    monkeypatch.setattr(doctor_cmd, "_reach", lambda bus, host, port, timeout, families:
-                        doctor_cmd.check("reachable", bus, False, "no connection", "ping"))
+    monkeypatch.setattr(doctor, "source_address", lambda host, port: "192.168.1.20")
+    monkeypatch.setattr(doctor, "reach", lambda target, host, port:
+                        doctor.check("reachable", target.bus, False, "no connection", "ping"))
     doc = json.loads(cli("-p", "dg-5f-right", "doctor", "--json").stdout)
     route = next(c for c in doc["checks"] if c["check"] == "route")
     assert not route["ok"] and "no 169.254.x.x address" in route["detail"]
     assert route["fix"].startswith("sudo ip addr add 169.254.")
-    monkeypatch.setattr(doctor_cmd, "source_address", lambda host, port: "169.254.186.1")
+    monkeypatch.setattr(doctor, "source_address", lambda host, port: "169.254.186.1")
     doc = json.loads(cli("-p", "dg-5f-right", "doctor", "--json").stdout)
     assert next(c for c in doc["checks"] if c["check"] == "route")["ok"]
 
@@ -154,10 +154,10 @@ def test_doctor_names_the_process_holding_a_serial_port(cli):
 
 
 def test_doctor_names_a_permission_problem(cli, monkeypatch):
-    from deltoctl.cli import doctor_cmd
+    from deltoctl.transport import doctor
 
     master, slave = os.openpty()
-    monkeypatch.setattr(doctor_cmd.os, "access", lambda path, mode: False)
+    monkeypatch.setattr(doctor.os, "access", lambda path, mode: False)
     try:
         doc = json.loads(cli("-t", f"serial://{os.ttyname(slave)}", "doctor", "--json").stdout)
     finally:

@@ -1,12 +1,15 @@
 """``deltoctl sim serve PROFILE``: a simulated device in its own process."""
 
 import contextlib
-from typing import Annotated
+import inspect
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from deltoctl.cli.context import options
-from deltoctl.errors import InvalidInput
+
+if TYPE_CHECKING:
+    from deltoctl.registry import SimOption
 
 app = typer.Typer(help="Simulated devices that speak the real protocol.", no_args_is_help=True)
 
@@ -24,51 +27,15 @@ def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
     return complete_joints(ctx, incomplete)
 
 
-@app.command("serve")
-def serve(
-    ctx: typer.Context,
-    profile: Annotated[str | None, typer.Argument(
-        metavar="[PROFILE]", autocompletion=_complete_profile,
-        help="Catalog name or file; default: --profile.")] = None,
-    host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
-    port: Annotated[int, typer.Option(help="TCP port (0: any free port).")] = 0,
-    firmware: Annotated[str, typer.Option(
-        help="Firmware version the device reports, MAJOR.MINOR.")] = "3.0",
-    model_id: Annotated[str | None, typer.Option(
-        help="Emulate another model than the profile's (e.g. 0x3F02), to rehearse a "
-             "mismatch.")] = None,
-    short_version: Annotated[bool, typer.Option(
-        help="Send the short GET_VERSION reply of old firmware.")] = False,
-    input_1: Annotated[bool, typer.Option("--input-1", help="Drive gpio/input_1 high.")]
-        = False,
-    delay: Annotated[float, typer.Option(help="Fault: seconds added before every reply.")]
-        = 0.0,
-    stall: Annotated[list[str] | None, typer.Option(
-        autocompletion=_complete_joint,
-        help="Fault: a joint that cannot move (repeatable).")] = None,
-    missing: Annotated[list[str] | None, typer.Option(
-        autocompletion=_complete_joint,
-        help="Fault: a joint (servo, I2C joint) that never answers (repeatable).")] = None,
-    pace: Annotated[bool, typer.Option(
-        help="Serial buses take the wire time of every byte at the baud rate the host "
-             "set, as a real bus does.")] = False,
-    wrong_baud: Annotated[list[str] | None, typer.Option(
-        autocompletion=_complete_joint,
-        help="Fault: a servo set to another baud rate than its bus (repeatable).")] = None,
-    who_am_i: Annotated[str, typer.Option(
-        help="WHO_AM_I of a simulated LSM6DS3: 0x69 (LSM6DS3), 0x6A (LSM6DS3TR-C), or "
-             "another value to rehearse a wrong part.")] = "0x6A",
-    orientation: Annotated[str, typer.Option(
-        help="The IMU's roll,pitch in degrees (gravity follows).")] = "0,0",
-) -> None:
+def serve(ctx: typer.Context, profile: str | None, host: str, port: int,
+          **given: Any) -> None:
     """Serve every block's simulated device until Ctrl-C or SIGTERM, printing one target per
     bus (BUS=URL, ready for --target).
 
-    A gripper on loopback TCP, a servo bus on a pseudo-terminal, an I2C bus as i2c+tcp://;
-    --hardware serves some blocks only; with --json, one JSON line."""
+    Each family's emulator serves its blocks behind a real link, with the faults and settings
+    the family declares (below). --hardware serves some blocks only; --json prints one line."""
     import gc
     import json
-    import math
     import signal
     import sys
     import threading
@@ -77,23 +44,8 @@ def serve(
 
     opts = options(ctx)
     prof = opts.load_profile(profile)
-    try:
-        model = int(model_id, 0) if model_id else None
-        who = int(who_am_i, 0)
-        angles = tuple(float(x) for x in orientation.split(","))
-    except ValueError:
-        raise InvalidInput("--model-id and --who-am-i take numbers (0x5F22, 0x6A), "
-                           "--orientation ROLL,PITCH in degrees") from None
-    if not (math.isfinite(delay) and 0 <= delay <= 10):
-        raise InvalidInput(f"--delay must be 0 to 10 seconds, got {delay:g}")
-    if not (0 <= port <= 65535 and 0 <= who <= 0xFF and 2 <= len(angles) <= 3
-            and all(math.isfinite(a) for a in angles)):
-        raise InvalidInput("--port takes 0-65535, --who-am-i a byte, --orientation ROLL,PITCH"
-                           "[,YAW] in finite degrees")
-    serve_options = ServeOptions(
-        host=host, port=port, firmware=firmware, model_id=model, short_version=short_version,
-        input_1=input_1, delay=delay, stall=tuple(stall or ()), missing=tuple(missing or ()),
-        pace=pace, wrong_baud=tuple(wrong_baud or ()), who_am_i=who, orientation=angles)
+    faults = {name: value for name, value in given.items() if value not in (None, False, [])}
+    serve_options = ServeOptions(host=host, port=port, **faults)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     gc.disable()  # a served device answers within microseconds; no collector pauses
@@ -108,5 +60,57 @@ def serve(
             stop.wait()
 
 
+def _parameter(option: "SimOption") -> inspect.Parameter:
+    """A family's declared option as a typer option of `sim serve`: given or not (None,
+    False, no joints), converted and checked by its declaration when the profile is served."""
+    shown = option.default if option.default not in (None, (), False) else None
+    if isinstance(shown, tuple):
+        shown = ",".join(format(x, "g") for x in shown)
+    elif isinstance(shown, int) and option.kind == "int" and option.high == 0xFF:
+        shown = f"{shown:#04x}"
+    info: dict[str, Any] = {
+        "help": option.help + (f" Default: {shown}." if shown is not None else ""),
+        "metavar": option.metavar or ("JOINT" if option.kind == "joints" else None),
+        "show_default": False}
+    if option.kind == "joints":
+        info["autocompletion"] = _complete_joint
+    kind: Any = {"flag": bool, "joints": list[str] | None}.get(option.kind, str | None)
+    default: Any = False if option.kind == "flag" else None
+    return inspect.Parameter(option.name, inspect.Parameter.KEYWORD_ONLY, default=default,
+                             annotation=Annotated[kind, typer.Option(option.flag, **info)])
+
+
+def _command() -> Any:
+    """`sim serve` with the options the families declare (each once: a name several
+    families share, such as --missing, is one option)."""
+    from deltoctl import registry
+    from deltoctl.cmdline import GLOBAL_OPTIONS
+
+    fixed = [
+        inspect.Parameter("ctx", inspect.Parameter.POSITIONAL_OR_KEYWORD,
+                          annotation=typer.Context),
+        inspect.Parameter("profile", inspect.Parameter.POSITIONAL_OR_KEYWORD, default=None,
+                          annotation=Annotated[str | None, typer.Argument(
+                              metavar="[PROFILE]", autocompletion=_complete_profile,
+                              help="Catalog name or file; default: --profile.")]),
+        inspect.Parameter("host", inspect.Parameter.KEYWORD_ONLY, default="127.0.0.1",
+                          annotation=Annotated[str, typer.Option(
+                              help="Address to listen on.")]),
+        inspect.Parameter("port", inspect.Parameter.KEYWORD_ONLY, default=0,
+                          annotation=Annotated[int, typer.Option(
+                              help="TCP port (0: any free port).")]),
+    ]
+    declared = [_parameter(o) for o in registry.sim_options().values()
+                if o.flag not in GLOBAL_OPTIONS]
+
+    def command(**kwargs: Any) -> None:
+        serve(**kwargs)
+
+    command.__doc__ = serve.__doc__
+    command.__signature__ = inspect.Signature(fixed + declared)  # type: ignore[attr-defined]
+    return command
+
+
 def register(root: typer.Typer) -> None:
+    app.command("serve")(_command())  # built now: the families installed are the options
     root.add_typer(app, name="sim")

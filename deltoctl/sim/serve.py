@@ -6,7 +6,6 @@ transport and returns each bus's target URL, which the System opens like hardwar
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass, fields
 from typing import Any
 
 from deltoctl import registry
@@ -14,27 +13,26 @@ from deltoctl.errors import InvalidInput
 from deltoctl.profile.model import Component, Hardware, Profile
 
 
-@dataclass
 class ServeOptions:
-    host: str = "127.0.0.1"
-    port: int = 0  # a TCP device's port (0: any free one)
-    # a gripper
-    firmware: str = "3.0"  # MAJOR.MINOR
-    model_id: int | None = None  # another model than the profile's
-    short_version: bool = False
-    input_1: bool = False
-    delay: float = 0.0  # s before every reply
-    stall: tuple[str, ...] = ()  # joints that cannot move
-    # the buses
-    missing: tuple[str, ...] = ()  # joints that never answer
-    pace: bool = False  # serial buses take the wire time of every byte
-    wrong_baud: tuple[str, ...] = ()  # servos at another baud rate than their bus
-    who_am_i: int = 0x6A
-    orientation: tuple[float, ...] = (0.0, 0.0)  # the IMU's roll, pitch (and yaw), degrees
+    """What serving is asked: where to listen (``host``, ``port``: what every simulator
+    shares) and the faults and settings by name (``faults``), each one a family of the
+    profile declares (``Family.serve_options``). An emulator reads an option as an attribute
+    (``ctx.options.firmware``): its value, or its declaration's default."""
 
+    def __init__(self, host: str = "127.0.0.1", port: int = 0, **faults: Any) -> None:
+        self.host, self.port = host, port
+        self.faults: dict[str, Any] = dict(faults)  # name → value, as given
+        self.defaults: dict[str, Any] = {}  # name → the declared default (serve_profile)
 
-JOINT_OPTIONS = ("stall", "missing", "wrong_baud")  # options that name joints
-ALWAYS = ("host", "port")
+    def __getattr__(self, name: str) -> Any:
+        for table in ("faults", "defaults"):
+            values = self.__dict__.get(table, {})
+            if name in values:
+                return values[name]
+        raise AttributeError(f"no sim option {name!r}")
+
+    def __repr__(self) -> str:
+        return f"ServeOptions(host={self.host!r}, port={self.port!r}, faults={self.faults!r})"
 
 
 class ServeContext:
@@ -49,7 +47,7 @@ class ServeContext:
 
     def named(self, option: str, hw: Hardware) -> list[Component]:
         """The joints of this block that a joint option (``missing`` …) names."""
-        names = getattr(self.options, option)
+        names = getattr(self.options, option, ())
         return [j for j in hw.joints if j.name in names]
 
     def i2c_bus(self, bus: str) -> tuple[Any, str]:
@@ -79,7 +77,7 @@ def serve_profile(stack: contextlib.ExitStack, prof: Profile, options: ServeOpti
         name = family.name if family else prof.family_of(hw) or hw.plugin
         by_family.setdefault(name, []).append(hw)
         families[name] = family
-    _check_options(prof, blocks, options, [f for f in families.values() if f])
+    options = _checked(prof, blocks, options, [f for f in families.values() if f])
     ctx = ServeContext(stack, prof, options)
     buses: dict[str, str] = {}
     for name, family in families.items():
@@ -95,20 +93,31 @@ def serve_profile(stack: contextlib.ExitStack, prof: Profile, options: ServeOpti
     return result
 
 
-def _check_options(prof: Profile, blocks: list[Hardware], options: ServeOptions,
-                   families: list[registry.Family]) -> None:
-    """Every option set is one the profile's families take; every joint named is there."""
-    defaults = ServeOptions()
-    taken = {o for f in families for o in f.serve_options} | set(ALWAYS)
-    flag = {f.name: "--" + f.name.replace("_", "-") for f in fields(options)}
-    misplaced = [flag[f.name] for f in fields(options)
-                 if f.name not in taken and getattr(options, f.name) != getattr(defaults, f.name)]
+def _checked(prof: Profile, blocks: list[Hardware], options: ServeOptions,
+             families: list[registry.Family]) -> ServeOptions:
+    """The options with every value as its declaration takes it and every default filled in;
+    an option no family of the profile declares (unless left at its default, as a fixture
+    passes it), a bad value or a joint the profile does not have is one InvalidInput naming
+    it."""
+    if not (isinstance(options.port, int) and 0 <= options.port <= 65535):
+        raise InvalidInput(f"--port takes 0 to 65535, got {options.port!r}")
+    declared = registry.sim_options([f.name for f in families])
+    known = registry.sim_options()
+    misplaced = [n for n, value in options.faults.items() if n not in declared
+                 and (n not in known or value not in (known[n].default, None, (), []))]
     if misplaced:
-        allowed = sorted(flag[o] for o in taken - set(ALWAYS))
-        raise InvalidInput(f"{', '.join(misplaced)}: not for {prof.name} "
+        flags = [known[n].flag if n in known else repr(n) for n in misplaced]
+        allowed = sorted(o.flag for o in declared.values())
+        raise InvalidInput(f"{', '.join(flags)}: not for {prof.name} "
                            f"(its simulator takes: {', '.join(allowed) or 'no options'})")
+    checked = ServeOptions(options.host, options.port, **{  # another family's default: left out
+        name: declared[name].value(value) for name, value in options.faults.items()
+        if name in declared})
+    checked.defaults = {name: o.default if o.kind != "joints" else ()
+                        for name, o in declared.items()}
     joints = {j.name for hw in blocks for j in hw.joints}
-    for option in JOINT_OPTIONS:
-        for name in getattr(options, option):
-            if name not in joints:
-                raise InvalidInput(f"{flag[option]}: {prof.name} has no joint {name!r}")
+    for name, option in declared.items():
+        for joint in checked.faults.get(name, ()) if option.kind == "joints" else ():
+            if joint not in joints:
+                raise InvalidInput(f"{option.flag}: {prof.name} has no joint {joint!r}")
+    return checked

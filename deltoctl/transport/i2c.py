@@ -17,7 +17,7 @@ from smbus2 import i2c_msg
 
 from deltoctl import trace
 from deltoctl.errors import DeviceError, InvalidInput, Unreachable
-from deltoctl.transport import split_url
+from deltoctl.transport import Check, Target, Transport, split_url
 
 TRIES = 3
 RETRY_PAUSE = 50e-6  # s between tries
@@ -154,3 +154,43 @@ def wire_bits(write: int, read: int) -> int:
     """Bits on the wire for a combined transaction: 9 bits per byte (8 + ACK), the address
     byte sent twice (write, then after the repeated start, read)."""
     return 9 * (write + 1 + (read + 1 if read else 0))
+
+
+_MODPROBE = "sudo modprobe i2c-dev   (Raspberry Pi: dtparam=i2c_arm=on in config.txt)"
+
+
+def _open(url: str) -> I2CBus:
+    return I2CBus(open_smbus(url), url)
+
+
+def _kernel_checks(target: Target) -> list[Check]:
+    from deltoctl.transport.doctor import device_checks
+
+    return device_checks(target.bus, parse_i2c_url(target.url)[1], "i2c", _MODPROBE)
+
+
+def _simulated_checks(target: Target) -> list[Check]:
+    from deltoctl.transport.doctor import reach
+
+    _, host, port = parse_i2c_url(target.url)
+    return [reach(target, host, port)]
+
+
+def _host_checks() -> list[Check]:
+    """The host's I2C buses, each checked."""
+    from deltoctl.transport.doctor import present_nodes
+
+    return present_nodes(("/dev/i2c-*",), "i2c", "no I2C bus (/dev/i2c-*)",
+                         "sudo modprobe i2c-dev   (Raspberry Pi: dtparam=i2c_arm=on)",
+                         _MODPROBE)
+
+
+def trace_label(url: str, address: int | None) -> str:
+    """A device's packets on a bus several devices share are labelled by its address."""
+    return url if address is None else f"{url} @{address:#04x}"
+
+
+KERNEL = Transport("i2c", "i2c:///dev/i2c-N", parse_i2c_url, _open, _kernel_checks,
+                   _host_checks, trace_label, shared=True)
+SIMULATED = Transport("i2c+tcp", "i2c+tcp://HOST:PORT", parse_i2c_url, _open,
+                      _simulated_checks, None, trace_label, shared=True)

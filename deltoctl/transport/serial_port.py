@@ -9,7 +9,7 @@ from urllib.parse import parse_qs
 
 from deltoctl import trace
 from deltoctl.errors import InvalidInput, Unreachable
-from deltoctl.transport import split_url
+from deltoctl.transport import Check, Target, Transport, split_url
 
 KEYS = ("baud", "rs485")
 MAX_BAUD = 12_000_000
@@ -122,3 +122,52 @@ def open_serial(url: str, timeout: float = 0.05) -> Any:
     if trace.PACKETS:  # checked once per port: an untraced port keeps its own methods
         trace.trace_serial(port, url)
     return port
+
+
+_PLUG_IN = "plug the adapter in, then: ls /dev/serial/by-id/"
+
+
+def _checks(target: Target) -> list[Check]:
+    """The port is there, this user may open it, no process holds it, and (rs485=1) its
+    kernel RS-485 mode."""
+    from deltoctl.transport.doctor import device_checks
+
+    path, _, rs485 = parse_serial_url(target.url)
+    checks = device_checks(target.bus, path, "serial", _PLUG_IN, exclusive=True)
+    return checks + ([_rs485(target.bus, path)] if rs485 else [])
+
+
+def _rs485(bus: str, path: str) -> Check:
+    """The kernel's RS-485 mode of the port (TIOCGRS485), read without sending anything."""
+    import fcntl
+    import struct
+
+    from deltoctl.transport.doctor import check
+
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    except OSError as exc:
+        return check("rs485", bus, False, f"cannot open {path}: {exc.strerror}", None)
+    try:
+        flags = struct.unpack("I", fcntl.ioctl(fd, 0x542E, bytes(32))[:4])[0]
+    except OSError:
+        return check("rs485", bus, True, "no kernel RS-485 mode on this port: the adapter "
+                     "must switch direction itself (most USB adapters do)")
+    finally:
+        os.close(fd)
+    state = "on" if flags & 1 else "off (deltoctl turns it on when it opens the port)"
+    return check("rs485", bus, True, f"kernel RS-485 mode {state}")
+
+
+def _host_checks() -> list[Check]:
+    """The host's serial adapters, each checked."""
+    from deltoctl.transport.doctor import present_nodes
+
+    return present_nodes(("/dev/ttyUSB*", "/dev/ttyACM*", "/dev/ttySC*", "/dev/ttyAMA*"),
+                         "serial", "no serial adapter (ttyUSB, ttyACM, ttySC, ttyAMA)",
+                         "plug the USB/RS-485 adapter in, then: ls /dev/serial/by-id/",
+                         _PLUG_IN, exclusive=True)
+
+
+TRANSPORT = Transport("serial", "serial:///dev/PORT?baud=N", parse_serial_url, open_serial,
+                      _checks, _host_checks)

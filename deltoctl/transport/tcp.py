@@ -8,7 +8,7 @@ import time
 
 from deltoctl import trace
 from deltoctl.errors import DeviceError, InvalidInput, Unreachable
-from deltoctl.transport import split_url
+from deltoctl.transport import Check, Target, Transport, split_url
 
 DEFAULT_PORT = 502  # Modbus TCP's, which a Delto's developer mode keeps
 
@@ -119,3 +119,26 @@ class TcpLink:
         trace.link("tcp %s:%d: closed", self.host, self.port)
         with contextlib.suppress(OSError):
             self.sock.close()
+
+
+def _open(url: str, timeout: float = 3.0) -> TcpLink:
+    host, port = parse_tcp_url(url)
+    return TcpLink(host, port, connect_timeout=timeout)
+
+
+def _checks(target: Target) -> list[Check]:
+    """A route from this host (a link-local device needs a link-local address here too),
+    and a connection the device accepts."""
+    from deltoctl.transport.doctor import reach, route
+
+    host, port = parse_tcp_url(target.url)
+    return [route(target.bus, host, port), reach(target, host, port)]
+
+
+def _trace_label(url: str, address: int | None) -> str:
+    host, port = parse_tcp_url(url)
+    return f"{host}:{port}"
+
+
+TRANSPORT = Transport("tcp", "tcp://HOST:PORT", parse_tcp_url, _open, _checks,
+                      trace_label=_trace_label)

@@ -1,6 +1,6 @@
 """Tesollo Delto grippers: developer-mode TCP protocol (codec), driver, model table, emulator."""
 
-from deltoctl.registry import Family
+from deltoctl.registry import Family, SimOption
 
 FAMILY = Family(
     name="delto",
@@ -18,5 +18,16 @@ FAMILY = Family(
                  "it speaks Modbus TCP) and check the port",
     capabilities=frozenset({"identify", "detect", "home", "jog", "calibrate_ft", "gpio",
                             "config"}),
-    serve_options=("firmware", "model_id", "short_version", "input_1", "delay", "stall"),
+    serve_options=(
+        SimOption("firmware", "text", "Firmware version the device reports, MAJOR.MINOR.",
+                  "3.0"),
+        SimOption("model_id", "int", "Emulate another model than the profile's (e.g. 0x3F02), "
+                  "to rehearse a mismatch.", None, 0, 0xFFFF),
+        SimOption("short_version", "flag", "Send the short GET_VERSION reply of old firmware.",
+                  False),
+        SimOption("input_1", "flag", "Drive gpio/input_1 high.", False),
+        SimOption("delay", "number", "Fault: seconds added before every reply.", 0.0, 0, 10),
+        SimOption("stall", "joints", "Fault: a joint that cannot move (repeatable)."),
+    ),
+    identity_fields=(("reported_model", "{}"), ("firmware", "fw {}")),
 )

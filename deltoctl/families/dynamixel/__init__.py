@@ -1,7 +1,7 @@
 """ROBOTIS Dynamixel Protocol 2.0 buses (the MH5's XL430 servos): codec, control table, bus
 driver, and an emulated bus on a pseudo-terminal."""
 
-from deltoctl.registry import Family
+from deltoctl.registry import Family, Permission, SimOption
 
 FAMILY = Family(
     name="dynamixel",
@@ -15,7 +15,20 @@ FAMILY = Family(
     address_kind="Dynamixel ID",
     capabilities=frozenset({"identify", "detect", "home", "jog", "registers", "torque",
                             "reboot", "config"}),
-    serve_options=("missing", "pace", "wrong_baud"),
+    serve_options=(
+        SimOption("missing", "joints", "Fault: a joint that never answers (repeatable)."),
+        SimOption("pace", "flag", "Serial buses take the wire time of every byte at the baud "
+                  "rate the host set, as a real bus does.", False),
+        SimOption("wrong_baud", "joints",
+                  "Fault: a servo set to another baud rate than its bus (repeatable)."),
+    ),
+    permissions=(Permission(
+        "torque-off",
+        why="EEPROM items take writes only with torque off, and the torque is on",
+        given="torque goes off for the EEPROM writes, then on again where they are",
+        hint="switch the torque off first (deltoctl torque off), or pass --allow torque-off "
+             "to have it switched off for the writes and on again (support the robot)"),),
+    identity_fields=(("servos", "{} Dynamixel servos"),),
     register_items="deltoctl.families.dynamixel.control_table:item_names",
     config_rules="deltoctl.families.dynamixel.control_table:config_rules",
 )

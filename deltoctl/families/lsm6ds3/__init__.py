@@ -1,6 +1,6 @@
 """The LSM6DS3 / LSM6DS3TR-C IMU on I2C (the MH5's chest IMU): registers, driver, emulator."""
 
-from deltoctl.registry import Family
+from deltoctl.registry import Family, SimOption
 
 FAMILY = Family(
     name="lsm6ds3",
@@ -14,5 +14,10 @@ FAMILY = Family(
     address_kind="I2C address",
     address_format="#04x",
     capabilities=frozenset({"identify", "detect", "config", "calibrate_imu"}),
-    serve_options=("who_am_i", "orientation"),
+    serve_options=(
+        SimOption("who_am_i", "int", "WHO_AM_I of a simulated LSM6DS3: 0x69 (LSM6DS3), 0x6A "
+                  "(LSM6DS3TR-C), or another value to rehearse a wrong part.", 0x6A, 0, 0xFF),
+        SimOption("orientation", "numbers", "The IMU's roll,pitch[,yaw] in degrees (gravity "
+                  "follows).", (0.0, 0.0), count=(2, 3), metavar="ROLL,PITCH"),
+    ),
 )
