@@ -352,11 +352,16 @@ def restore_rules(live: dict[str, dict[str, Any]]) -> dict[str, dict[str, Rule]]
 
 
 def check_ranges(snap: Snapshot, rows: list[dict[str, Any]],
-                 rules: dict[str, dict[str, Rule]]) -> None:
+                 rules: dict[str, dict[str, Rule]],
+                 live: dict[str, dict[str, Any]] | None = None) -> None:
     """A value to restore outside its item's documented range (not only its size's) is a bad
-    snapshot: exit 2, naming the item, the value and the range, before anything is written."""
+    snapshot: exit 2, naming the item, the value and the range, before anything is written.
+    A live entry's own ``low``/``high`` (its device model's range) narrow the family's."""
     for row in rows:
         low, high, _ = rules[row["block"]].get(row["item"], (None, None, None))
+        if live is not None:
+            entry = live_entry(live, (row["block"], row["part"], row["item"]))
+            low, high = entry.get("low", low), entry.get("high", high)
         value = row["snapshot"]
         if not isinstance(value, int) or isinstance(value, bool):
             continue
@@ -521,6 +526,6 @@ def plan_restore(system: System, snap: Snapshot,
     for row in rows:
         row["live"] = row.pop("other")
     rules = restore_rules(live)
-    check_ranges(snap, rows, rules)
+    check_ranges(snap, rows, rules, live)
     plan(rows, live, allow, rules)
     return rows, notes

@@ -194,6 +194,9 @@ def profile_from_urdf(root: Node, loc: _Locator, path: Path) -> Profile:
         if hw.family is None and profile.family is None:
             hw.family = registry.for_plugin(hw.plugin)
         _import_endpoint(profile, hw)
+        family = registry.get(profile.family_of(hw))
+        if family is not None and family.import_block:  # the plugin's own conventions
+            registry._load(family.import_block)(profile, hw)
     profile.warnings = loc.warnings
     return profile
 

@@ -1,5 +1,6 @@
-"""ROBOTIS Dynamixel Protocol 2.0 buses (the MH5's XL430 servos): codec, control table, bus
-driver, and an emulated bus on a pseudo-terminal."""
+"""ROBOTIS Dynamixel Protocol 2.0 buses of X-series servos (the MH5's XL430s, OpenMANIPULATOR-X's
+XM430s, …): codec, the models' control tables, bus driver, an emulated bus on a
+pseudo-terminal, and the public ros2_control plugins' conventions."""
 
 from deltoctl.registry import Family, Permission, SimOption
 
@@ -9,7 +10,11 @@ FAMILY = Family(
     driver="deltoctl.families.dynamixel.driver:DynamixelDriver",
     frame_names="deltoctl.families.dynamixel.codec:frame_name",
     emulator="deltoctl.families.dynamixel.emulator:serve",
-    plugins=("mh5_hardware/MH5DynamixelInterface",),
+    plugins=("mh5_hardware/MH5DynamixelInterface", "dynamixel_hardware/DynamixelHardware",
+             "dynamixel_hardware_interface/DynamixelHardware"),
+    import_block="deltoctl.families.dynamixel.plugins:import_block",
+    address_param="id",  # dynamixel_hardware's joint param
+    mock_param="use_dummy",  # dynamixel_hardware's simulated servos
     schemes=("serial",),
     address_range=(0, 252),
     address_kind="Dynamixel ID",

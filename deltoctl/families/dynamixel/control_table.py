@@ -1,4 +1,5 @@
-"""The XL430-W250 control table as data (ROBOTIS e-manual; reference §3.3).
+"""The X-series control table as data, the XL430-W250's (ROBOTIS e-manual; reference §3.3);
+the other models' tables derive from it (models.py).
 
 One row per item: address, size in bytes, name, access (R or RW), default, sign, the range the
 e-manual documents (docs/en/dxl/x/xl430-w250.md) and whether it is a safety setting. EEPROM
@@ -8,6 +9,7 @@ items (addresses below 64) are writable only while Torque Enable is 0.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 
 @dataclass(frozen=True)
@@ -96,22 +98,24 @@ BAUD_RATES = {0: 9600, 1: 57600, 2: 115200, 3: 1_000_000, 4: 2_000_000, 5: 3_000
               6: 4_000_000, 7: 4_500_000}
 
 
-def item_at(address: int) -> Item | None:
-    return next((i for i in XL430 if i.address <= address < i.address + i.size), None)
+def item_at(address: int, table: tuple[Item, ...] = XL430) -> Item | None:
+    return next((i for i in table if i.address <= address < i.address + i.size), None)
 
 
-def item_named(name: str) -> Item:
-    """A control table item by name (any case; spaces, - or _) or by address."""
+def item_named(name: str, table: tuple[Item, ...] = XL430, model: str = "") -> Item:
+    """A control table item by name (any case; spaces, - or _) or by address, in ``table``
+    (the servo's model's, named ``model`` in the message when it has no such item)."""
     from deltoctl.errors import InvalidInput
 
     key = name.lower().replace("_", " ").replace("-", " ")
-    for item in XL430:
+    for item in table:
         if item.name.lower() == key or (name.isdigit() and item.address == int(name)):
             return item
     from deltoctl.suggest import did_you_mean
 
-    close = did_you_mean(name, (i.name.replace(" ", "_").lower() for i in XL430))
-    raise InvalidInput(f"no control table item {name!r}{close}: give a name such as "
+    close = did_you_mean(name, (i.name.replace(" ", "_").lower() for i in table))
+    where = f" in the {model}'s table" if model else ""
+    raise InvalidInput(f"no control table item {name!r}{where}{close}: give a name such as "
                        "return_delay_time or present_temperature, or an address")
 
 
@@ -145,11 +149,27 @@ OPERATING_MODES = {1: "velocity", 3: "position", 4: "extended position", 16: "PW
 
 
 def config_rules() -> dict[str, tuple[int | None, int | None, str | None]]:
-    """For `config restore`: each item's documented range, and the --allow that a safety
-    setting needs to be written (None for the others)."""
-    return {i.name: (i.low, i.high, i.key if i.safety else None) for i in XL430}
+    """For `config restore`: each item's documented range over every model (the driver
+    checks each servo's own model's before writing), and the --allow that a safety setting
+    needs to be written (None for the others)."""
+    from deltoctl.families.dynamixel.models import MODELS
+
+    rules: dict[str, tuple[int | None, int | None, str | None]] = {}
+    for model in MODELS:
+        for i in model.table:
+            low, high, _ = rules.get(i.name, (i.low, i.high, None))
+            rules[i.name] = (_widest(low, i.low, min), _widest(high, i.high, max),
+                             i.key if i.safety else None)
+    return rules
+
+
+def _widest(a: int | None, b: int | None, pick: Any) -> int | None:
+    return None if a is None or b is None else pick(a, b)
 
 
 def item_names() -> list[str]:
-    """Item names as the register verbs take them (return_delay_time)."""
-    return [i.name.lower().replace(" ", "_") for i in XL430]
+    """Item names as the register verbs take them (return_delay_time), of every model."""
+    from deltoctl.families.dynamixel.models import MODELS
+
+    names = dict.fromkeys(i.name.lower().replace(" ", "_") for m in MODELS for i in m.table)
+    return list(names)

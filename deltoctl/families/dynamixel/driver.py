@@ -18,9 +18,10 @@ from deltoctl.families.dynamixel.control_table import (
     BAUD_RATES,
     BY_NAME,
     TABLE_SIZE,
-    XL430_W250,
     Item,
 )
+from deltoctl.families.dynamixel.models import Model, by_number, expected_model, label
+from deltoctl.families.dynamixel.plugins import servo_ids
 
 RAD_PER_RAW = 0.001533980787886  # 2π/4096
 CENTER = 2047
@@ -36,15 +37,23 @@ NAN = float("nan")
 LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}  # default Hz
 
 
+def _amps_per_step(number: int) -> float | None:
+    model = by_number(number)
+    return None if model is None or model.current_unit is None else model.current_unit / 1000
+
+
 class DynamixelDriver(Driver):
     def __init__(self, block: Block) -> None:
         super().__init__(block)
         parse_bus_url(self.url)  # a rate its servos cannot run: exit 2 before a port opens
         hw = block.hw
-        self.joints = {j.address: j for j in hw.joints if j.address is not None}
+        self.joints = servo_ids(block.profile, hw)
         self.port: Any = None
         self.reader = codec.PacketReader()
         self.present: dict[int, tuple[int, int]] = {}  # id → (model, firmware)
+        self.expected = {i: expected_model(hw.params, j.params, j.name)
+                         for i, j in self.joints.items()}
+        self.allow_model_mismatch = block.allow_model_mismatch
         self.torque_enabled: set[int] = set()
         self.moving: set[int] = set()  # servos sent a goal they may not have reached
         self._requests: dict[tuple, bytes] = {}  # sync read instructions, built once
@@ -56,6 +65,7 @@ class DynamixelDriver(Driver):
         self._inflight: tuple[int, list[int], Any] | None = None  # a sync read sent
         self._retry_at = 0.0  # when a lost port is next reopened (0: not lost)
         self._followed: dict[str, tuple[float, float]] = {}  # replayed goals and speeds
+        self._units: dict[int, float | None] | None = None  # Present Current's A per step
         self.loops = {}
         for name, default in LOOPS.items():
             try:
@@ -192,13 +202,41 @@ class DynamixelDriver(Driver):
                        bool(self.present), "servo",
                        "check power, the baud rate and the IDs (deltoctl detect scans the "
                        "other baud rates)")
+        self._check_models()
         self.connected = True
 
+    def _check_models(self) -> None:
+        """Each servo's reported model against the profile's: a mismatch is an error unless
+        allowed (then a warning, and the servo's own table is used)."""
+        wrong = [f"{self.joints[i].name} (ID {i}) is {label(m)}, the profile says "
+                 f"{label(self.expected[i])}" for i, (m, _) in sorted(self.present.items())
+                 if self.expected[i] is not None and m != self.expected[i]]
+        if not wrong:
+            return
+        message = "model mismatch: " + "; ".join(wrong)
+        if not self.allow_model_mismatch:
+            raise DeviceError(message, hint="fix the profile's model_number or motor_type, "
+                              "or pass --allow-model-mismatch to go on with the reported models")
+        self.warnings.append(message + " (allowed; using each servo's own table)")
+
+    def model(self, device_id: int) -> Model:
+        """The model a servo reported (its table, units and modes)."""
+        number = self.present[device_id][0]
+        model = by_number(number)
+        if model is None:
+            raise DeviceError(f"{self.joints[device_id].name} (ID {device_id}) reports model "
+                              f"number {number}, not an X-series model deltoctl knows")
+        return model
+
     def identify(self) -> dict:
-        return {"bus": self.url, "servos": {
-            self.joints[i].name: {"id": i, "model_number": m, "firmware": f,
-                                  "model_match": m == XL430_W250}
-            for i, (m, f) in sorted(self.present.items())}}
+        servos = {}
+        for i, (m, f) in sorted(self.present.items()):
+            known = by_number(m)
+            servos[self.joints[i].name] = {
+                "id": i, "model_number": m, "model": known.name if known else None,
+                "firmware": f, "profile_model": self.expected[i],
+                "model_match": self.expected[i] is None or m == self.expected[i]}
+        return {"bus": self.url, "servos": servos}
 
     def round_trip(self) -> None:
         """One ping of the first servo: what ``connect`` times."""
@@ -279,8 +317,19 @@ class DynamixelDriver(Driver):
             name = joint.name
             values[name + "/position"] = (position - CENTER) * RAD_PER_RAW + joint.offset
             values[name + "/velocity"] = velocity * RAD_S_PER_RAW
-            values[name + "/effort"] = load * LOAD_SCALE
+            # 126 is the Present Current (A, in the model's unit) or, without a current
+            # sensor, the Present Load
+            unit = self._current_units.get(device_id)
+            values[name + "/effort"] = load * (LOAD_SCALE if unit is None else unit)
         return values
+
+    @property
+    def _current_units(self) -> dict[int, float | None]:
+        """A per servo of Present Current's step (None: the servo reports load)."""
+        units = self._units
+        if units is None or len(units) != len(self.present):
+            units = self._units = {i: _amps_per_step(m) for i, (m, _) in self.present.items()}
+        return units
 
     def _sync_request(self, address: int, length: int, ids: list[int]) -> bytes:
         key = (address, length, tuple(ids))
@@ -334,7 +383,7 @@ class DynamixelDriver(Driver):
         every other XL430 rate too (all IDs at once), to find servos set to another rate."""
         assert self.port is not None
         found = self._broadcast_ping(0.3)
-        expected = {i: XL430_W250 for i in self.joints}
+        expected = self.expected
         missing = sorted(set(expected) - set(found))
         elsewhere: dict[int, int] = {}
         if missing:
@@ -350,7 +399,8 @@ class DynamixelDriver(Driver):
             finally:
                 self.port.baudrate = own
         unexpected = sorted(set(found) - set(expected))
-        wrong = sorted(i for i in set(found) & set(expected) if found[i] != expected[i])
+        wrong = sorted(i for i in set(found) & set(expected)
+                       if expected[i] is not None and found[i] != expected[i])
         name = {i: j.name for i, j in self.joints.items()}
         checks = [{"what": f"{self.hw.name}: servos", "profile": sorted(expected),
                    "device": sorted(found),
@@ -505,19 +555,21 @@ class DynamixelDriver(Driver):
         raise InvalidInput(f"{joint!r} is not a servo joint of {self.hw.name}")
 
     def read_registers(self, joint: str, items: list[str]) -> dict[str, Any]:
-        """Control table items by name (all of them, in one read, when none are named)."""
-        from deltoctl.families.dynamixel.control_table import XL430, item_named
+        """Control table items by name (all of them, in one read, when none are named), in
+        the table of the servo's own model."""
+        from deltoctl.families.dynamixel.control_table import item_named
 
         device_id = self.servo(joint)
-        chosen = [item_named(i) for i in items]
+        model = self.model(device_id)
+        chosen = [item_named(i, model.table, model.name) for i in items]
         if chosen:
             values = {i.name: self.read_register(device_id, i) for i in chosen}
         else:
-            table = self.read_table(device_id)
-            chosen = list(XL430)
+            table = self.read_table(device_id, 0, model.table_size)
+            chosen = list(model.table)
             values = {i.name: int.from_bytes(table[i.address:i.address + i.size], "little",
                                              signed=i.signed) for i in chosen}
-        return {"joint": joint, "id": device_id, "items": [
+        return {"joint": joint, "id": device_id, "model": model.name, "items": [
             {"address": i.address, "item": i.name, "value": values[i.name],
              "access": ("EEPROM " if i.eeprom else "RAM ") + i.access} for i in chosen]}
 
@@ -526,10 +578,11 @@ class DynamixelDriver(Driver):
         command like a move's: outside the joint's envelope it is refused, nothing written."""
         from deltoctl.families.dynamixel.control_table import item_named
 
-        chosen = item_named(item)
+        device_id = self.servo(joint)
+        model = self.model(device_id)
+        chosen = item_named(item, model.table, model.name)
         if chosen.access != "RW":
             raise InvalidInput(f"{chosen.name} is read-only")
-        device_id = self.servo(joint)
         self._check_goal(device_id, chosen.name, value)
         self.write_register_item(device_id, chosen, value)
         return self.read_register(device_id, chosen)
@@ -552,26 +605,22 @@ class DynamixelDriver(Driver):
     def config_read(self) -> dict[str, dict[str, dict[str, Any]]]:
         """The whole control table of every servo that answers (one read each), by item name
         with units; EEPROM items need torque off while the servo's is on."""
-        from deltoctl.families.dynamixel.control_table import XL430
-
         parts = {}
         for device_id, joint in self.joints.items():
             if device_id not in self.present:
                 continue  # configure warned already
-            table = self.read_table(device_id)
+            model = self.model(device_id)
+            table = self.read_table(device_id, 0, model.table_size)
             values = {i.name: int.from_bytes(table[i.address:i.address + i.size], "little",
-                                             signed=i.signed) for i in XL430}
-            parts[joint.name] = {i.name: self._config_entry(i, values) for i in XL430}
+                                             signed=i.signed) for i in model.table}
+            parts[joint.name] = {i.name: self._config_entry(i, values, model)
+                                 for i in model.table}
         return parts
 
     @staticmethod
-    def _config_entry(item: Item, values: dict[str, int]) -> dict[str, Any]:
-        from deltoctl.families.dynamixel.control_table import (
-            BUS_ITEMS,
-            OPERATING_MODES,
-            READINGS,
-            UNITS,
-        )
+    def _config_entry(item: Item, values: dict[str, int], model: Model) -> dict[str, Any]:
+        from deltoctl.families.dynamixel.control_table import BUS_ITEMS, READINGS
+        from deltoctl.families.dynamixel.models import MODE_NAMES
 
         value, bits = values[item.name], item.size * 8
         low, high = ((-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if item.signed
@@ -579,13 +628,16 @@ class DynamixelDriver(Driver):
         entry: dict[str, Any] = {"value": value, "access": item.access,
                                  "area": "EEPROM" if item.eeprom else "RAM",
                                  "address": item.address, "min": low, "max": high}
-        unit = UNITS.get(item.name)
+        if item.low is not None and item.high is not None:  # the model's documented range
+            entry["low"], entry["high"] = item.low, item.high
+        unit = model.units().get(item.name)
         if item.name in ("Profile Acceleration", "Profile Velocity") and values["Drive Mode"] & 4:
             unit = "ms"  # a time-based profile
         if unit:
             entry["unit"] = unit
         bauds = {code: f"{baud} bps" for code, baud in BAUD_RATES.items()}
-        meaning = {"Baud Rate": bauds, "Operating Mode": OPERATING_MODES}.get(item.name, {})
+        modes = {m: MODE_NAMES[m] for m in sorted(model.modes)}
+        meaning = {"Baud Rate": bauds, "Operating Mode": modes}.get(item.name, {})
         if value in meaning:
             entry["meaning"] = meaning[value]
         if item.name in READINGS:
@@ -620,19 +672,19 @@ class DynamixelDriver(Driver):
         read_back = {}
         for device_id, writes in plan.items():
             self._write_servo(device_id, writes, device_id in locked)
-            table = self.read_table(device_id)
+            table = self.read_table(device_id, 0, self.model(device_id).table_size)
             read_back[self.joints[device_id].name] = {
                 item.name: int.from_bytes(table[item.address:item.address + item.size],
                                           "little", signed=item.signed) for item, _ in writes}
         return read_back
 
-    @staticmethod
-    def _restorable(part: str, name: str, value: Any) -> Item:
-        """The item, when a restore may write it (not a reading, a command or a bus
-        setting)."""
+    def _restorable(self, part: str, name: str, value: Any) -> Item:
+        """The item, when a restore may write it to this servo (not a reading, a command or
+        a bus setting; a value within the range its model's e-manual page documents)."""
         from deltoctl.families.dynamixel.control_table import BUS_ITEMS, READINGS
 
-        item = BY_NAME.get(name)
+        model = self.model(self.servo(part))
+        item = model.by_name.get(name)
         if item is None or item.access != "RW" or name in READINGS or name in BUS_ITEMS:
             raise InvalidInput(f"{part}: {name!r} is not a control table item a restore writes")
         try:  # checked before any write: a restore is refused whole, never half done
@@ -643,6 +695,10 @@ class DynamixelDriver(Driver):
             raise InvalidInput(f"{part}: {name} takes an integer of {item.size} byte(s), "
                                f"{'signed' if item.signed else 'unsigned'}, not {value!r}") \
                 from None
+        if (item.low is not None and value < item.low) or (item.high is not None
+                                                           and value > item.high):
+            raise InvalidInput(f"{part}: {name} {value} is outside the {model.name}'s "
+                               f"documented range {item.low}..{item.high}")
         return item
 
     def _write_servo(self, device_id: int, writes: list[tuple[Item, int]],

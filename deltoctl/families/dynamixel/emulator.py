@@ -1,12 +1,16 @@
-"""A Dynamixel bus of XL430 servos: Protocol 2.0 answered from each servo's control table,
+"""A Dynamixel bus of X-series servos: Protocol 2.0 answered from each servo's control table,
 behind a pseudo-terminal that pyserial (and so dynamixel-sdk) opens as a serial port.
 
-Each servo keeps the XL430 control table (EEPROM and RAM, access rights, EEPROM refused while
-torque is on), moves to its goal with a time-based or velocity-based profile, reports
-temperature and voltage, and honours Status Return Level, broadcast semantics, REG_WRITE and
-ACTION, reboot and factory reset, and answers only at its Baud Rate (the rate the host set
-on the pty). Faults: a missing servo, a corrupted CRC, no reply, a servo at another baud
-rate. Paced, the bus takes the wire time of every byte.
+Each servo is one model (models.py): it keeps that model's control table (EEPROM and RAM,
+access rights, EEPROM refused while torque is on), runs the operating modes the model has (a
+mode it lacks is a data range error; position mode keeps goals within the position limits,
+extended and current-based position do not; velocity mode turns at the goal velocity, within
+the velocity limit), moves to a goal with a time-based or velocity-based profile, reports its
+current in its own unit (or its load, without a current sensor), temperature and voltage, and
+honours Status Return Level, broadcast semantics, REG_WRITE and ACTION, reboot and factory
+reset, and answers only at its Baud Rate (the rate the host set on the pty). Faults: a missing
+servo, a corrupted CRC, no reply, a servo at another baud rate. Paced, the bus takes the wire
+time of every byte.
 """
 
 from __future__ import annotations
@@ -23,31 +27,35 @@ from typing import TYPE_CHECKING
 
 from deltoctl.errors import ProtocolError
 from deltoctl.families.dynamixel import codec
-from deltoctl.families.dynamixel.control_table import (
-    BAUD_RATES,
-    BY_NAME,
-    TABLE_SIZE,
-    XL430,
-    item_at,
+from deltoctl.families.dynamixel.control_table import BAUD_RATES, item_at
+from deltoctl.families.dynamixel.models import (
+    EXTENDED,
+    POSITION,
+    VELOCITY,
+    XL430_W250,
+    Model,
+    by_number,
+    expected_model,
 )
 
 if TYPE_CHECKING:
-    from deltoctl.profile.model import Hardware
+    from deltoctl.profile.model import Component, Hardware
     from deltoctl.sim.serve import ServeContext
 
 _SPEEDS = {getattr(termios, f"B{b}"): b for b in BAUD_RATES.values() if hasattr(termios, f"B{b}")}
 ACCESS_ERROR, DATA_LENGTH_ERROR, INSTRUCTION_ERROR, RESULT_FAIL = 7, 5, 2, 1
-MAX_RPM_UNITS = 265  # velocity limit default, 0.229 rpm units
+DATA_RANGE_ERROR, DATA_LIMIT_ERROR = 4, 6
 RAW_PER_REV = 4096
-
-
-def _addr(name: str) -> int:
-    return BY_NAME[name].address
+RPM_PER_UNIT = 0.229
+MOVING_CURRENT_MA = 120.0  # what a servo draws while it moves (no load model)
 
 
 class Servo:
-    def __init__(self, device_id: int, firmware: int = 46) -> None:
-        self.memory = bytearray(TABLE_SIZE)
+    def __init__(self, device_id: int, firmware: int = 46, model: Model = XL430_W250) -> None:
+        self.model = model
+        self.items = model.by_name
+        self.size = model.table_size
+        self.memory = bytearray(self.size)
         self.factory_reset(0xFF)
         self.set("ID", device_id)
         self.set("Firmware Version", firmware)
@@ -58,15 +66,16 @@ class Servo:
         self.registered: tuple[int, bytes] | None = None
         self.position = 2047.0
         self._move: tuple[float, float, float, float] | None = None  # start, goal, t0, duration
+        self._turned_at = time.monotonic()  # velocity mode: when the position was last moved
 
     # -- the table ---------------------------------------------------------------------------
     def get(self, name: str) -> int:
-        item = BY_NAME[name]
+        item = self.items[name]
         raw = bytes(self.memory[item.address:item.address + item.size])
         return int.from_bytes(raw, "little", signed=item.signed)
 
     def set(self, name: str, value: int) -> None:
-        item = BY_NAME[name]
+        item = self.items[name]
         self.memory[item.address:item.address + item.size] = value.to_bytes(
             item.size, "little", signed=item.signed)
 
@@ -76,7 +85,7 @@ class Servo:
 
     def factory_reset(self, option: int) -> None:
         keep = {"ID": self.memory[7], "Baud Rate": self.memory[8]} if any(self.memory) else {}
-        for item in XL430:
+        for item in self.model.table:
             self.set(item.name, item.default)
         if option in (0x01, 0x02) and keep:
             self.memory[7] = keep["ID"]
@@ -84,7 +93,7 @@ class Servo:
             self.memory[8] = keep["Baud Rate"]
 
     def reboot(self) -> None:
-        for item in XL430:
+        for item in self.model.table:
             if not item.eeprom and item.access == "RW":
                 self.set(item.name, item.default)
         self.set("Hardware Error Status", 0)
@@ -93,30 +102,52 @@ class Servo:
 
     def read(self, address: int, length: int) -> tuple[int, bytes]:
         self.update()
-        if address + length > TABLE_SIZE or length == 0:
+        if address + length > self.size or length == 0:
             return ACCESS_ERROR, b""
         return 0, bytes(self.memory[address:address + length])
 
     def write(self, address: int, data: bytes) -> int:
-        if address + len(data) > TABLE_SIZE or not data:
+        if address + len(data) > self.size or not data:
             return ACCESS_ERROR
         torque_on = self.memory[64] == 1
         for offset in range(len(data)):
-            item = item_at(address + offset)
+            item = item_at(address + offset, self.model.table)
             if item is None or item.access != "RW" or (item.eeprom and torque_on):
                 return ACCESS_ERROR
         if self.memory[70] and address <= 64 < address + len(data) and data[64 - address]:
             return RESULT_FAIL  # a shut-down servo comes back only by reboot
         self.update()
+        before = bytes(self.memory)
         self.memory[address:address + len(data)] = data
+        error = self._refused()
+        if error:
+            self.memory[:] = before  # a refused write changes nothing
+            return error
         if address <= 116 < address + len(data):
             self._start_move()
+        return 0
+
+    def _refused(self) -> int:
+        """The error a write just made earns: a mode the model lacks (data range), a goal
+        beyond its limit (data limit)."""
+        mode = self.get("Operating Mode")
+        if mode not in self.model.modes:
+            return DATA_RANGE_ERROR
+        if abs(self.get("Goal Velocity")) > self.get("Velocity Limit"):
+            return DATA_LIMIT_ERROR
+        if "Goal Current" in self.items and abs(self.get("Goal Current")) > self.get(
+                "Current Limit"):
+            return DATA_LIMIT_ERROR
+        if mode == POSITION and self.memory[64] and not (
+                self.get("Min Position Limit") <= self.get("Goal Position")
+                <= self.get("Max Position Limit")):
+            return DATA_LIMIT_ERROR
         return 0
 
     # -- motion ----------------------------------------------------------------------------------
     def _start_move(self) -> None:
         goal = float(self.get("Goal Position"))
-        if self.memory[64] != 1:
+        if self.memory[64] != 1 or self.get("Operating Mode") not in (POSITION, EXTENDED, 5):
             return
         time_based = self.memory[10] & 0x04
         profile = self.get("Profile Velocity")
@@ -124,13 +155,21 @@ class Servo:
         if time_based:
             duration = profile / 1000.0
         else:
-            units = profile or MAX_RPM_UNITS
-            rev_per_s = units * 0.229 / 60.0
+            units = profile or self.get("Velocity Limit") or 1
+            rev_per_s = units * RPM_PER_UNIT / 60.0
             duration = distance / (rev_per_s * RAW_PER_REV)
         self._move = (self.position, goal, time.monotonic(), duration)
 
     def update(self) -> None:
-        if self._move is not None and self.memory[64] == 1:
+        now = time.monotonic()
+        turned, self._turned_at = self._turned_at, now
+        if self.memory[64] == 1 and self.get("Operating Mode") == VELOCITY:
+            units = self.get("Goal Velocity")
+            self.position += units * RPM_PER_UNIT / 60.0 * RAW_PER_REV * (now - turned)
+            self.set("Present Velocity", units)
+            self.set("Moving", int(units != 0))
+            self._effort(units != 0)
+        elif self._move is not None and self.memory[64] == 1:
             start, goal, t0, duration = self._move
             fraction = 1.0 if duration <= 0 else min(1.0, (time.monotonic() - t0) / duration)
             previous = self.position
@@ -141,8 +180,16 @@ class Servo:
             self.set("Moving", 1 if fraction < 1.0 else 0)
             if fraction >= 1.0:
                 self._move = None
-            self.set("Present Load", 50 if previous != self.position else 0)
+            self._effort(previous != self.position)
         self.set("Present Position", round(self.position))
+
+    def _effort(self, moving: bool) -> None:
+        """Present Current in the model's unit, or Present Load (0.1 %) without a sensor."""
+        unit = self.model.current_unit
+        if unit is None:
+            self.set("Present Load", 50 if moving else 0)
+        else:
+            self.set("Present Current", round(MOVING_CURRENT_MA / unit) if moving else 0)
 
 
 @dataclass
@@ -392,22 +439,31 @@ class DynamixelPtyServer:
         self.close()
 
 
+def _model_of(hw: Hardware, joint: Component) -> Model:
+    """The model the profile names for a joint's servo (the XL430-W250 when it names none,
+    or one deltoctl has no table for)."""
+    number = expected_model(hw.params, joint.params, joint.name)
+    return (by_number(number) if number is not None else None) or XL430_W250
+
+
 def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
     """One pseudo-terminal per bus block, its servos at the joints' IDs, listening at the bus
     URL's baud rate."""
     from deltoctl.families.dynamixel import parse_bus_url
+    from deltoctl.families.dynamixel.plugins import servo_ids
 
     o = ctx.options
     buses = {}
     for hw in blocks:
         url = ctx.profile.buses.get(hw.bus or "", "serial:///dev/ttyUSB0?baud=1000000")
         _, baud, _ = parse_bus_url(url)
-        bus = DynamixelBus([Servo(j.address) for j in hw.joints if j.address is not None],
-                           baud=baud)
-        bus.faults.missing |= {j.address for j in ctx.named("missing", hw)}
+        ids = {j.name: i for i, j in servo_ids(ctx.profile, hw).items()}
+        bus = DynamixelBus([Servo(i, model=_model_of(hw, j))
+                            for i, j in servo_ids(ctx.profile, hw).items()], baud=baud)
+        bus.faults.missing |= {ids[j.name] for j in ctx.named("missing", hw) if j.name in ids}
         for joint in ctx.named("wrong_baud", hw):
-            if joint.address in bus.servos:  # 57600 (or 115200 on a 57600 bus)
-                bus.servos[joint.address].memory[8] = 1 if baud != 57600 else 2
+            if joint.name in ids:  # 57600 (or 115200 on a 57600 bus)
+                bus.servos[ids[joint.name]].memory[8] = 1 if baud != 57600 else 2
         server = ctx.stack.enter_context(DynamixelPtyServer(bus, pace=o.pace))
         query = url.split("?", 1)[1] if "?" in url else f"baud={baud}"
         buses[hw.bus or hw.name] = f"serial://{server.port}?{query}"

@@ -1,0 +1,265 @@
+"""The Dynamixel X series by model number: each model's control table, units, limits and
+operating modes, as data (ROBOTIS e-manual, emanual.robotis.com/docs/en/dxl/x/<model>/).
+
+Models that share an address layout share one table; a model's entry adds what differs (its
+current unit, the default and maximum of its limits, its voltage range, its modes). Every X
+model keeps Present Current or Load, Velocity and Position at 126/128/132 and Present Input
+Voltage and Temperature at 144/146, so one Sync Read serves a bus of mixed models; the meaning
+of 126 (load or current, and the current's unit) is the servo's own.
+
+Model numbers: the "Model Number" row of each e-manual page (reference:
+dynamixel-x-series-and-cia402.md). Facts not checked against a page are listed in
+``UNVERIFIED`` (one place to correct them).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+
+from deltoctl.families.dynamixel.control_table import XL430, Item
+
+# -- the layouts ----------------------------------------------------------------------------------
+
+_CURRENT = (  # the items of a model with a current sensor
+    Item(38, 2, "Current Limit", safety=True),
+    Item(102, 2, "Goal Current", signed=True),
+    Item(126, 2, "Present Current", "R", signed=True),
+)
+_EXTERNAL_PORTS = tuple(Item(56 + k, 1, f"External Port Mode {k + 1}", default=3, low=0,
+                             high=3) for k in range(3)) + tuple(
+    Item(152 + 2 * k, 2, f"External Port Data {k + 1}") for k in range(3))
+
+
+def _layout(*, drop: tuple[str, ...] = (), add: tuple[Item, ...] = ()) -> tuple[Item, ...]:
+    items = [i for i in XL430 if i.name not in drop] + list(add)
+    return tuple(sorted(items, key=lambda i: i.address))
+
+
+# XL430-W250, 2XL430-W250, XC430-W150/W240: no current sensor, Present Load at 126
+# (docs/en/dxl/x/xl430-w250.md)
+X430_LOAD = XL430
+# XM430, XH430, XD430: Current Limit 38, Goal Current 102, Present Current 126
+# (docs/en/dxl/x/xm430-w350.md, xh430-v350.md, xd430-t350.md)
+X430_CURRENT = _layout(drop=("Present Load",), add=_CURRENT)
+# XM540, XH540, XD540: the 430's, plus three external ports (56-58, 152-157)
+# (docs/en/dxl/x/xm540-w270.md, xh540-w270.md, xd540-t270.md)
+X540 = _layout(drop=("Present Load",), add=_CURRENT + _EXTERNAL_PORTS)
+# XW430, XW540 (waterproof): the 430's without the LED (docs/en/dxl/x/xw540-t260.md,
+# xw430-t200.md)
+XW = _layout(drop=("Present Load", "LED"), add=_CURRENT)
+# XL330, XC330: the 430's, plus PWM Slope 62 (docs/en/dxl/x/xl330-m288.md, xc330-t288.md)
+_PWM_SLOPE = Item(62, 1, "PWM Slope", default=140, low=1, high=255)
+X330 = _layout(drop=("Present Load",), add=(*_CURRENT, _PWM_SLOPE))
+
+LAYOUTS = {"X430 without current": X430_LOAD, "X430": X430_CURRENT, "X540": X540, "XW": XW,
+           "X330": X330}
+
+# Operating Mode (11) values, and which a model runs
+CURRENT, VELOCITY, POSITION, EXTENDED, CURRENT_POSITION, PWM = 0, 1, 3, 4, 5, 16
+MODE_NAMES = {CURRENT: "current", VELOCITY: "velocity", POSITION: "position",
+              EXTENDED: "extended position", CURRENT_POSITION: "current-based position",
+              PWM: "PWM"}
+NO_CURRENT_MODES = frozenset({VELOCITY, POSITION, EXTENDED, PWM})
+ALL_MODES = frozenset(MODE_NAMES)
+
+
+@dataclass(frozen=True)
+class Model:
+    """One model: its number, name, table and what differs from the table's defaults."""
+
+    number: int
+    name: str
+    layout: str  # a key of LAYOUTS
+    current_unit: float | None = None  # mA per step of Present/Goal Current; None: no sensor
+    current_limit: int | None = None  # Current Limit (38): its default, also its maximum
+    velocity_limit: int = 265  # Velocity Limit (44) default, 0.229 rpm
+    velocity_max: int = 1023  # ... and its maximum
+    voltage: tuple[int, int, int, int] = (140, 60, 60, 140)  # max, min default; range (0.1 V)
+    temperature_limit: int = 80  # °C, default
+    baud_codes: int = 7  # the highest Baud Rate (8) code: 7 = 4.5 Mbps, 6 = 4 Mbps
+    overrides: dict[str, int] = field(default_factory=dict)  # other defaults by item name
+
+    @property
+    def modes(self) -> frozenset[int]:
+        return NO_CURRENT_MODES if self.current_unit is None else ALL_MODES
+
+    @cached_property
+    def table(self) -> tuple[Item, ...]:
+        """The layout with this model's number, defaults and ranges."""
+        vmax, vmin, vlow, vhigh = self.voltage
+        changes: dict[str, dict[str, int | None]] = {
+            "Model Number": {"default": self.number},
+            "Baud Rate": {"high": self.baud_codes},
+            "Operating Mode": {"high": max(self.modes)},
+            "Temperature Limit": {"default": self.temperature_limit},
+            "Max Voltage Limit": {"default": vmax, "low": vlow, "high": vhigh},
+            "Min Voltage Limit": {"default": vmin, "low": vlow, "high": vhigh},
+            "Velocity Limit": {"default": self.velocity_limit, "high": self.velocity_max},
+            "Current Limit": {"default": self.current_limit, "low": 0,
+                              "high": self.current_limit},
+        }
+        for name, value in self.overrides.items():
+            changes.setdefault(name, {})["default"] = value
+        return tuple(replace(i, **changes[i.name]) if i.name in changes else i
+                     for i in LAYOUTS[self.layout])
+
+    @cached_property
+    def by_name(self) -> dict[str, Item]:
+        return {i.name: i for i in self.table}
+
+    @property
+    def table_size(self) -> int:
+        """Bytes from address 0 to the end of the last item (one READ gets the whole table)."""
+        return max(i.address + i.size for i in self.table)
+
+    def units(self) -> dict[str, str]:
+        """The unit of one raw step of each item that has one."""
+        from deltoctl.families.dynamixel.control_table import UNITS
+
+        units = dict(UNITS)
+        if self.current_unit is not None:
+            unit = f"{self.current_unit:g} mA"
+            units.update({"Current Limit": unit, "Goal Current": unit, "Present Current": unit})
+        return units
+
+    def current_amps(self, raw: int) -> float:
+        """Present Current in A (raw steps × the model's unit)."""
+        return raw * (self.current_unit or 0.0) / 1000.0
+
+
+_X430 = dict(voltage=(160, 95, 95, 160))
+_XH_V = dict(voltage=(300, 110, 110, 300))
+_XL330 = dict(layout="X330", current_unit=1.0, current_limit=1750, velocity_max=2047,
+              voltage=(70, 35, 31, 70), temperature_limit=70, baud_codes=6,
+              overrides={"Shutdown": 53})
+_XC330_T = dict(layout="X330", current_unit=1.0, current_limit=910, velocity_max=2047,
+                voltage=(140, 55, 55, 140), temperature_limit=70, baud_codes=6,
+                overrides={"PWM Slope": 255})
+_XC330_M = dict(layout="X330", current_unit=1.0, current_limit=2352, velocity_max=2047,
+                voltage=(70, 37, 37, 70), temperature_limit=70, baud_codes=6)
+
+MODELS: tuple[Model, ...] = (
+    # docs/en/dxl/x/xl430-w250.md, 2xl430-w250.md, xc430-w150.md, xc430-w240.md
+    Model(1060, "XL430-W250", "X430 without current", temperature_limit=72),
+    Model(1090, "2XL430-W250", "X430 without current", temperature_limit=72),
+    Model(1070, "XC430-W150", "X430 without current", velocity_limit=460,
+          voltage=(160, 65, 65, 160)),
+    Model(1080, "XC430-W240", "X430 without current", velocity_limit=306,
+          voltage=(160, 65, 65, 160)),
+    # docs/en/dxl/x/xm430-w350.md, xm430-w210.md
+    Model(1020, "XM430-W350", "X430", 2.69, 1193, velocity_limit=200, **_X430),
+    Model(1030, "XM430-W210", "X430", 2.69, 1193, velocity_limit=330, **_X430),
+    # docs/en/dxl/x/xh430-w350.md, xh430-w210.md, xh430-v350.md, xh430-v210.md
+    Model(1000, "XH430-W350", "X430", 2.69, 648, velocity_limit=280, **_X430),
+    Model(1010, "XH430-W210", "X430", 2.69, 648, velocity_limit=480, **_X430),
+    Model(1040, "XH430-V350", "X430", 1.34, 689, velocity_limit=135, **_XH_V),
+    Model(1050, "XH430-V210", "X430", 1.34, 689, velocity_limit=230, **_XH_V),
+    # docs/en/dxl/x/xd430-t350.md, xd430-t210.md
+    Model(1001, "XD430-T350", "X430", 2.69, 648, velocity_limit=280, **_X430),
+    Model(1011, "XD430-T210", "X430", 2.69, 648, velocity_limit=480, **_X430),
+    # docs/en/dxl/x/xw430-t200.md, xw430-t333.md
+    Model(1280, "XW430-T200", "XW", 2.69, 1193, velocity_limit=250, **_X430),
+    Model(1270, "XW430-T333", "XW", 2.69, 1193, velocity_limit=150, **_X430),
+    # docs/en/dxl/x/xm540-w270.md, xm540-w150.md
+    Model(1120, "XM540-W270", "X540", 2.69, 2047, velocity_limit=128, **_X430),
+    Model(1130, "XM540-W150", "X540", 2.69, 2047, velocity_limit=230, **_X430),
+    # docs/en/dxl/x/xh540-w270.md, xh540-w150.md, xh540-v270.md, xh540-v150.md
+    Model(1100, "XH540-W270", "X540", 2.69, 2047, velocity_limit=128, **_X430),
+    Model(1110, "XH540-W150", "X540", 2.69, 2047, velocity_limit=230, **_X430),
+    Model(1140, "XH540-V270", "X540", 2.69, 2047, velocity_limit=128, **_XH_V),
+    Model(1150, "XH540-V150", "X540", 2.69, 2047, velocity_limit=230, **_XH_V),
+    # docs/en/dxl/x/xd540-t270.md, xd540-t150.md
+    Model(1101, "XD540-T270", "X540", 2.69, 2047, velocity_limit=128, **_X430),
+    Model(1111, "XD540-T150", "X540", 2.69, 2047, velocity_limit=230, **_X430),
+    # docs/en/dxl/x/xw540-t260.md, xw540-t140.md, xw540-h260.md
+    Model(1170, "XW540-T260", "XW", 2.69, 2047, velocity_limit=167, **_X430),
+    Model(1180, "XW540-T140", "XW", 2.69, 2047, velocity_limit=300, **_X430),
+    Model(1310, "XW540-H260", "XW", 2.69, 2047, velocity_limit=167, **_X430),
+    # docs/en/dxl/x/xl330-m288.md, xl330-m077.md
+    Model(1200, "XL330-M288", velocity_limit=445, **_XL330),
+    Model(1190, "XL330-M077", velocity_limit=1620, **_XL330),
+    # docs/en/dxl/x/xc330-t288.md, xc330-t181.md, xc330-m288.md, xc330-m181.md
+    Model(1220, "XC330-T288", velocity_limit=320, **_XC330_T),
+    Model(1210, "XC330-T181", velocity_limit=520, **_XC330_T),
+    Model(1240, "XC330-M288", velocity_limit=445, **_XC330_M),
+    Model(1230, "XC330-M181", velocity_limit=705, **_XC330_M),
+)
+
+# What was not checked against the model's own e-manual page (the layouts of all of them were
+# checked against ROBOTIS' dynamixel_hardware_interface model files; the rest of each row
+# named here is an estimate from its siblings). Correct a value, then remove it from here.
+UNVERIFIED: dict[str, tuple[str, ...]] = {
+    "2XL430-W250": ("temperature_limit", "velocity_limit"),
+    "XC430-W150": ("velocity_limit", "voltage", "temperature_limit"),
+    "XC430-W240": ("velocity_limit", "voltage", "temperature_limit"),
+    "XM430-W210": ("velocity_limit",),
+    "XH430-W350": ("velocity_limit",),
+    "XH430-W210": ("velocity_limit",),
+    "XH430-V210": ("velocity_limit",),
+    "XD430-T350": ("current_unit", "current_limit", "velocity_limit"),
+    "XD430-T210": ("current_unit", "current_limit", "velocity_limit"),
+    "XW430-T200": ("current_unit", "current_limit", "velocity_limit", "voltage"),
+    "XW430-T333": ("current_unit", "current_limit", "velocity_limit", "voltage"),
+    "XM540-W270": ("velocity_limit",),
+    "XM540-W150": ("velocity_limit",),
+    "XH540-W270": ("velocity_limit",),
+    "XH540-W150": ("velocity_limit",),
+    "XH540-V270": ("current_unit", "velocity_limit", "voltage"),
+    "XH540-V150": ("current_unit", "velocity_limit", "voltage"),
+    "XD540-T270": ("current_unit", "current_limit", "velocity_limit"),
+    "XD540-T150": ("current_unit", "current_limit", "velocity_limit"),
+    "XW540-T140": ("velocity_limit",),
+    "XW540-H260": ("velocity_limit", "voltage"),
+    "XL330-M077": ("velocity_limit",),
+    "XC330-T181": ("current_limit", "velocity_limit"),
+    "XC330-M288": ("current_limit", "velocity_limit", "voltage"),
+    "XC330-M181": ("current_limit", "velocity_limit", "voltage"),
+}
+
+BY_NUMBER = {m.number: m for m in MODELS}
+BY_KEY = {m.name.lower(): m for m in MODELS}
+XL430_W250 = BY_NUMBER[1060]
+
+
+def by_number(number: int) -> Model | None:
+    return BY_NUMBER.get(number)
+
+
+def by_name(text: str) -> Model | None:
+    """A model by name as profiles write it: XM430-W350, xm430_w350, XM430-W350-R (the
+    interface suffix -T/-R is ignored), or its number."""
+    key = text.strip().lower().replace("_", "-")
+    if key.isdigit():
+        return BY_NUMBER.get(int(key))
+    model = BY_KEY.get(key)
+    if model is None and key[-2:] in ("-t", "-r"):
+        model = BY_KEY.get(key[:-2])
+    return model
+
+
+def label(number: int) -> str:
+    """A model number for people: "XM430-W350 (1020)", or "unknown model 30"."""
+    model = BY_NUMBER.get(number)
+    return f"{model.name} ({number})" if model else f"unknown model {number}"
+
+
+def expected_model(block: Mapping[str, str], joint: Mapping[str, str], name: str) -> int | None:
+    """The model number a profile expects of a joint's servo: its ``model_number`` or
+    ``motor_type`` param (1020, XM430-W350), else its block's; None when it names none."""
+    from deltoctl.errors import InvalidInput
+
+    for params in (joint, block):
+        for key in ("model_number", "motor_type"):
+            text = str(params.get(key, "")).strip()
+            if not text:
+                continue
+            model = by_name(text)
+            if model is not None:
+                return model.number
+            if text.isdigit() and int(text) < 1 << 16:
+                return int(text)  # a model deltoctl has no table for: compared as it is
+            raise InvalidInput(f"{name}: {key} {text!r} is not a Dynamixel X-series model "
+                               "deltoctl knows (e.g. XM430-W350 or 1020)")
+    return None

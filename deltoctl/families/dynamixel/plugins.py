@@ -1,0 +1,121 @@
+"""The public Dynamixel ros2_control plugins' conventions, read into deltoctl's model when a
+URDF is loaded, so their descriptions run unchanged.
+
+- ``dynamixel_hardware/DynamixelHardware`` (dynamixel-community/dynamixel_hardware, its README
+  and src/dynamixel_hardware.cpp): hardware params ``usb_port``, ``baud_rate`` and
+  ``use_dummy``; a param ``id`` per joint (the family's ``address_param``).
+- ``dynamixel_hardware_interface/DynamixelHardware`` (ROBOTIS-GIT/dynamixel_hardware_interface,
+  its README and src/dynamixel_hardware_interface.cpp; OpenMANIPULATOR-X's
+  open_manipulator_x_position.ros2_control.xacro): hardware params ``port_name``,
+  ``baud_rate``, ``number_of_joints``, ``number_of_transmissions`` and the optional
+  ``transmission_to_joint_matrix`` (row-major, comma-separated, identity by default); a
+  ``<gpio>`` per servo with params ``type`` (``dxl``) and ``ID``, and the control table items it
+  writes at start. Joint i is driven by the servo its matrix row names; the servo gpios become
+  the joints' addresses (their items stay as the joint's params).
+"""
+
+from __future__ import annotations
+
+from urllib.parse import quote
+
+from deltoctl.errors import ProfileError
+from deltoctl.profile.model import Component, Hardware, Profile
+
+COMMUNITY = "dynamixel_hardware/DynamixelHardware"
+ROBOTIS = "dynamixel_hardware_interface/DynamixelHardware"
+PORT_PARAMS = {COMMUNITY: "usb_port", ROBOTIS: "port_name"}
+MAX_SERVOS = 253  # IDs 0..252: a matrix larger than that is no bus
+
+
+def import_block(profile: Profile, hw: Hardware) -> None:
+    """Addresses and the bus of a block written for one of the two plugins (idempotent: a
+    block deltoctl exported keeps its addresses and bus)."""
+    if hw.plugin == ROBOTIS:
+        _servo_gpios(profile, hw)
+    if hw.plugin in PORT_PARAMS and hw.bus is None:
+        _bus(profile, hw, PORT_PARAMS[hw.plugin])
+
+
+def servo_ids(profile: Profile, hw: Hardware) -> dict[int, Component]:
+    """ID → joint: the joint's address, or its ``id`` param (dynamixel_hardware's)."""
+    from deltoctl.profile.validate import part_address
+
+    ids = {}
+    for joint in hw.joints:
+        address = part_address(profile, hw, joint)
+        if address is not None:
+            ids[address] = joint
+    return ids
+
+
+def _fail(profile: Profile, hw: Hardware, message: str) -> ProfileError:
+    return ProfileError(f"<ros2_control name={hw.name!r}> ({hw.plugin}): {message}",
+                        profile.source, hw.line)
+
+
+def _bus(profile: Profile, hw: Hardware, port_param: str) -> None:
+    """The serial port and baud rate params as the block's bus, named after the block."""
+    port, baud = hw.params.get(port_param), hw.params.get("baud_rate")
+    if not port:
+        return  # the target then comes from -t
+    if baud is not None and not baud.strip().isdigit():
+        raise _fail(profile, hw, f"baud_rate must be a whole number, got {baud!r}")
+    query = f"?baud={int(baud)}" if baud is not None else ""
+    name = hw.name if hw.name not in profile.buses else f"{hw.name}-bus"
+    profile.buses[name] = f"serial://{quote(port.strip(), safe='/')}{query}"
+    hw.bus = name
+
+
+def _servo_gpios(profile: Profile, hw: Hardware) -> None:
+    """ROBOTIS' convention: each ``type: dxl`` gpio is a servo, joint i takes the one its
+    transmission-to-joint row names (±1: a reversed servo)."""
+    servos = [g for g in hw.gpios if g.params.get("type") == "dxl"]
+    if not servos:
+        return
+    ids = [_id(profile, hw, g.name, g.params.get("ID")) for g in servos]
+    joints = [j for j in hw.joints if j.address is None]
+    matrix = _matrix(profile, hw, len(hw.joints), len(servos))
+    for row, joint in zip(matrix, hw.joints):
+        drives = [(k, v) for k, v in enumerate(row) if v != 0.0]
+        if len(drives) != 1 or abs(drives[0][1]) != 1.0:
+            raise _fail(profile, hw, f"joint {joint.name!r} takes {len(drives)} servos' "
+                        f"motion ({', '.join(f'{v:g}' for v in row)} in "
+                        "transmission_to_joint_matrix): deltoctl drives each joint from one "
+                        "servo, its factor 1 or -1")
+        if joint in joints:
+            k, factor = drives[0]
+            joint.address = ids[k]
+            joint.inverse = joint.inverse != (factor < 0)
+            for key, value in servos[k].params.items():
+                if key not in ("type", "ID"):
+                    joint.params.setdefault(key, value)
+    hw.gpios = [g for g in hw.gpios if g not in servos]
+
+
+def _id(profile: Profile, hw: Hardware, gpio: str, text: str | None) -> int:
+    if text is None or not text.strip().isdigit():
+        raise _fail(profile, hw, f"gpio {gpio!r} has no ID param with the servo's ID (got "
+                    f"{text!r})")
+    return int(text)
+
+
+def _matrix(profile: Profile, hw: Hardware, joints: int, servos: int) -> list[list[float]]:
+    """transmission_to_joint_matrix (joints × servos), or the identity."""
+    if joints > MAX_SERVOS or servos > MAX_SERVOS:
+        raise _fail(profile, hw, f"{joints} joints and {servos} servos: more than a bus holds")
+    for key, count in (("number_of_joints", joints), ("number_of_transmissions", servos)):
+        given = hw.params.get(key)
+        if given is not None and given.strip() != str(count):
+            raise _fail(profile, hw, f"{key} is {given!r}, but the block has {count}")
+    text = hw.params.get("transmission_to_joint_matrix")
+    if text is None:
+        return [[1.0 if i == k else 0.0 for k in range(servos)] for i in range(joints)]
+    from deltoctl.profile.model import parse_number
+
+    values = ([parse_number(v) for v in text.split(",")]
+              if text.count(",") + 1 == joints * servos else [])
+    if len(values) != joints * servos or any(v is None for v in values):
+        raise _fail(profile, hw, f"transmission_to_joint_matrix must hold {joints} × {servos} "
+                    f"finite numbers, got {text.strip()!r}")
+    return [[float(v or 0.0) for v in values[i * servos:(i + 1) * servos]]
+            for i in range(joints)]
