@@ -1,0 +1,130 @@
+"""ros2_control descriptions written for the two public Dynamixel plugins load as profiles and
+run on the emulated bus unchanged: dynamixel-community's ``dynamixel_hardware`` (a param ``id``
+per joint) and ROBOTIS' ``dynamixel_hardware_interface`` (a ``<gpio>`` per servo)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from deltoctl.profile.catalog import load_profile
+from tests.conftest import block_of
+
+LINKS = """
+  <link name="base"/><link name="l1"/><link name="l2"/>
+  <joint name="joint1" type="revolute"><parent link="base"/><child link="l1"/>
+    <limit lower="-3.14" upper="3.14" velocity="4.8" effort="2"/></joint>
+  <joint name="joint2" type="revolute"><parent link="l1"/><child link="l2"/>
+    <limit lower="-1.5" upper="1.5" velocity="4.8" effort="2"/></joint>
+"""
+JOINT = """
+    <joint name="{name}">{extra}
+      <command_interface name="position"/>
+      <state_interface name="position"/><state_interface name="velocity"/>
+      <state_interface name="effort"/>
+    </joint>"""
+COMMUNITY = """<?xml version="1.0"?>
+<robot name="pan_tilt">{links}
+  <ros2_control name="pan_tilt" type="system">
+    <hardware>
+      <plugin>dynamixel_hardware/DynamixelHardware</plugin>
+      <param name="usb_port">/dev/ttyUSB0</param>
+      <param name="baud_rate">57600</param>{dummy}
+    </hardware>{joints}
+  </ros2_control>
+</robot>
+"""
+ROBOTIS = """<?xml version="1.0"?>
+<robot name="two_axis">{links}
+  <ros2_control name="two_axis" type="system">
+    <hardware>
+      <plugin>dynamixel_hardware_interface/DynamixelHardware</plugin>
+      <param name="port_name">/dev/ttyUSB0</param>
+      <param name="baud_rate">1000000</param>
+      <param name="dynamixel_model_folder">/param/dxl_model</param>
+      <param name="number_of_joints">2</param>
+      <param name="number_of_transmissions">2</param>
+      <param name="transmission_to_joint_matrix">{matrix}</param>
+    </hardware>{joints}{gpios}
+  </ros2_control>
+</robot>
+"""
+GPIO = """
+    <gpio name="dxl{k}">
+      <param name="type">dxl</param>
+      <param name="ID">{id}</param>
+      <command_interface name="Goal Position"/>
+      <state_interface name="Present Position"/><state_interface name="Present Current"/>
+      <param name="Operating Mode">3</param>
+      <param name="Position P Gain">800</param>
+    </gpio>"""
+
+
+def community(tmp_path, dummy: bool = False):
+    joints = "".join(JOINT.format(name=n, extra=f'\n      <param name="id">{i}</param>')
+                     for n, i in (("joint1", 1), ("joint2", 2)))
+    path = tmp_path / "pan_tilt.urdf"
+    path.write_text(COMMUNITY.format(links=LINKS, joints=joints, dummy=(
+        '\n      <param name="use_dummy">true</param>' if dummy else "")))
+    return path
+
+
+def robotis(tmp_path, matrix: str = "0, 1, -1, 0", ids: tuple[str, ...] = ("21", "22")):
+    joints = "".join(JOINT.format(name=n, extra="") for n in ("joint1", "joint2"))
+    gpios = "".join(GPIO.format(k=k, id=i) for k, i in enumerate(ids, 1))
+    path = tmp_path / "two_axis.urdf"
+    path.write_text(ROBOTIS.format(links=LINKS, joints=joints, gpios=gpios, matrix=matrix))
+    return path
+
+
+def test_dynamixel_hardware_ids_and_port_become_the_bus(tmp_path, cli):
+    path = community(tmp_path)
+    profile = load_profile(path)
+    hw = profile.hardware[0]
+    assert profile.family_of(hw) == "dynamixel"
+    assert profile.buses[hw.bus] == "serial:///dev/ttyUSB0?baud=57600"
+    run = cli("--sim", "-p", str(path), "identify", "--json")
+    assert run.exit_code == 0, run.stderr
+    doc = json.loads(run.stdout)
+    servos = block_of(doc.get("result", doc))["identity"]["servos"]
+    assert {j: s["id"] for j, s in servos.items()} == {"joint1": 1, "joint2": 2}
+    jog = cli("--sim", "-p", str(path), "jog", "joint2", "5deg", "--yes")
+    assert jog.exit_code == 0, jog.stderr
+
+
+def test_dynamixel_hardware_use_dummy_runs_on_the_emulator(tmp_path, cli):
+    run = cli("-p", str(community(tmp_path, dummy=True)), "identify")
+    assert run.exit_code == 0, run.stderr
+    assert "simulated" in run.stderr
+
+
+def test_dynamixel_hardware_interface_servo_gpios_become_the_joints_servos(tmp_path, cli):
+    path = robotis(tmp_path)
+    profile = load_profile(path)
+    hw = profile.hardware[0]
+    assert hw.gpios == []  # the servos, not GPIOs
+    joints = {j.name: j for j in hw.joints}
+    # transmission_to_joint_matrix 0 1 / -1 0: joint1 is servo 22, joint2 is servo 21 reversed
+    assert (joints["joint1"].address, joints["joint1"].inverse) == (22, False)
+    assert (joints["joint2"].address, joints["joint2"].inverse) == (21, True)
+    assert joints["joint1"].params["Position P Gain"] == "800"
+    assert profile.buses[hw.bus] == "serial:///dev/ttyUSB0?baud=1000000"
+    run = cli("--sim", "-p", str(path), "identify", "--json")
+    assert run.exit_code == 0, run.stderr
+    jog = cli("--sim", "-p", str(path), "jog", "joint1", "5deg", "--yes", "--json")
+    assert jog.exit_code == 0, jog.stderr
+
+
+@pytest.mark.parametrize(("matrix", "ids", "says"), [
+    ("1, 1, 0, 1", ("21", "22"), "takes 2 servos' motion"),
+    ("0.5, 0, 0, 1", ("21", "22"), "its factor 1 or -1"),
+    ("1, 0, 0", ("21", "22"), "2 × 2 finite numbers"),
+    ("1, 0, 0, nan", ("21", "22"), "2 × 2 finite numbers"),
+    ("1, 0, 0, 1", ("21", "x"), "no ID param"),
+])
+def test_a_description_deltoctl_cannot_drive_is_one_clear_error(tmp_path, cli, matrix, ids,
+                                                                says):
+    run = cli("-p", str(robotis(tmp_path, matrix, ids)), "profile", "validate")
+    assert run.exit_code == 2, run.stderr
+    assert says in run.stderr and "Traceback" not in run.stderr
