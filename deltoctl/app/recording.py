@@ -64,11 +64,13 @@ def planned_output(template: Path, force: bool = False) -> Path:
     if not path.parent.is_dir():
         raise InvalidInput(f"cannot write {path}: {path.parent} is not a directory")
     if SERIAL not in path.name:
-        _refuse_existing(path, force)
+        refuse_existing(path, force)
     return path
 
 
-def _refuse_existing(path: Path, force: bool) -> None:
+def refuse_existing(path: Path, force: bool) -> None:
+    """An existing file (without ``force``) is invalid input: a recording never overwrites
+    one unasked."""
     if not force and (path.exists() or path.is_symlink()):
         raise InvalidInput(f"{path} exists: a recording does not overwrite a file",
                            "pass --force to overwrite it, or put {time} in the name")
@@ -77,11 +79,11 @@ def _refuse_existing(path: Path, force: bool) -> None:
 def create_output(path: Path, force: bool = False) -> None:
     """The file a recording goes to, created empty; one that exists (without ``force``) or
     cannot be written is invalid input."""
-    _refuse_existing(path, force)
+    refuse_existing(path, force)
     try:
         path.open("wb" if force else "xb").close()
     except FileExistsError:
-        _refuse_existing(path, force)
+        refuse_existing(path, force)
     except OSError as exc:
         raise InvalidInput(f"cannot write {path}: {exc.strerror}") from None
 

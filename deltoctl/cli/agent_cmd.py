@@ -13,9 +13,13 @@ import typer
 from deltoctl.cli.context import Options, options
 from deltoctl.errors import InvalidInput
 
-SPARE = "import sys; from deltoctl.cli.agent_cmd import spare; spare(sys.argv[1])"
+# the agent's verb processes: argv[1] the profile, then SIMULATED when --sim serves the robot
+# (the zygote's socket comes last)
+SPARE = ("import sys; from deltoctl.cli.agent_cmd import spare; "
+         "spare(sys.argv[1], 'simulated' in sys.argv[2:])")
 ZYGOTE = ("import sys; from deltoctl.cli.agent_cmd import zygote; "
-          "zygote(sys.argv[1], int(sys.argv[2]))")
+          "zygote(sys.argv[1], int(sys.argv[-1]), 'simulated' in sys.argv[2:-1])")
+SIMULATED = "simulated"
 
 
 def register(root: typer.Typer) -> None:
@@ -100,7 +104,9 @@ def agent(
                 env={k: v for k, v in os.environ.items() if not k.startswith("DELTOCTL_")})
             links = [a for a in links if not a.startswith("--target=")]
             links += [f"--target={bus}={url}" for bus, url in served["buses"].items()]
-        children = ([sys.executable, "-c", ZYGOTE, spec], [sys.executable, "-c", SPARE, spec])
+        marks = [SIMULATED] if opts.sim else []
+        children = ([sys.executable, "-c", ZYGOTE, spec, *marks],
+                    [sys.executable, "-c", SPARE, spec, *marks])
         from deltoctl.cli.fleet_cmd import agent_checks
         from deltoctl.profile.exporter import to_yaml
 
@@ -168,8 +174,9 @@ def _motion_rule(config: object, allow_unauthenticated: bool) -> tuple[bool, str
                    "links are not all mutual TLS")
 
 
-def _warm(spec: str) -> None:
-    """What every verb imports, and the robot's profile and drivers: loaded once."""
+def _warm(spec: str, simulated: bool = False) -> None:
+    """What every verb imports, and the robot's profile and drivers: loaded once. With
+    ``simulated`` (``agent --sim``), every block the verbs open is marked simulated."""
     import contextlib
     import importlib
 
@@ -177,6 +184,10 @@ def _warm(spec: str) -> None:
                    "deltoctl.cli.output", "deltoctl.profile.catalog", "deltoctl.core.system",
                    "deltoctl.core.runner"):
         importlib.import_module(module)
+    if simulated:
+        from deltoctl.cli import device_cmd
+
+        device_cmd.SERVED_SIMULATED = "deltoctl agent --sim"
     with contextlib.suppress(Exception):  # only a head start: the verb reports any problem
         from deltoctl import registry
         from deltoctl.profile.catalog import load_profile
@@ -203,15 +214,15 @@ def _run(argv: list[str]) -> int:
     return 0
 
 
-def zygote(spec: str, sock_fd: int) -> None:
+def zygote(spec: str, sock_fd: int, simulated: bool = False) -> None:
     """The agent's warm process: forks one child per verb (deltoctl/fleet/forks.py)."""
     from deltoctl.fleet.forks import serve
 
-    _warm(spec)
+    _warm(spec, simulated)
     serve(sock_fd, _run)
 
 
-def spare(spec: str = "") -> None:
+def spare(spec: str = "", simulated: bool = False) -> None:
     """A deltoctl process started ahead by the agent (when it has no zygote): warm, it waits
     for its command line (one JSON list) on stdin, then runs it as ``deltoctl`` would."""
     import json
@@ -219,7 +230,7 @@ def spare(spec: str = "") -> None:
     import threading
     import time
 
-    _warm(spec)
+    _warm(spec, simulated)
     parent = os.getppid()
     line = sys.stdin.readline()
     if not line:

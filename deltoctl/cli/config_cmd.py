@@ -39,7 +39,6 @@ def snapshot(
     """Read every configurable value of every block (--hardware narrows) into one YAML file:
     the whole control table of each servo, the Bioscara joints' parameters, the gripper's
     firmware and sensors, the IMU's registers. --json prints the document."""
-    import json
     from datetime import datetime, timezone
 
     from deltoctl.app import config
@@ -64,7 +63,7 @@ def snapshot(
             raise InvalidInput(f"cannot write {path}: {exc.strerror}") from None
         info(f"snapshot: {path}")
     if opts.json:
-        typer.echo(json.dumps(doc, indent=2, ensure_ascii=False))
+        emit_json(doc)
     elif output != "-":
         table(None, ["block", "family", "target", "parts", "items"],
               [[name, b["family"], b["target"] or "in-process", len(b["parts"]),
@@ -145,11 +144,10 @@ def _report(opts: Options, snapshot_file: Path, rows: list[dict[str, Any]],
 
 def _complete_allow(incomplete: str) -> list[str]:
     from deltoctl import registry
-    from deltoctl.app.config import PERMISSIONS
 
     declared = {rule[2] for f in registry.families().values()
                 for rule in f.config_rule_table().values() if rule[2]}
-    return [n for n in (*PERMISSIONS, *sorted(declared)) if n.startswith(incomplete)]
+    return [n for n in (*registry.permissions(), *sorted(declared)) if n.startswith(incomplete)]
 
 
 def restore(

@@ -27,6 +27,11 @@ AllowMismatch = Annotated[bool, typer.Option(
     help="Go on when a device reports another model than the profile (exit 3).")]
 
 
+# why every block runs on a simulator that -t names like a device: set by 'deltoctl agent
+# --sim' in the processes that run its verbs, so that their JSON and recordings say simulated
+SERVED_SIMULATED: str | None = None
+
+
 @contextlib.contextmanager
 def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any = None,
                probe: bool = False) -> Iterator[Any]:
@@ -38,6 +43,9 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
     with open_app_robot(profile or opts.load_profile(), opts.target, sim=opts.sim,
                         hardware=opts.hardware, allow_model_mismatch=allow_model_mismatch,
                         probe=probe, notice=info) as robot:
+        if SERVED_SIMULATED:
+            for m in robot.blocks:
+                m.simulated = m.simulated or SERVED_SIMULATED
         yield robot
 
 
@@ -325,8 +333,11 @@ def stream(
                                                      hardware=[m.hw for m in system]),
                            tuple(system.extra_states()))
             sinks.append(live)
-        run_cycles(system, rate, duration, sinks)
+        stats = run_cycles(system, rate, duration, sinks)
     info(f"{sink.samples} samples of {len(names)} interfaces")
+    if opts.json:  # stdout holds the frames: the stream's document goes to stderr
+        emit_json({"samples": sink.samples, "interfaces": len(names),
+                   "loop": stats.summary()}, err=True)
     links.finish()
     finish(system)
 

@@ -98,7 +98,7 @@ def forward(ctx: typer.Context) -> NoReturn:
     argv = strip_remote(list(ctx.find_root().meta.get(ARGV, [])))
     errors = ErrorLines(robot, opts.json, _write_err)
     try:
-        verb = _check(argv, robot)
+        verb = _check(_record_file_dropped(argv), robot)
         if verb == "record" and not {"--help", "-h"} & set(argv):
             code = _remote_record(opts, robot, argv, errors.feed)
             raise typer.Exit(code)
@@ -131,14 +131,55 @@ def _verb_args(argv: list[str]) -> list[str]:
     return argv[i + 1:]
 
 
+def _record_file_dropped(argv: list[str]) -> list[str]:
+    """The command line as the agent judges it: a remote record's FILE is written on this
+    computer and never sent, so the agent's path rule (files in its directory only) does not
+    judge it. Any other command line as it is."""
+    from deltoctl.cli.main import command_path
+    from deltoctl.cmdline import hoist_global_options
+
+    hoisted = hoist_global_options(argv)
+    args = _verb_args(hoisted)
+    try:
+        if command_path(hoisted) != ("record",) or {"--help", "-h"} & set(args):
+            return argv
+    except InvalidInput:
+        return argv
+    at = _positional(args)
+    if at is None:
+        return argv
+    return hoisted[:len(hoisted) - len(args)] + args[:at] + args[at + 1:]
+
+
+def _positional(args: list[str]) -> int | None:
+    """Where record's FILE argument stands among its arguments."""
+    from typer.main import get_command
+
+    from deltoctl.cli import record_cmd
+
+    holder = typer.Typer()
+    record_cmd.register(holder)
+    takes_value = {o for p in get_command(holder).params if getattr(p, "opts", None)
+                   and p.param_type_name == "option" and not p.is_flag for o in p.opts}
+    i = 0
+    while i < len(args):
+        arg = args[i]
+        if arg == "--":
+            return i + 1 if i + 1 < len(args) else None
+        if not arg.startswith("-") or arg == "-":
+            return i
+        i += 2 if arg in takes_value else 1
+    return None
+
+
 def _record_params(args: list[str], robot: str) -> dict[str, Any]:
     """The record's own options, checked here; its file's directory must be there."""
     params = record_options(args)
     from pathlib import Path
 
-    output = params["output"] = Path(params["output"])
-    if not output.parent.is_dir():
-        raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
+    from deltoctl.app.recording import planned_output
+
+    params["output"] = planned_output(Path(params["output"]), params["force"])
     return params
 
 
@@ -201,8 +242,9 @@ def _remote_record(opts: Options, robot: str, argv: list[str],
         rec = RemoteRecord(session, robot, params["output"], params["rate"],
                            params["duration"], [f"--hardware={h}" for h in opts.hardware],
                            params["gpio_type"], params["allow_model_mismatch"], err,
-                           opened=lambda: info(f"recording {params['output']} from robot "
-                                               f"{robot} (its cycle times; Ctrl-C ends it)"))
+                           force=params["force"],
+                           opened=lambda: info(f"recording {rec.output} from robot {robot} "
+                                               "(its cycle times; Ctrl-C ends it)"))
         with cancelled_by_signals(rec.cancel):
             try:
                 code = rec.run()
@@ -440,12 +482,12 @@ def run_cmd(
 
     opts = options(ctx)
     skipped: list[str] = []
+    verb_argv: list[str] | None = None  # one verb, checked once the robots are known
     if command[0] not in VERBS and os.path.isfile(command[0]) and len(command) == 1:
         lines, skipped = script_lines(command[0], opts)
     else:
-        argv = hoist_global_options(list(command))
-        _check(argv, "*")
-        lines = [_globals(opts) + argv]
+        verb_argv = hoist_global_options(list(command))
+        lines = [_globals(opts) + verb_argv]
     for note in skipped:
         info(f"skipped {note}")
     with caller_session(opts.zenoh_config, "fleet") as session:
@@ -457,6 +499,8 @@ def run_cmd(
             raise Unreachable(f"no robot matches {robots!r}"
                               + (f" (found: {', '.join(sorted(found))})" if found else
                                  ": no agent answers on this Zenoh network"))
+        if verb_argv is not None:  # refused naming the robots it was for
+            _check(verb_argv, ", ".join(sorted(chosen)))
         moving = [ln for ln in lines if _verb(ln) in MOTION]
         if moving and not opts.yes and sys.stdin.isatty():
             names = ", ".join(sorted(chosen))
@@ -466,12 +510,19 @@ def run_cmd(
 
                 raise Refused("not confirmed; nothing moved")
             lines = [["--yes", *ln] if _verb(ln) in MOTION else ln for ln in lines]
+        report = len(lines) == 1 and _verb(lines[0]) == "report"
+        if report and "--json" not in lines[0]:  # each robot's JSON, gathered below
+            lines = [[*lines[0], "--json"]]
         jobs = [Job(r, chosen[r], lines) for r in sorted(chosen)]
         threads = [threading.Thread(target=j.run, args=(session,), daemon=True) for j in jobs]
         for t in threads:
             t.start()
         _watch(jobs, threads, opts)
     code = worst([j.code for j in jobs])
+    if report:
+        from deltoctl.cli.report_cmd import fleet_summary
+
+        fleet_summary([j.report() for j in jobs], opts.json, code)
     if opts.json:
         emit_json({"command": lines[0] if len(lines) == 1 else lines, "skipped": skipped,
                    "exit_code": code, "robots": [j.report() for j in jobs]})

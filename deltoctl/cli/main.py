@@ -29,6 +29,7 @@ EXIT_LINE = ("Exit codes: 0 ok · 1 failed · 2 usage or invalid input · 3 warn
 
 TEACH = "deltoctl.teach"  # ctx.meta key: this run shows help or completes, so verbs are taught
 ARGV = "deltoctl.argv"  # ctx.meta key: the command line, global options first
+DOCUMENT = "deltoctl.document"  # ctx.meta key: the verb's JSON document, written as it exits
 
 
 class DeltoctlGroup(TyperGroup):
@@ -81,6 +82,22 @@ class DeltoctlGroup(TyperGroup):
             raise
 
     def invoke(self, ctx: Any) -> Any:
+        """The verb, then its JSON document in the envelope that knows its exit code."""
+        code = 1
+        try:
+            result = self._invoke(ctx)
+            code = 0
+            return result
+        except typer.Exit as exc:
+            code = exc.exit_code
+            raise
+        finally:
+            if ctx.meta.get(DOCUMENT) is not None:
+                from deltoctl.cli.output import flush_document
+
+                flush_document(ctx, code)
+
+    def _invoke(self, ctx: Any) -> Any:
         try:
             return super().invoke(ctx)
         except DeltoctlError as exc:
@@ -219,7 +236,8 @@ def root(
         "--version", callback=_version, is_eager=True, help="Show the version and exit.")] = False,
 ) -> None:
     """Global options may come before or after the verb."""
-    _logging(verbose, log_file)
+    # --robot: the robot's agent refuses --log-file (a file on its computer): none is made here
+    _logging(verbose, None if robot else log_file)
     ctx.obj = Options(
         profile=profile,
         target=list(target or []),

@@ -161,13 +161,17 @@ def jog(
     record: Annotated[Path | None, typer.Option(
         "--record", metavar="FILE.mcap",
         help="Record the motion to MCAP: every block's states and each cycle's commands "
-             "(/joint_commands), for `deltoctl replay`.")] = None,
+             "(/joint_commands), for `deltoctl replay`; {time} and {serial} in its name "
+             "are filled as record fills them.")] = None,
     allow_model_mismatch: AllowMismatch = False,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Overwrite --record's file when it exists (without: exit 2).")]
+        = False,
 ) -> None:
     """Move one joint by DELTA (or --to POS), within its limits and the profile's jog step;
     more JOINT DELTA pairs move at the same time (blocks on several links at once)."""
     from deltoctl.app.motion import fail_unsettled, moving_joints, ready_to_jog
-    from deltoctl.app.recording import new_output, recorded_moves
+    from deltoctl.app.recording import new_output, planned_output, recorded_moves
 
     opts = options(ctx)
     profile = opts.load_profile()
@@ -181,9 +185,11 @@ def jog(
     moving_joints(profile, [name for name, _ in pairs])
     speed = _speed(velocity)
 
-    # a file that cannot be written is refused (exit 2) before anything opens
-    with new_output(record) if record else contextlib.nullcontext(), \
-            open_robot(opts, allow_model_mismatch, profile) as robot:
+    # a file that cannot be written, or exists, is refused (exit 2) before anything opens
+    record = planned_output(record, force) if record else None
+    with open_robot(opts, allow_model_mismatch, profile) as robot, \
+            new_output(record, robot.system, force) if record else \
+            contextlib.nullcontext() as record:
         system = robot.system
         ready_to_jog(system, [name for name, _ in pairs])  # e.g. not homed: before asking
         values = system.read()

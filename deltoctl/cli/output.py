@@ -12,15 +12,75 @@ from typing import Any
 
 import typer
 
+from deltoctl.cli.main import DOCUMENT  # root ctx.meta key: the document, until the verb exits
+
 
 def stdout_is_terminal() -> bool:
     return sys.stdout.isatty()
 
 
-def emit_json(data: Any) -> None:
+WARNINGS = "deltoctl.warnings"  # root ctx.meta key: the warnings said so far
+
+
+def emit_json(data: Any, err: bool = False) -> None:
+    """The verb's JSON document (on stderr with ``err``: a stream's, whose stdout holds its
+    frames). Inside a command it is written when the verb exits, in its envelope
+    (``envelope``), which then knows the warnings and the exit code."""
+    root = _root()
+    if root is None:
+        write_json(data, err)
+        return
+    root.meta[DOCUMENT] = (_verb(), data, err)
+
+
+def write_json(data: Any, err: bool = False) -> None:
     import json
 
-    typer.echo(json.dumps(data, indent=2, default=_jsonable))
+    if err:
+        typer.echo(json.dumps(data, separators=(",", ":"), default=_jsonable), err=True)
+    else:
+        typer.echo(json.dumps(data, indent=2, default=_jsonable))
+
+
+def envelope(verb: str, data: Any, warnings: list[str], exit_code: int,
+             profile: str | None) -> dict[str, Any]:
+    """Every verb's JSON in one shape: ``verb``, ``profile``, the data — ``blocks`` for a
+    document of blocks (its other keys kept beside them), else ``result`` —, ``warnings``
+    and ``exit_code``."""
+    named = data.get("profile") if isinstance(data, dict) else None
+    profile = named if isinstance(named, str) else profile
+    if isinstance(data, dict) and isinstance(data.get("blocks"), list):
+        body = {k: v for k, v in data.items() if k != "profile"}
+    else:
+        body = {"result": data}
+    return {"verb": verb, "profile": profile, **body, "warnings": list(warnings),
+            "exit_code": exit_code}
+
+
+def flush_document(ctx: Any, exit_code: int) -> None:
+    """Write the verb's pending document in its envelope, with the exit code it ends with."""
+    meta = ctx.find_root().meta
+    pending = meta.pop(DOCUMENT, None)
+    if pending is None:
+        return
+    verb, data, err = pending
+    profile = getattr(ctx.find_root().obj, "profile", None)
+    write_json(envelope(verb, data, meta.get(WARNINGS, []), exit_code, profile), err)
+
+
+def _root() -> Any:
+    from typer._click.globals import get_current_context
+
+    ctx = get_current_context(silent=True)
+    return None if ctx is None else ctx.find_root()
+
+
+def _verb() -> str:
+    """The command path of the verb running (``gpio get``)."""
+    from typer._click.globals import get_current_context
+
+    ctx = get_current_context(silent=True)
+    return "" if ctx is None else ctx.command_path.partition(" ")[2]
 
 
 def emit_json_line(data: Any) -> None:
@@ -65,8 +125,12 @@ def info(message: str) -> None:
 
 
 def warn(message: str) -> None:
-    """A warning on stderr, shown even with -q (it explains an exit code of 3)."""
+    """A warning on stderr, shown even with -q (it explains an exit code of 3); the verb's
+    JSON document lists it too."""
     typer.echo(f"warning: {message}", err=True)
+    root = _root()
+    if root is not None:
+        root.meta.setdefault(WARNINGS, []).append(message)
 
 
 def _quiet() -> bool:

@@ -25,6 +25,8 @@ def _status(output: Path, cycles: int, link: float | None) -> str:
     return f"recording {output.name}: {cycles} cycles, {size / 1e6:.1f} MB{state}"
 
 
+ForceOpt = Annotated[bool, typer.Option(
+    "--force", help="Overwrite the file when it exists (without: exit 2).")]
 FoxgloveOpt = Annotated[bool, typer.Option(
     "--foxglove", help="Serve the live values to Foxglove too (WebSocket, the topics and "
                        "messages of a recording); needs pip install 'deltoctl\\[foxglove]'.")]
@@ -79,7 +81,10 @@ def foxglove_result(live: Any) -> dict[str, Any]:
 
 def record(
     ctx: typer.Context,
-    output: Annotated[Path, typer.Argument(help="The .mcap file to write.")],
+    output: Annotated[Path, typer.Argument(
+        help="The .mcap file to write; {time} in its name becomes the start time (UTC, "
+             "20261125T211400Z), {serial} each block's device serial, or its target's "
+             "address where the device reports none (joined by +).")],
     rate: RateOpt = 100.0,
     duration: DurationOpt = None,
     allow_model_mismatch: AllowMismatch = False,
@@ -92,16 +97,18 @@ def record(
     foxglove_port: FoxglovePortOpt = 8765,
     foxglove_host: FoxgloveHostOpt = "127.0.0.1",
     foxglove_origin: FoxgloveOriginOpt = None,
+    force: ForceOpt = False,
 ) -> None:
     """Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
     valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back, 1 when
     the file could not be written to the end (disk full, file too large, removed)."""
-    from deltoctl.app.recording import check_record, driven_profile
+    from deltoctl.app.recording import check_record, driven_profile, planned_output
     from deltoctl.app.recording import record as record_robot
     from deltoctl.core.runner import interrupted_by_signals
 
     opts = options(ctx)
     check_record(output, rate, duration, gpio_type)
+    output = planned_output(output, force)  # an existing file is refused before anything opens
     bar = progress(opts, elapsed=True)
     task = bar.add_task(f"recording {output.name}", total=duration) if bar else None
 
@@ -120,7 +127,8 @@ def record(
                                tuple(robot.system.extra_states()), gpio_type)
                 sinks.append(live)
             result, links = record_robot(robot.system, output, rate, duration, gpio_type,
-                                         sinks, show if bar else None)
+                                         sinks, show if bar else None, force)
+            output = Path(result["output"])
     finally:
         if bar is not None:
             bar.stop()

@@ -6,7 +6,6 @@ import contextlib
 import hashlib
 import hmac
 import json
-import queue
 import secrets
 import threading
 import time
@@ -21,6 +20,7 @@ WEEK = 7 * 86400.0  # a query's timeout: a verb (a stream) may run for long
 # s to wait for the verb's exit after a cancel: beyond the agent's SIGKILL at 6 s
 CANCEL_GRACE = 8.0
 KEY_BYTES = 16  # the heartbeat key's size
+POLL = 0.005  # s between two looks at a verb's replies when none is waiting
 
 
 def sign(key_: bytes, rid: str, what: str, number: int) -> bytes:
@@ -105,7 +105,9 @@ class RemoteCall:
     def run(self) -> int:
         zenoh = zenoh_module()
         s, live, robot = self.session, self.session.liveliness(), self.robot
-        watch = live.declare_subscriber(key(robot, "agent", "*"), self._on_agent)
+        # channels, read from this thread: Zenoh's threads never call into Python, which
+        # may be shutting down when they do (an abort at exit, "exception not rethrown")
+        watch = live.declare_subscriber(key(robot, "agent", "*"))
         if not agents(s, robot):
             watch.undeclare()
             raise Unreachable(f"robot {robot}: no agent answers",
@@ -116,14 +118,12 @@ class RemoteCall:
                                    priority=zenoh.Priority.REAL_TIME)
         beats = threading.Thread(target=self._beat, args=(beat,), daemon=True)
         beats.start()
-        replies: queue.Queue[Any] = queue.Queue()
         try:
-            handler = zenoh.handlers.Callback(replies.put, lambda: replies.put(None))
-            s.get(key(robot, "run"), handler,
-                  payload=json.dumps({"id": self.rid, "argv": self.argv,
-                                      "key": self.key.hex()}),
-                  consolidation=zenoh.ConsolidationMode.NONE, timeout=WEEK)
-            return self._collect(replies)
+            replies = s.get(key(robot, "run"),
+                            payload=json.dumps({"id": self.rid, "argv": self.argv,
+                                                "key": self.key.hex()}),
+                            consolidation=zenoh.ConsolidationMode.NONE, timeout=WEEK)
+            return self._collect(replies, watch)
         finally:
             self.done.set()
             beats.join()
@@ -138,25 +138,29 @@ class RemoteCall:
                 self.session.put(key(self.robot, "cancel", self.rid),
                                  sign(self.key, self.rid, "cancel", 0))
 
-    def _collect(self, replies: queue.Queue[Any]) -> int:
+    def _collect(self, replies: Any, watch: Any) -> int:
+        """The verb's replies as they come (the channel polled), until its query ends."""
+        closed = zenoh_module().ZError  # what the channel raises once the query has ended
         code: int | None = None
         gone_at: float | None = None
         while True:
             try:
-                reply = replies.get(timeout=0.05)
-            except queue.Empty:
-                now = time.monotonic()
-                if self.agent_gone.is_set() and gone_at is None:
-                    gone_at = now  # replies sent before it left may still be on their way
-                if (gone_at and now - gone_at > 0.3) or (
-                        self.cancelled_at and now - self.cancelled_at > CANCEL_GRACE):
-                    break
-                continue
+                reply = replies.try_recv()
+                if reply is None:
+                    self._watch_agent(watch)
+                    now = time.monotonic()
+                    if self.agent_gone.is_set() and gone_at is None:
+                        gone_at = now  # replies sent before it left may still be on their way
+                    if (gone_at and now - gone_at > 0.3) or (
+                            self.cancelled_at and now - self.cancelled_at > CANCEL_GRACE):
+                        break
+                    time.sleep(POLL)
+                    continue
+            except closed:
+                break
             except KeyboardInterrupt:
                 self.cancel()
                 continue
-            if reply is None:
-                break
             if reply.ok is None:
                 message = reply.err.payload.to_string() if reply.err is not None else "?"
                 raise DeltoctlError(f"robot {self.robot}: {message}")
@@ -188,9 +192,12 @@ class RemoteCall:
             with contextlib.suppress(Exception):
                 publisher.put(sign(self.key, self.rid, "alive", number))
 
-    def _on_agent(self, sample: Any) -> None:
-        if sample.kind == zenoh_module().SampleKind.DELETE:
-            self.agent_gone.set()
+    def _watch_agent(self, watch: Any) -> None:
+        """The agent's liveliness token gone: it stopped (or the link to it is lost)."""
+        delete = zenoh_module().SampleKind.DELETE
+        while (sample := watch.try_recv()) is not None:
+            if sample.kind == delete:
+                self.agent_gone.set()
 
 
 @contextlib.contextmanager

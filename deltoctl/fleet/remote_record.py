@@ -33,6 +33,8 @@ NAN = float("nan")
 STATUS = "/connection_status"
 # the stream's last line on stderr: how many cycles the robot ran
 SAMPLES = re.compile(r"(\d+) samples of \d+ interfaces")
+# the figures of the robot's own loop a remote record reports, as a local record does
+ROBOT_LOOP = ("lateness_p50_ms", "lateness_p99_ms", "packets", "errors", "error_rate_perc")
 
 
 def agent_info(session: Any, robot: str, wait: float = FOUND_WAIT) -> dict[str, Any]:
@@ -100,9 +102,10 @@ class RemoteRecord:
     def __init__(self, session: Any, robot: str, output: Path, rate: float,
                  duration: float | None, options: list[str], gpio_type: str = "group-values",
                  allow_model_mismatch: bool = False,
-                 err: Callable[[bytes], None] = lambda _: None,
+                 err: Callable[[bytes], None] = lambda _: None, force: bool = False,
                  opened: Callable[[], None] = lambda: None) -> None:
         self.session, self.robot, self.output = session, robot, output
+        self.force = force  # overwrite an existing file
         self.opened = opened  # called once the file is created (the first frame came)
         self.rate, self.duration, self.options = rate, duration, list(options)
         self.gpio_type, self.err = gpio_type, err
@@ -115,6 +118,7 @@ class RemoteRecord:
         self.cancelled = threading.Event()
         self.cycles = 0
         self.robot_cycles: int | None = None
+        self.robot_loop: dict[str, float] = {}  # the robot's lateness and packet figures
         self.first_ns = self.last_ns = 0
         self.periods = array("q")
         self.bad_lines = 0
@@ -135,6 +139,7 @@ class RemoteRecord:
             return code
         if self.cancelled.is_set():  # Ctrl-C before the stream started: no file
             return 130
+        self._name_output(identities)
         self.metadata = {"identify": identities, "deltoctl": {"version": __version__},
                          "remote": {"robot": self.robot, "profile": self.profile.name}}
         argv = [*self.options, "stream", "--json", "--rate", repr(self.rate), *self.mismatch]
@@ -188,6 +193,19 @@ class RemoteRecord:
             return None, code or 1
         return identities, code
 
+    def _name_output(self, identities: dict[str, str]) -> None:
+        """``{serial}`` in the file's name, from the blocks the robot identified; the file
+        refused when it exists (without ``force``)."""
+        from deltoctl.app.recording import SERIAL, block_serial, output_path, refuse_existing
+
+        if SERIAL in self.output.name:
+            serials = []
+            for name, text in identities.items():
+                ident = json.loads(text)
+                serials.append(block_serial(name, ident.get("target"), ident))
+            self.output = output_path(self.output, serials)
+        refuse_existing(self.output, self.force)
+
     # -- frames -----------------------------------------------------------------------------
 
     def _frame(self, line: bytes) -> None:
@@ -235,11 +253,25 @@ class RemoteRecord:
         self.opened()
 
     def _error_line(self, line: bytes) -> None:
+        if line.startswith(b'{"verb"'):  # the stream's document: the robot's loop
+            self._stream_document(line)
+            return
         found = SAMPLES.fullmatch(line.decode(errors="replace").strip())
         if found:  # said by this side, as a local record says it
             self.robot_cycles = int(found.group(1))
         else:
             self.err(line + b"\n")
+
+    def _stream_document(self, line: bytes) -> None:
+        """The robot's loop figures a local record reports (lateness, packets, errors), from
+        the stream's closing document; what is not a number of its is left out."""
+        try:
+            loop = json.loads(line)["result"]["loop"]
+        except (ValueError, KeyError, TypeError):
+            return
+        if isinstance(loop, dict):
+            self.robot_loop = {k: loop[k] for k in ROBOT_LOOP if isinstance(
+                loop.get(k), (int, float)) and not isinstance(loop.get(k), bool)}
 
     # -- the end ----------------------------------------------------------------------------
 
@@ -264,7 +296,8 @@ class RemoteRecord:
 
     def summary(self) -> dict[str, Any]:
         """The robot's loop as its cycle times tell it: rate, cycles, period jitter, and the
-        cycles it ran against those written here."""
+        cycles it ran against those written here; its lateness and packet figures as its
+        stream's document says them (0 from an agent that sends none)."""
         period_ns = 1e9 / self.rate
         span = (self.last_ns - self.first_ns) / 1e9
         jitter = sorted(abs(p - period_ns) for p in self.periods)
@@ -273,11 +306,16 @@ class RemoteRecord:
             return round(jitter[min(len(jitter) - 1, round(q * (len(jitter) - 1)))] / 1e6,
                          4) if jitter else 0.0
 
+        robot = {k: self.robot_loop.get(k, 0) for k in ROBOT_LOOP}
         return {"requested_rate": self.rate,
                 "real_rate": round((self.cycles - 1) / span, 2) if span > 0 else 0.0,
                 "cycles": self.cycles,
                 "deadline_misses": sum(1 for p in self.periods if p >= 2 * period_ns),
+                "lateness_p50_ms": robot["lateness_p50_ms"],
+                "lateness_p99_ms": robot["lateness_p99_ms"],
                 "period_jitter_p50_ms": ms(0.5), "period_jitter_p99_ms": ms(0.99),
+                "packets": robot["packets"], "errors": robot["errors"],
+                "error_rate_perc": robot["error_rate_perc"],
                 "robot": self.robot, "robot_cycles": self.robot_cycles,
                 "cycles_not_received": max(0, (self.robot_cycles or 0) - self.cycles)}
 

@@ -173,6 +173,33 @@ class DeltoDriver(Driver):
                 self.configured_model, info.model_id, info.firmware, sensor, mask, short,
                 direction, "revised" if revised else "legacy")
             self.connected = True
+        self._warn_sensor_mismatch(sensor, short)
+
+    def _warn_sensor_mismatch(self, sensor: int, short: bool) -> None:
+        """A warning (exit 3) when the gripper's fingertip sensors are not the profile's: the
+        declared fingertip interfaces its replies leave without values, named."""
+        if not self.fingertip_sensor:
+            return  # said in __init__: no fingertip values are asked for
+        filled = set(self._reply_plan[2])
+        missing = []  # each sensor's interfaces without values: sensor/* when none has one
+        for s in [*self.ft_sensors, *self.tactile_sensors]:
+            names = [i.name for i in s.state_interfaces if f"{s.name}/{i.name}" not in filled]
+            if names:
+                missing.append(f"{s.name}/" + ("*" if len(names) == len(s.state_interfaces)
+                                               else ",".join(names)))
+        if not missing:
+            return
+        declared = ", ".join(sorted({_grid_label(s) for s in self.tactile_sensors}))
+        profile = " and ".join(filter(None, [
+            "F/T sensors" if self.ft_sensors else "",
+            f"tactile grids ({declared})" if self.tactile_sensors else ""]))
+        reported = sensor_label(sensor) + (" (implied by its short version reply)"
+                                           if short else "")
+        message = (f"{self.hw.name}: fingertip sensor mismatch: the profile declares "
+                   f"{profile}, the gripper at {self.host}:{self.port} reports {reported}: "
+                   f"no values for {'; '.join(missing)}")
+        if message not in self.warnings:
+            self.warnings.append(message)
 
     def detect(self) -> dict:
         """Sensors, finger mask and GPIO as the gripper reports them, against the profile."""
