@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 
 def test_bench_loop_reports_stages(cli):
     result = cli("bench", "loop", "--rate", "200", "--duration", "0.3", "--unpaced", "0.2",
@@ -36,3 +38,26 @@ def test_bench_i2c_sets_the_tool_against_the_wire(cli):
     assert report["wire_us"] == 180.0  # 72 bits at 400 kHz
     assert report["deltoctl_us"] > 0 and report["smbus2_loop_us"] > 0
     assert "goal_overhead_le_25pct" in report
+
+
+def test_bench_loop_reports_its_own_cost_per_hand(cli):
+    """The loop thread's CPU per cycle and per hand, its wake-ups, and (strace there) its
+    system calls per cycle: each hand's GET_DATA and SET_DUTY are one send each."""
+    import shutil
+
+    result = cli("bench", "loop", "--hands", "2", "--rate", "200", "--duration", "0.5",
+                 "--unpaced", "0", "--json")
+    assert result.exit_code == 0, result.stderr
+    doc = json.loads(result.stdout)
+    paced = doc.get("result", doc)["hands"]["2"]["paced"]
+    assert paced["loop_thread_cpu_us_per_cycle"] > 0
+    assert paced["loop_cpu_us_per_hand_cycle"] == \
+        pytest.approx(paced["loop_thread_cpu_us_per_cycle"] / 2, abs=0.1)
+    assert paced["loop_wakeups_per_cycle"] >= 0.5  # at 200 Hz the loop sleeps between cycles
+    calls = doc.get("result", doc)["hands"]["2"]["syscalls"]
+    if shutil.which("strace") is None:
+        assert calls is None
+        return
+    assert calls["cycles"] > 0 and calls["per_cycle"] >= 4
+    sends = sum(n for name, n in calls["by_call"].items() if name.startswith("send"))
+    assert sends == pytest.approx(4, abs=0.05)  # 2 hands × 2 sends

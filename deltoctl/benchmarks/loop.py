@@ -9,6 +9,7 @@ import dataclasses
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -173,6 +174,38 @@ def _run(system: Any, rate: float, duration: float, mcap_path: Path,
     from deltoctl.record.recorder_process import RecorderProcess
 
     timing = {"codec": 0.0, "socket": 0.0, "recording": 0.0, "write": 0.0}
+    write = _timed_write(system, timing)
+    recorded = dataclasses.replace(system.profile, hardware=[m.hw for m in system])
+    sinks: list[Sink] = []
+    live = client = None
+    if foxglove:
+        live, client = _live_view(recorded, system)
+        sinks.append(_Timed(live, timing, "foxglove"))
+    recorder = RecorderProcess(mcap_path, recorded, {})
+    before = _Usage()
+    try:
+        loop = run_cycles(system, rate, duration, [_Recording(recorder, timing), *sinks], write)
+    finally:
+        for m in system:
+            m.driver.timing = None
+        if live is not None:
+            live.stop()
+    used = before.since()
+    n = max(loop.cycles, 1)
+    return {
+        **_cycle_figures(loop, rate, used, len(system.members)),
+        "recorder_process_cpu_us_per_cycle": round(recorder.cpu_seconds / n * 1e6, 1),
+        "stage_us_per_cycle": {k: round(v / n * 1e6, 1) for k, v in timing.items()},
+        "mcap_bytes": mcap_path.stat().st_size,
+        "mcap_messages": sum(recorder.counts.values()),
+        "errors": system.stats["errors"],
+        **({"foxglove": _foxglove_report(live, client)} if live and client else {}),
+    }
+
+
+def _timed_write(system: Any, timing: dict[str, float]) -> Callable[[dict[str, float]], None]:
+    """The cycle's write, zero efforts to every hand, timed; each driver times its read into
+    ``timing`` too."""
     hands = [(m.driver, {f"{j.name}/effort": 0.0 for j in m.hw.joints}) for m in system]
     for driver, _ in hands:
         driver.timing = timing
@@ -183,46 +216,102 @@ def _run(system: Any, rate: float, duration: float, mcap_path: Path,
             driver.write(efforts)
         timing["write"] += time.perf_counter() - t0
 
-    recorded = dataclasses.replace(system.profile, hardware=[m.hw for m in system])
-    sinks: list[Sink] = []
-    live = client = None
-    if foxglove:
-        from deltoctl.record.foxglove_live import FoxgloveLive
+    return write
 
-        live = FoxgloveLive("127.0.0.1", 0)
-        try:
-            live.begin(recorded, tuple(system.extra_states()))
-            client = _foxglove_client(live.url, len(live.recorder.channels))
-        except BaseException:
-            live.stop()
-            raise
-        sinks.append(_Timed(live, timing, "foxglove"))
-    recorder = RecorderProcess(mcap_path, recorded, {})
-    cpu0 = time.process_time()
-    ticks = _cpu_ticks()
+
+def _live_view(recorded: Profile, system: Any) -> tuple[Any, subprocess.Popen]:
+    """The Foxglove live view of the run and a client subscribed to every topic."""
+    from deltoctl.record.foxglove_live import FoxgloveLive
+
+    live = FoxgloveLive("127.0.0.1", 0)
     try:
-        loop = run_cycles(system, rate, duration, [_Recording(recorder, timing), *sinks], write)
-    finally:
-        for driver, _ in hands:
-            driver.timing = None
-        if live is not None:
-            live.stop()
-    cpu = time.process_time() - cpu0
-    steal = _steal_percent(ticks, _cpu_ticks())
+        live.begin(recorded, tuple(system.extra_states()))
+        return live, _foxglove_client(live.url, len(live.recorder.channels))
+    except BaseException:
+        live.stop()
+        raise
+
+
+class _Usage:
+    """What the calling thread (the loop's) and its process used from now on: CPU time,
+    and the times the thread blocked and was woken (voluntary context switches)."""
+
+    def __init__(self) -> None:
+        self.process, self.thread = time.process_time(), time.thread_time()
+        self.ticks, self.wakeups = _cpu_ticks(), _wakeups()
+
+    def since(self) -> dict[str, Any]:
+        return {"process_cpu": time.process_time() - self.process,
+                "thread_cpu": time.thread_time() - self.thread,
+                "wakeups": _wakeups() - self.wakeups,
+                "steal": _steal_percent(self.ticks, _cpu_ticks())}
+
+
+def _wakeups() -> int:
+    """The calling thread's voluntary context switches so far (0 where not counted)."""
+    try:
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_THREAD).ru_nvcsw
+    except (ImportError, AttributeError, OSError):
+        return 0
+
+
+def _cycle_figures(loop: LoopStats, rate: float, used: dict[str, Any], hands: int) -> dict:
+    """The loop's statistics, its rate against the requested one and its own cost: the
+    loop thread's CPU per cycle, per hand, and its wake-ups per cycle."""
     stats = loop.summary()
     n = max(stats["cycles"], 1)
     return {
         **stats,
         "achieved_fraction": round(stats["real_rate"] / rate, 4) if rate else None,
-        "cpu_us_per_cycle": round(cpu / n * 1e6, 1),
-        "recorder_process_cpu_us_per_cycle": round(recorder.cpu_seconds / n * 1e6, 1),
-        "stage_us_per_cycle": {k: round(v / n * 1e6, 1) for k, v in timing.items()},
-        "mcap_bytes": mcap_path.stat().st_size,
-        "mcap_messages": sum(recorder.counts.values()),
-        "cpu_steal_percent": steal,
-        "errors": system.stats["errors"],
-        **({"foxglove": _foxglove_report(live, client)} if live and client else {}),
+        "cpu_us_per_cycle": round(used["process_cpu"] / n * 1e6, 1),
+        "loop_thread_cpu_us_per_cycle": round(used["thread_cpu"] / n * 1e6, 1),
+        "loop_cpu_us_per_hand_cycle": round(used["thread_cpu"] / n / hands * 1e6, 1),
+        "loop_wakeups_per_cycle": round(used["wakeups"] / n, 2),
+        "cpu_steal_percent": used["steal"],
     }
+
+
+def _syscalls(system: Any, rate: float, duration: float, mcap_path: Path) -> dict | None:
+    """The loop thread's system calls per cycle, by name, counted by ``strace -c`` attached
+    to it during a paced run of its own (tracing slows every call: the run's timing is not
+    reported). None where strace is missing or may not attach."""
+    import shutil
+    import signal
+    import threading
+
+    strace = shutil.which("strace")
+    if strace is None:
+        return None
+    proc = subprocess.Popen([strace, "-c", "-p", str(threading.get_native_id())],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    attached = proc.stderr.readline() if proc.stderr else ""  # "Process N attached"
+    if "attached" not in attached:
+        proc.kill()
+        proc.communicate()
+        return None
+    try:
+        run = _run(system, rate, duration, mcap_path)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        table = proc.communicate(timeout=30)[1]
+    calls = _strace_counts(table)
+    n = max(run["cycles"], 1)
+    return {"cycles": run["cycles"],
+            "per_cycle": round(sum(calls.values()) / n, 2),
+            "by_call": {name: round(count / n, 2) for name, count
+                        in sorted(calls.items(), key=lambda c: -c[1]) if count / n >= 0.01}}
+
+
+def _strace_counts(table: str) -> dict[str, int]:
+    """``strace -c``'s summary → calls by system call name."""
+    calls = {}
+    for line in table.splitlines():
+        parts = line.split()  # % time, seconds, usecs/call, calls, [errors], syscall
+        if len(parts) in (5, 6) and parts[3].isdigit() and parts[-1] != "total":
+            calls[parts[-1]] = int(parts[3])
+    return calls
 
 
 def _foxglove_report(live: Any, client: subprocess.Popen) -> dict:
@@ -251,6 +340,10 @@ def measure(prof: Profile, rate: float, duration: float, unpaced: float,
 
     from deltoctl.core.system import System
 
+    if foxglove:
+        from deltoctl.record.foxglove_live import load_foxglove
+
+        load_foxglove()  # the extra is there, before any device is started
     results: dict[str, Any] = {"profile": prof.name, "python": sys.version.split()[0],
                                "idle_loop": _idle_loop(rate, duration), "hands": {}}
     with contextlib.ExitStack() as stack:
@@ -268,6 +361,8 @@ def measure(prof: Profile, rate: float, duration: float, unpaced: float,
             with System(robot, targets) as system:
                 run = {"endpoints": endpoints[:n],
                        "paced": _run(system, rate, duration, tmp / f"paced-{n}.mcap")}
+                run["syscalls"] = _syscalls(system, rate, min(duration, 2.0),
+                                            tmp / f"traced-{n}.mcap")
                 if foxglove:
                     run["paced_foxglove"] = _run(system, rate, duration,
                                                  tmp / f"foxglove-{n}.mcap", foxglove=True)

@@ -32,12 +32,22 @@ def bench_loop(
     its own `sim serve` over loopback TCP, through the cycle runner, recording to MCAP; beside
     it, the same loop idle (what this machine allows). With --foxglove, the paced run again
     while the live view serves it to a Foxglove WebSocket client in another process."""
-    import math
-    import os
-
     from deltoctl.benchmarks.loop import measure
 
     opts = options(ctx)
+    counts = _loop_options(rate, duration, unpaced, hands)
+    prof = opts.load_profile(opts.profile or "dg-5f-right")
+    results = measure(prof, rate, duration, unpaced, counts, foxglove)
+    if opts.json:
+        emit_json(results)
+        return
+    _say_loop(results, counts, rate)
+
+
+def _loop_options(rate: float, duration: float, unpaced: float, hands: str) -> tuple[int, ...]:
+    """The options checked; the numbers of hands, sorted."""
+    import math
+
     if not all(math.isfinite(x) for x in (rate, duration, unpaced)) or rate <= 0 \
             or duration <= 0 or unpaced < 0:
         raise InvalidInput("--rate and --duration must be positive, --unpaced not negative")
@@ -47,48 +57,55 @@ def bench_loop(
         raise InvalidInput(f"--hands takes numbers, e.g. 1,2,4; got {hands!r}") from None
     if not counts or not all(1 <= n <= 16 for n in counts):
         raise InvalidInput("--hands takes 1 to 16 hands")
-    prof = opts.load_profile(opts.profile or "dg-5f-right")
-    if foxglove:
-        from deltoctl.record.foxglove_live import load_foxglove
+    return counts
 
-        load_foxglove()  # the extra is there, before any device is started
-    results = measure(prof, rate, duration, unpaced, counts, foxglove)
-    if opts.json:
-        emit_json(results)
-        return
-    say(f"bench loop: {prof.name}, {', '.join(map(str, counts))} hand(s), each against its own "
-        f"sim serve ({os.cpu_count()} CPUs)")
+
+def _say_loop(results: dict, counts: tuple[int, ...], rate: float) -> None:
+    import os
+
+    say(f"bench loop: {results['profile']}, {', '.join(map(str, counts))} hand(s), each "
+        f"against its own sim serve ({os.cpu_count()} CPUs)")
     idle = results["idle_loop"]
     say(f"  baseline: an idle {rate:g} Hz loop here reaches {100 * idle['achieved_fraction']:.2f}"
         f" %, lateness p99 {idle['lateness_p99_ms']:.3f} ms, misses {idle['deadline_misses']}"
-        + (f", CPU steal {idle['cpu_steal_percent']} %"
-           if idle["cpu_steal_percent"] is not None else ""))
+        + _steal(idle))
     for n, run in results["hands"].items():
         for name in ("paced", "paced_foxglove", "unpaced"):
-            if name not in run:
-                continue
-            r = run[name]
-            label = "+foxglove" if name == "paced_foxglove" else name
-            say(f"  {n} hand(s) {label:9} requested {r['requested_rate']:g} Hz, real "
-                f"{r['real_rate']:.1f} Hz"
-                + (f" ({100 * r['achieved_fraction']:.2f} %)" if r["achieved_fraction"] else "")
-                + f", lateness p50 {r['lateness_p50_ms']:.3f} ms p99 "
-                f"{r['lateness_p99_ms']:.3f} ms, period jitter p99 "
-                f"{r['period_jitter_p99_ms']:.3f} ms, misses {r['deadline_misses']}, errors "
-                f"{r['errors']}"
-                + (f", CPU steal {r['cpu_steal_percent']} %"
-                   if r["cpu_steal_percent"] is not None else ""))
-            stages = ", ".join(f"{k} {v:.1f}" for k, v in r["stage_us_per_cycle"].items())
-            say(f"      µs per cycle: {stages}; CPU {r['cpu_us_per_cycle']:.1f} in the loop, "
-                f"{r['recorder_process_cpu_us_per_cycle']:.1f} in the recorder process")
-            if "foxglove" in r:
-                f = r["foxglove"]
-                say(f"      Foxglove: {f['cycles_sent']} cycles sent, {f['cycles_dropped']} "
-                    f"dropped; the client got {f['client_messages']} messages, /joint_states "
-                    f"at {f['client_joint_states_per_s']:.1f} Hz (its process: "
-                    f"{f['client_cpu_percent']} % of a CPU)")
+            if name in run:
+                _say_run(n, "+foxglove" if name == "paced_foxglove" else name, run[name])
+        calls = run.get("syscalls")
+        if calls:
+            by_call = ", ".join(f"{k} {v:g}" for k, v in calls["by_call"].items())
+            say(f"      system calls of the loop thread per paced cycle: {calls['per_cycle']:g}"
+                f" ({by_call})")
     say("  goals: " + ", ".join(f"{k}={'yes' if v else 'NO'}"
                                 for k, v in results["goals"].items()))
+
+
+def _steal(r: dict) -> str:
+    return f", CPU steal {r['cpu_steal_percent']} %" if r["cpu_steal_percent"] is not None else ""
+
+
+def _say_run(n: str, label: str, r: dict) -> None:
+    """One run's rate, lateness and jitter; its cost per cycle by stage and by process."""
+    say(f"  {n} hand(s) {label:9} requested {r['requested_rate']:g} Hz, real "
+        f"{r['real_rate']:.1f} Hz"
+        + (f" ({100 * r['achieved_fraction']:.2f} %)" if r["achieved_fraction"] else "")
+        + f", lateness p50 {r['lateness_p50_ms']:.3f} ms p99 {r['lateness_p99_ms']:.3f} ms, "
+        f"period jitter p99 {r['period_jitter_p99_ms']:.3f} ms, misses {r['deadline_misses']}, "
+        f"errors {r['errors']}" + _steal(r))
+    stages = ", ".join(f"{k} {v:.1f}" for k, v in r["stage_us_per_cycle"].items())
+    say(f"      µs per cycle: {stages}; CPU {r['cpu_us_per_cycle']:.1f} in the loop, "
+        f"{r['recorder_process_cpu_us_per_cycle']:.1f} in the recorder process")
+    say(f"      the loop thread: CPU {r['loop_thread_cpu_us_per_cycle']:.1f} µs per cycle, "
+        f"{r['loop_cpu_us_per_hand_cycle']:.1f} per hand; "
+        f"{r['loop_wakeups_per_cycle']:g} wake-ups per cycle")
+    if "foxglove" in r:
+        f = r["foxglove"]
+        say(f"      Foxglove: {f['cycles_sent']} cycles sent, {f['cycles_dropped']} "
+            f"dropped; the client got {f['client_messages']} messages, /joint_states "
+            f"at {f['client_joint_states_per_s']:.1f} Hz (its process: "
+            f"{f['client_cpu_percent']} % of a CPU)")
 
 
 @app.command("dynamixel")
