@@ -410,14 +410,25 @@ def render_html(doc: dict[str, Any]) -> str:
     return env.get_template("report.html.j2").render(r=doc, counts=counts, size=SVG_SIZE)
 
 
-def fleet_report(reports: dict[str, dict[str, Any] | None]) -> dict[str, Any]:
-    """Each robot's report in one document, the worst first."""
+def render_fleet_html(doc: dict[str, Any]) -> str:
+    import jinja2
+
+    env = jinja2.Environment(loader=jinja2.PackageLoader("deltoctl.app", "templates"),
+                             autoescape=True, trim_blocks=True, lstrip_blocks=True)
+    return env.get_template("fleet.html.j2").render(f=doc)
+
+
+def fleet_report(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Each robot's report (``fleet run report``: robot, exit_code, output, error) in one
+    document, the worst first; a robot without one fails."""
     robots = []
-    for name, doc in reports.items():
-        verdict = doc.get("verdict", FAIL) if isinstance(doc, dict) else FAIL
-        robots.append({"robot": name, "verdict": verdict,
-                       "failed": doc.get("failed", []) if isinstance(doc, dict) else [],
-                       "report": doc})
+    for run in runs:
+        doc = run.get("output")
+        ok = isinstance(doc, dict) and doc.get("kind") == "deltoctl_report"
+        robots.append({"robot": run["robot"], "exit_code": run.get("exit_code"),
+                       "verdict": doc.get("verdict", FAIL) if ok else FAIL,
+                       "failed": doc.get("failed", []) if ok else [],
+                       "error": run.get("error"), "report": doc if ok else None})
     robots.sort(key=lambda r: (SEVERITY.get(r["verdict"], 0), r["robot"]))
     verdicts = [r["verdict"] for r in robots]
     verdict = FAIL if FAIL in verdicts else WARN if WARN in verdicts else PASS

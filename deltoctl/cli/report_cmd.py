@@ -3,7 +3,7 @@ self-contained HTML file and its JSON twin."""
 
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -81,3 +81,31 @@ def report(
         for w in doc["warnings"]:
             warn(w)
         raise typer.Exit(WARNINGS)
+
+
+def fleet_summary(runs: list[dict[str, Any]], as_json: bool, code: int) -> None:
+    """``fleet run report``: every robot's report gathered in one fleet report (a table per
+    robot, the worst first), fleet-report-<time>.html and its JSON twin; exits with the
+    fleet's worst code."""
+    import json
+
+    from deltoctl.app.report import fleet_report, render_fleet_html
+
+    for run in runs:  # each robot's report, out of the JSON envelope a verb's may come in
+        out = run.get("output")
+        if isinstance(out, dict) and out.get("verb") == "report" and "result" in out:
+            run["output"] = out["result"]
+    doc = fleet_report(runs)
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    html = Path(f"fleet-report-{stamp}.html")
+    html.write_text(render_fleet_html(doc), encoding="utf-8")
+    html.with_suffix(".json").write_text(json.dumps(doc, indent=2, default=str) + "\n",
+                                         encoding="utf-8")
+    if as_json:
+        emit_json(doc)
+    else:
+        table(None, ["robot", "verdict", "failed"],
+              [[r["robot"], r["verdict"], ", ".join(r["failed"]) or r["error"] or ""]
+               for r in doc["robots"]])
+    info(f"fleet report: {html} and {html.with_suffix('.json').name}")
+    raise typer.Exit(code)
