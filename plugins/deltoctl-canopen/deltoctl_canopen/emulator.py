@@ -1,0 +1,342 @@
+"""Emulated CiA 402 drives: real CANopen slaves on a local hub.
+
+Each node is canopen's ``LocalNode`` — its SDO server, NMT slave (boot-up, heartbeat from
+0x1017), EMCY producer and PDO maps — over the object dictionary of the node's EDS, with a
+``Drive402`` behind the objects a drive computes (statusword, positions, velocities, error
+code). RPDOs are applied when they come (types 254/255) or at the next SYNC (0-240); TPDOs go
+out on SYNC (types 1-240) or when their data change (254/255), in OPERATIONAL only; node
+guarding requests are answered. A node can be missing, report another product code, stall
+(its following error faults it: EMCY 0x8611) or fall silent after a while (no heartbeat,
+no reply).
+
+The nodes of a bus and deltoctl meet on a ``HubServer`` (loopback only): ``--sim`` serves it in
+the command's process, ``deltoctl sim serve`` in a process of its own.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from deltoctl_canopen.drive import Drive402
+
+if TYPE_CHECKING:
+    from deltoctl.profile.model import Hardware
+    from deltoctl.sim.serve import ServeContext
+
+
+TICK = 0.005  # s: event TPDOs, the following error, a node falling silent
+SAVE_SIGNATURE = 0x65766173  # "save", written to 0x1010
+OVER_CURRENT = 0x2310  # the error code of --drive-fault
+
+
+@dataclass
+class NodeFaults:
+    product_code: int | None = None  # report another product than the EDS's
+    stall: bool = False  # the axis cannot move: a move faults on its following error
+    silent_after: float | None = None  # s after start: the node stops (no heartbeat, no reply)
+    fault_at_start: int | None = None  # an error code the drive boots into Fault with
+
+
+class EmulatedDrive:
+    def __init__(self, network: Any, node_id: int, od: Any, faults: NodeFaults) -> None:
+        from canopen import LocalNode
+
+        self.network, self.faults = network, faults
+        self.lock = threading.RLock()
+        self.node = LocalNode(node_id, od)
+        self.drive = self._new_drive()
+        self.started = time.monotonic()
+        self.silent = False
+        self.saved = 0  # how many times 0x1010 was written
+        self._sync_rpdo: list[tuple[Any, bytes]] = []
+        self._sent: dict[int, bytes] = {}
+        self._pdo_dirty = True
+        self._toggle = 0
+        self.node.add_read_callback(self._on_read)
+        self.node.add_write_callback(self._on_write)
+        network.add_node(self.node)
+        network.subscribe(0x000, self._after_nmt)
+        network.subscribe(0x080, self._on_sync)
+        network.subscribe(0x700 + node_id, self._on_guard)
+        if faults.product_code is not None:
+            self.node.data_store.setdefault(0x1018, {})[2] = \
+                faults.product_code.to_bytes(4, "little")
+
+    def _new_drive(self) -> Drive402:
+        drive = Drive402(time.monotonic(), on_fault=self._emcy)
+        od = self.node.object_dictionary
+        for index, sub in drive.params:
+            with contextlib.suppress(KeyError):
+                obj = od[index] if sub == 0 and not hasattr(od[index], "subindices") \
+                    else od[index][sub]
+                if obj.default is not None:
+                    drive.params[index, sub] = int(obj.default)
+        drive.stalled = self.faults.stall
+        if self.faults.fault_at_start:
+            drive.fault(self.faults.fault_at_start, time.monotonic())
+        return drive
+
+    def boot(self) -> None:
+        """Power on: boot-up message, then PRE-OPERATIONAL (heartbeat as 0x1017 says)."""
+        self.node.nmt.send_command(0x82)
+        self.node.nmt.state = "PRE-OPERATIONAL"
+
+    # -- the object dictionary ---------------------------------------------------------------
+    def _on_read(self, index: int, subindex: int, od: Any) -> Any:
+        with self.lock:
+            return self.drive.read(index, subindex, time.monotonic()) \
+                if self._live(index) else None
+
+    @staticmethod
+    def _live(index: int) -> bool:
+        return index >= 0x6000 or index in (0x1001,)
+
+    def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+        from canopen.sdo import SdoAbortedError
+
+        if index == 0x1010:
+            if int.from_bytes(data[:4], "little") != SAVE_SIGNATURE:
+                raise SdoAbortedError(0x08000020)
+            self.saved += 1
+            return
+        if 0x1400 <= index <= 0x1BFF:
+            self._pdo_dirty = True
+            return
+        if od.data_type in _NUMBERS and index >= 0x6000:
+            value = od.decode_raw(data)
+            low, high = od.min, od.max
+            if (low is not None and value < low) or (high is not None and value > high):
+                raise SdoAbortedError(0x06090030)
+            with self.lock:
+                self.drive.write(index, subindex, int(value), time.monotonic())
+            if index == 0x6040:
+                self.send_event_pdos()
+
+    def _emcy(self, code: int) -> None:
+        with contextlib.suppress(Exception):
+            self.node.emcy.send(code, 0x01)
+
+    # -- NMT, node guarding -------------------------------------------------------------------
+    def _after_nmt(self, can_id: int, data: bytes, timestamp: float) -> None:
+        if len(data) < 2 or data[1] not in (0, self.node.id) or self.silent:
+            return
+        if data[0] == 0x81:  # reset node: the application's values too
+            self.node.data_store.clear()
+            if self.faults.product_code is not None:
+                self.node.data_store[0x1018] = {2: self.faults.product_code.to_bytes(4,
+                                                                                  "little")}
+            with self.lock:
+                self.drive = self._new_drive()
+        if data[0] in (0x81, 0x82):
+            self._pdo_dirty = True
+            self.node.nmt.state = "PRE-OPERATIONAL"
+        if data[0] == 0x01:
+            self._sent.clear()
+            self.send_event_pdos()
+
+    def _on_guard(self, can_id: int, data: bytes, timestamp: float) -> None:
+        if data or self.silent:  # a heartbeat has a byte; a guarding request none
+            return
+        state = {"STOPPED": 4, "OPERATIONAL": 5, "PRE-OPERATIONAL": 127}.get(
+            self.node.nmt.state, 0)
+        self.network.send_message(0x700 + self.node.id, bytes([state | self._toggle]))
+        self._toggle ^= 0x80
+
+    # -- PDOs -----------------------------------------------------------------------------------
+    def _maps(self) -> tuple[list[Any], list[Any]]:
+        """The enabled TPDO and RPDO maps, read again after their objects were written."""
+        node = self.node
+        if self._pdo_dirty:
+            self._pdo_dirty = False
+            for maps in (node.tpdo, node.rpdo):
+                for pdo in maps.map.values():
+                    with contextlib.suppress(Exception):
+                        if pdo.enabled:
+                            self.network.unsubscribe(pdo.cob_id, self._on_rpdo)
+                    with contextlib.suppress(Exception):  # a PDO the EDS does not have
+                        pdo.read(from_od=False)
+            for pdo in node.rpdo.map.values():
+                if pdo.enabled and pdo.cob_id:
+                    self.network.subscribe(pdo.cob_id, self._on_rpdo)
+        return ([p for p in node.tpdo.map.values() if p.enabled and p.cob_id and p.map],
+                [p for p in node.rpdo.map.values() if p.enabled and p.cob_id and p.map])
+
+    def _operational(self) -> bool:
+        return self.node.nmt.state == "OPERATIONAL" and not self.silent
+
+    def _on_rpdo(self, can_id: int, data: bytes, timestamp: float) -> None:
+        if not self._operational():
+            return
+        for pdo in self._maps()[1]:
+            if pdo.cob_id == can_id:
+                if pdo.trans_type is not None and pdo.trans_type <= 240:
+                    self._sync_rpdo.append((pdo, bytes(data)))
+                else:
+                    self._apply(pdo, bytes(data))
+
+    def _apply(self, pdo: Any, data: bytes) -> None:
+        from canopen.sdo import SdoAbortedError
+
+        pdo.data = bytearray(data.ljust(len(pdo.data), b"\0"))
+        for var in pdo.map:
+            with contextlib.suppress(SdoAbortedError, KeyError):
+                self.node.set_data(var.index, var.subindex, var.get_data())
+
+    def _on_sync(self, can_id: int, data: bytes, timestamp: float) -> None:
+        if not self._operational():
+            return
+        pending, self._sync_rpdo = self._sync_rpdo, []
+        for pdo, payload in pending:
+            self._apply(pdo, payload)
+        for pdo in self._maps()[0]:
+            if pdo.trans_type is not None and 1 <= pdo.trans_type <= 240:
+                self._transmit(pdo)
+
+    def _pack(self, pdo: Any) -> bytes:
+        for var in pdo.map:
+            var.set_data(self.node.get_data(var.index, var.subindex))
+        return bytes(pdo.data)
+
+    def _transmit(self, pdo: Any) -> None:
+        with contextlib.suppress(Exception):
+            data = self._pack(pdo)
+            self._sent[pdo.cob_id] = data
+            self.network.send_message(pdo.cob_id, data)
+
+    def send_event_pdos(self) -> None:
+        """TPDOs of type 254/255 whose data changed since they were last sent."""
+        if not self._operational():
+            return
+        for pdo in self._maps()[0]:
+            if pdo.trans_type is not None and pdo.trans_type >= 254:
+                with contextlib.suppress(Exception):
+                    if self._pack(pdo) != self._sent.get(pdo.cob_id):
+                        self._transmit(pdo)
+
+    def tick(self, now: float) -> None:
+        after = self.faults.silent_after
+        if after is not None and not self.silent and now - self.started >= after:
+            self.silent = True  # a dead node: no heartbeat, no reply, no PDO
+            self.node.nmt.stop_heartbeat()
+            self.node.remove_network()
+            return
+        with self.lock:
+            self.drive.update(now)
+        self.send_event_pdos()
+
+
+_NUMBERS: set[int] = set()
+
+
+def _number_types() -> set[int]:
+    from canopen.objectdictionary import datatypes
+
+    return set(datatypes.INTEGER_TYPES) | set(datatypes.FLOAT_TYPES)
+
+
+@dataclass
+class EmulatedBus:
+    """One CAN bus: its hub, a network for its nodes, and their drives."""
+
+    hub: Any
+    network: Any
+    drives: dict[int, EmulatedDrive] = field(default_factory=dict)
+    _stop: threading.Event = field(default_factory=threading.Event)
+    _thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        return f"can://localhub/{self.hub.channel}"
+
+    def start(self) -> EmulatedBus:
+        for drive in self.drives.values():
+            drive.boot()
+        self._thread = threading.Thread(target=self._run, name="canopen-drives", daemon=True)
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        while not self._stop.wait(TICK):
+            now = time.monotonic()
+            for drive in self.drives.values():
+                drive.tick(now)
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=1)
+        for drive in self.drives.values():
+            drive.node.nmt.stop_heartbeat()
+        with contextlib.suppress(Exception):
+            self.network.disconnect()
+        self.hub.close()
+
+    def __enter__(self) -> EmulatedBus:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def start_bus(nodes: dict[int, tuple[Path, NodeFaults]], host: str = "127.0.0.1",
+              port: int = 0) -> EmulatedBus:
+    """A hub on loopback and a drive for each node ID (EDS file, faults); started."""
+    import canopen
+
+    from deltoctl_canopen import eds
+    from deltoctl_canopen.hub import HubBus, HubServer
+
+    _NUMBERS.update(_number_types())
+    hub = HubServer(host, port).start()
+    try:
+        network = canopen.Network(HubBus(channel=hub.channel))
+        network.connect()
+        bus = EmulatedBus(hub, network)
+        for node_id, (eds_path, faults) in nodes.items():
+            od = eds.load(eds_path, node_id)
+            bus.drives[node_id] = EmulatedDrive(network, node_id, od, faults)
+        return bus.start()
+    except BaseException:
+        hub.close()
+        raise
+
+
+def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
+    """Every CANopen block's drives on one hub per bus: ``{bus: can://localhub/…}``."""
+    from deltoctl_canopen.nodes import block_nodes
+
+    o = ctx.options
+    named = {option: {j.name for hw in blocks for j in ctx.named(option, hw)}
+             for option in ("missing", "stall", "drive_fault", "heartbeat_stops")}
+    by_bus: dict[str, dict[int, tuple[Path, NodeFaults]]] = {}
+    for hw in blocks:
+        nodes = by_bus.setdefault(hw.bus or hw.name, {})
+        for joint, node in block_nodes(ctx.profile, hw).items():
+            if joint in named["missing"]:
+                continue
+            faults = NodeFaults(
+                product_code=o.wrong_identity, stall=joint in named["stall"],
+                silent_after=o.heartbeat_stops_after if joint in named["heartbeat_stops"]
+                else None, fault_at_start=OVER_CURRENT if joint in named["drive_fault"] else None)
+            nodes[node.node_id] = (node.dcf, faults)
+        ctx.blocks[hw.name] = {"nodes": sorted(nodes)}
+    buses = {}
+    for name, nodes in by_bus.items():
+        bus = ctx.stack.enter_context(start_bus(nodes, host=_loopback(o.host)))
+        buses[name] = bus.url
+    return buses
+
+
+def _loopback(host: str) -> str:
+    """The hub listens on loopback only: any other --host is served on 127.0.0.1."""
+    import ipaddress
+
+    with contextlib.suppress(ValueError):
+        if ipaddress.ip_address(host).is_loopback:
+            return host
+    return "127.0.0.1"
