@@ -1,6 +1,8 @@
 """``bench dynamixel``: sync reads of an emulated bus in another process — deltoctl's driver
 against dynamixel-sdk's GroupSyncRead, then deltoctl against the wire's limit, paced; then the
-MH5's two buses in one System cycle against the slower bus's wire time."""
+MH5's two buses in one System cycle against the slower bus's wire time; then a bus of mixed
+models (five XM430, two XL330) at 1 kHz and 4 Mbps against its wire time, read as one Sync
+Read, one Bulk Read or a Sync Read per model, and against dynamixel-sdk's GroupBulkRead."""
 
 from __future__ import annotations
 
@@ -12,7 +14,10 @@ from typing import Any
 _SERVE_BUS = """
 import sys
 from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
-servos = [Servo(i) for i in range(1, {n} + 1)]
+from deltoctl.families.dynamixel.models import XL430_W250, by_number
+models = {models}
+servos = [Servo(i, model=by_number(models[i - 1]) if models else XL430_W250)
+          for i in range(1, {n} + 1)]
 for servo in servos:
     servo.set("Return Delay Time", 0)  # as the MH5 sets it
 server = DynamixelPtyServer(DynamixelBus(servos), pace={pace}).start()
@@ -21,9 +26,12 @@ sys.stdin.read()
 """
 
 
-def _bus_process(servos: int, pace: bool) -> tuple[subprocess.Popen, str]:
-    """An emulated bus of N servos in another process; returns (process, pty path)."""
-    proc = subprocess.Popen([sys.executable, "-c", _SERVE_BUS.format(n=servos, pace=pace)],
+def _bus_process(servos: int, pace: bool,
+                 models: list[int] | None = None) -> tuple[subprocess.Popen, str]:
+    """An emulated bus of N servos (XL430-W250s, or these model numbers) in another process;
+    returns (process, pty path)."""
+    code = _SERVE_BUS.format(n=servos, pace=pace, models=list(models or []))
+    proc = subprocess.Popen([sys.executable, "-c", code],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     return proc, proc.stdout.readline().strip() if proc.stdout else ""
 
@@ -120,6 +128,7 @@ def measure(servos: int, duration: float) -> dict:
                             "goal_ge_0_9": rate >= 0.9 * limit}
     results["paced"] = paced
     results["two_buses"] = measure_two_buses(duration)
+    results["mixed_bus"] = measure_mixed_bus(duration)
     return results
 
 
@@ -177,3 +186,122 @@ def measure_two_buses(duration: float, servos: tuple[int, int] = (10, 12),
             "both_over_slower_wire": round(both / slower, 3),
             "in_series_over_slower_wire": round(series / slower, 3),
             "goal_both_le_1_15_of_slower_wire": both <= 1.15 * slower}
+
+
+MIXED = [1020] * 5 + [1200] * 2  # five XM430-W350 and two XL330-M288
+
+
+def _mixed_driver(pty: str, baud: int) -> Any:
+    from deltoctl import registry
+    from deltoctl.core.driver import Block
+    from deltoctl.families.dynamixel.driver import DynamixelDriver
+    from deltoctl.profile.model import Component, Hardware, Profile
+
+    family = registry.get("dynamixel")
+    assert family is not None
+    hw = Hardware("bus", family=family.name, joints=[
+        Component("joint", f"j{i}", address=i, params={"model_number": str(n)})
+        for i, n in enumerate(MIXED, 1)])
+    driver = DynamixelDriver(Block(Profile("bench", hardware=[hw]), hw, family,
+                                   f"serial://{pty}?baud={baud}"))
+    driver.configure()
+    return driver
+
+
+def _read_ways(driver: Any) -> dict[str, Any]:
+    """One read of every servo's present current/load, velocity and position, three ways:
+    one Sync Read (every X model keeps them at 126), one Bulk Read, a Sync Read per model."""
+    from deltoctl.families.dynamixel import codec
+
+    ids = list(range(1, len(MIXED) + 1))
+    bulk = codec.bulk_read([(i, 126, 10) for i in ids])
+    groups = [[i for i in ids if MIXED[i - 1] == n] for n in sorted(set(MIXED))]
+
+    def bulk_read() -> int:
+        driver._send(bulk)
+        return len(codec.split_statuses(driver._collect(len(ids) * 21)))
+
+    return {"sync_read": lambda: len(driver._sync_read(126, 10, ids)),
+            "bulk_read": bulk_read,
+            "sync_read_per_model": lambda: sum(len(driver._sync_read(126, 10, g))
+                                               for g in groups)}
+
+
+def _paced_ms(read: Any, duration: float,
+              rate: float = 1000.0) -> tuple[float, float, float, int]:
+    """Reads at ``rate`` Hz for ``duration`` s: (mean, median and 99th percentile ms, the
+    reads that missed a servo)."""
+    from deltoctl.families.dynamixel.emulator import wait_until
+
+    period, times, short = 1.0 / rate, [], 0
+    start = next_at = time.perf_counter()
+    while next_at - start < duration:
+        t0 = time.perf_counter()
+        short += read() != len(MIXED)
+        times.append(time.perf_counter() - t0)
+        next_at += period
+        wait_until(next_at)  # sleeps: the emulator's process keeps the other core
+    times.sort()
+    return (sum(times) / len(times) * 1e3, times[len(times) // 2] * 1e3,
+            times[int(0.99 * (len(times) - 1))] * 1e3, short)
+
+
+def _sdk_bulk_hz(pty: str, baud: int, duration: float) -> float | None:
+    """dynamixel-sdk's GroupBulkRead of the same items, as fast as it goes."""
+    try:
+        import dynamixel_sdk as sdk
+    except ImportError:
+        return None
+    port = sdk.PortHandler(pty)
+    port.openPort()
+    port.setBaudRate(baud)
+    group = sdk.GroupBulkRead(port, sdk.PacketHandler(2.0))
+    for i in range(1, len(MIXED) + 1):
+        group.addParam(i, 126, 10)
+    cycles, start = 0, time.perf_counter()
+    while time.perf_counter() - start < duration:
+        group.txRxPacket()
+        cycles += 1
+    rate = cycles / (time.perf_counter() - start)
+    port.closePort()
+    return rate
+
+
+def measure_mixed_bus(duration: float, baud: int = 4_000_000) -> dict:
+    """Five XM430 and two XL330 on one bus paced at ``baud``: deltoctl's read of all seven
+    at 1 kHz against the wire time of one Sync Read, beside a Bulk Read and a Sync Read per
+    model; then deltoctl flat out against dynamixel-sdk's GroupBulkRead on the same bus."""
+    from deltoctl.families.dynamixel import codec
+
+    ids = list(range(1, len(MIXED) + 1))
+    replies = sum(len(codec.status(i, 0, bytes(10))) for i in ids)
+    wire = {"sync_read": len(codec.sync_read(126, 10, ids)) + replies,
+            "bulk_read": len(codec.bulk_read([(i, 126, 10) for i in ids])) + replies}
+    wire_ms = {k: n * 10 / baud * 1e3 for k, n in wire.items()}
+    proc, pty = _bus_process(len(MIXED), pace=True, models=MIXED)
+    try:
+        driver = _mixed_driver(pty, baud)
+        ways = {}
+        for name, read in _read_ways(driver).items():
+            mean, median, p99, short = _paced_ms(read, duration)
+            ways[name] = {"mean_ms": round(mean, 4), "median_ms": round(median, 4),
+                          "p99_ms": round(p99, 4), "short_reads": short}
+        flat = 1.0 / (_cycle_ms(_read_ways(driver)["sync_read"], duration) / 1e3)
+        driver.cleanup()
+        theirs = _sdk_bulk_hz(pty, baud, duration)
+    finally:
+        _stop(proc)
+    best = min(ways, key=lambda k: ways[k]["mean_ms"])
+    sync = ways["sync_read"]["mean_ms"] / wire_ms["sync_read"]
+    median = ways["sync_read"]["median_ms"] / wire_ms["sync_read"]
+    out: dict = {"baud": baud, "servos": {"XM430-W350": 5, "XL330-M288": 2}, "rate_hz": 1000,
+                 "wire_ms": {k: round(v, 4) for k, v in wire_ms.items()}, "reads": ways,
+                 "fastest": best, "sync_read_over_wire": round(sync, 3),
+                 "sync_read_median_over_wire": round(median, 3),
+                 "goal_sync_read_le_1_1_of_wire": sync <= 1.1,
+                 "deltoctl_flat_out_hz": round(flat, 1)}
+    if theirs is not None:
+        out.update({"dynamixel_sdk_bulk_read_hz": round(theirs, 1),
+                    "ratio_to_sdk": round(flat / theirs, 2),
+                    "goal_ratio_ge_2": flat >= 2 * theirs})
+    return out

@@ -145,6 +145,16 @@ def bench_dynamixel(
         f"{two['both_over_slower_wire']:.3f} × the slower bus's wire time "
         f"({max(two['wire_ms'].values()):.3f} ms); one after the other: "
         f"{two['in_series_ms']:.3f} ms = {two['in_series_over_slower_wire']:.3f} ×")
+    mixed = results["mixed_bus"]
+    say(f"  mixed bus (5 × XM430 + 2 × XL330) at 1 kHz, paced at {mixed['baud'] // 1000} kbps: "
+        + ", ".join(f"{k.replace('_', ' ')} {v['mean_ms']:.3f} ms" for k, v in
+                    mixed["reads"].items())
+        + f"; Sync Read = {mixed['sync_read_over_wire']:.3f} × its wire time "
+          f"({mixed['wire_ms']['sync_read']:.3f} ms)")
+    if "ratio_to_sdk" in mixed:
+        say(f"  flat out: deltoctl {mixed['deltoctl_flat_out_hz']:.1f} reads/s, dynamixel-sdk "
+            f"GroupBulkRead {mixed['dynamixel_sdk_bulk_read_hz']:.1f}: ratio "
+            f"{mixed['ratio_to_sdk']:.2f}")
 
 
 @app.command("i2c")
