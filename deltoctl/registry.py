@@ -455,6 +455,15 @@ def transport_of(url: str) -> Transport:
         raise InvalidInput(f"{url!r}: {exc.message}", hint=exc.hint) from None
 
 
+def trace_label(url: str) -> Callable[[str, int | None], str] | None:
+    """How the transport of ``url`` labels its packets in the trace; None when it labels
+    them by the URL, or the URL is bad (the driver says what is wrong with it)."""
+    try:
+        return transport_of(url).trace_label
+    except DeltoctlError:
+        return None
+
+
 def open_link(url: str, links: Any = None, **options: Any) -> Any:
     """The open link to ``url``, by its scheme's transport; a transport whose links are
     shared (an I2C bus: several blocks' devices on it) is opened once per System's

@@ -130,30 +130,16 @@ def packet(bus: str, direction: str, data: bytes, frame: str | None = None) -> N
                                    f"{frame}: " if frame else "", extra["hex"], extra=extra)
 
 
-def name_frames(url: str, namer: FrameNamer | None, addresses: Iterable[int] = ()) -> None:
+def name_frames(url: str, namer: FrameNamer | None, addresses: Iterable[int] = (),
+                label: Callable[[str, int | None], str] | None = None) -> None:
     """Name the frames traced on the link to ``url`` with ``namer`` (a family codec's
     ``frame_name``); on an I2C bus, those of the devices at ``addresses`` only (several
-    families may share one bus)."""
+    families may share one bus). ``label``: how the link's transport labels its packets
+    (host:port, a device on a shared bus …; None: the URL)."""
     if not PACKETS or namer is None:
         return
-    scheme = url.partition("://")[0]
-    if scheme == "tcp":
-        from deltoctl.errors import DeltoctlError
-        from deltoctl.transport.tcp import parse_tcp_url
-
-        try:
-            host, port = parse_tcp_url(url)
-        except DeltoctlError:  # the driver says what is wrong with the URL
-            return
-        _namers[f"{host}:{port}"] = namer
-    elif scheme.startswith("i2c"):
-        _namers.update({_i2c_label(url, a): namer for a in addresses})
-    else:
-        _namers[url] = namer
-
-
-def _i2c_label(url: str, address: int) -> str:
-    return f"{url} @{address:#04x}"
+    for address in list(addresses) or [None]:
+        _namers[label(url, address) if label else url] = namer
 
 
 def _name(bus: str, data: bytes) -> str | None:
@@ -192,7 +178,7 @@ def trace_i2c(bus: Any) -> None:
     run = bus._run
 
     def traced_run(address: int, *msgs: Any) -> None:
-        where = _i2c_label(bus.url, address)
+        where = f"{bus.url} @{address:#04x}"  # as the I2C transport's trace_label
         name = None
         for m in msgs:
             if not m.flags & 1:  # I2C_M_RD clear: a write

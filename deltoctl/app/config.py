@@ -30,13 +30,6 @@ ENTRY_KEYS = frozenset(FILE_KEYS) | {"min", "max", "note", "fixed", "needs", "op
 TOP_KEYS = frozenset({"deltoctl_config", "profile", "deltoctl", "taken", "blocks"})
 BLOCK_KEYS = frozenset({"family", "target", "parts"})
 PROFILE_NOTE = "set from the profile at each start: change the profile"
-PERMISSIONS = ("torque-off", "home-offset")  # what --allow names (the built-in families')
-# why a permission is asked for, and the way on (the names drivers put in ``needs``)
-NEEDS = {"torque-off": "EEPROM items take writes only with torque off, and the torque is on"}
-ALLOWED = {"torque-off": "torque goes off for the EEPROM writes, then on again where they are"}
-HINTS = {"torque-off": "switch the torque off first (deltoctl torque off), or pass --allow "
-                       "torque-off to have it switched off for the writes and on again "
-                       "(support the robot)"}
 
 Key = tuple[str, str, str]  # block, part, item
 
@@ -384,7 +377,8 @@ def permission(text: str) -> str:
 def plan(rows: list[dict[str, Any]], live: dict[str, dict[str, Any]],
          allow: frozenset[str], rules: dict[str, dict[str, Rule]] | None = None) -> None:
     """Each differing item's fate: write, or why not (read-only, skipped, refused). A safety
-    setting a family declares needs its --allow, as EEPROM with torque on needs torque-off."""
+    setting a family declares needs its --allow, as do the permissions a driver names in an
+    entry's ``needs`` (declared by its family: ``Family.permissions``)."""
     for row in rows:
         entry = live_entry(live, (row["block"], row["part"], row["item"]))
         guard = ((rules or {}).get(row["block"], {}).get(row["item"]) or (None,) * 3)[2]
@@ -441,28 +435,40 @@ def write_changes(system: System, rows: list[dict[str, Any]], allow: frozenset[s
 def refusal(refused: list[dict[str, Any]], allow: frozenset[str]) -> Refused:
     """Why a restore is refused before anything is written or anyone is asked: what, and
     the way on."""
+    from deltoctl import registry
+
+    declared = registry.permissions()  # why each is asked for, and the way on
     needs = sorted({n for r in refused for n in r["needs"] if n not in allow})
     parts = sorted({f"{r['block']}/{r['part']}" for r in refused})
-    why = " ".join(NEEDS.get(n, "") for n in needs).strip()
-    safety = [n for n in needs if n not in NEEDS]
+    why = " ".join(declared[n].why for n in needs if n in declared).strip()
+    safety = [n for n in needs if n not in declared or not declared[n].why]
     if safety:
         why = (why + " " if why else "") + (f"{', '.join(safety)}: safety setting(s), "
                                             "written only when named")
     return Refused(f"nothing written: {len(refused)} item(s) of {', '.join(parts)} are "
                   f"written only with {' and '.join(f'--allow {n}' for n in needs)}"
                   + (f" ({why})" if why else ""),
-                  hint="; ".join(HINTS.get(n, f"check the snapshot's value, then pass "
-                                              f"--allow {n}") for n in needs))
+                  hint="; ".join(_way_on(declared.get(n), n) for n in needs))
+
+
+def _way_on(permission: Any, name: str) -> str:
+    if permission is not None and permission.hint:
+        return str(permission.hint)
+    return f"check the snapshot's value, then pass --allow {name}"
 
 
 def description(writes: list[dict[str, Any]]) -> str:
     """What a restore will write, for the caller's confirmation."""
+    from deltoctl import registry
+
     parts = sorted({f"{r['block']}/{r['part']}" for r in writes})
     shown = ", ".join(parts[:6]) + (f" and {len(parts) - 6} more" if len(parts) > 6 else "")
     what = f"restore {len(writes)} value(s) to {shown}"
+    declared = registry.permissions()  # what each permission given does
     for need in sorted({n for r in writes for n in r.get("needs", ())}):
         names = sorted({r["part"] for r in writes if need in r.get("needs", ())})
-        what += f"; {', '.join(names)}: {ALLOWED.get(need, '--allow ' + need)}"
+        given = declared[need].given if need in declared else ""
+        what += f"; {', '.join(names)}: {given or '--allow ' + need}"
     return what
 
 

@@ -274,17 +274,19 @@ def _remote_record(opts: Options, robot: str, argv: list[str],
 # -- fleet list ------------------------------------------------------------------------------
 
 def _identity_text(identity: dict[str, Any]) -> str:
+    """Each block as its family shows its identity (``Family.identity_fields``: model,
+    firmware, parts …); a family not installed here, or one declaring none, by its name."""
+    from deltoctl import registry
+
     if "error" in identity:
         return f"identify failed: {identity['error']}"
     parts = []
     for block, fields in identity.items():
-        model = (fields.get("reported_model") or fields.get("model") or fields.get("chip")
-                 or fields.get("family"))
-        text = f"{block}: {model}".split(" (0x")[0]
-        if fields.get("firmware"):
-            text += f" fw {fields['firmware']}"
-        counts = [f"{v} {k}" for k, v in fields.items() if k in ("joints", "servos")]
-        parts.append(text + (f" ({', '.join(counts)})" if counts else ""))
+        family = registry.get(str(fields.get("family")))
+        shown = [template.format(fields[key]).split(" (0x")[0]  # a model's number: too long
+                 for key, template in (family.identity_fields if family else ())
+                 if fields.get(key) not in (None, "")]
+        parts.append(f"{block}: {' '.join(shown) or fields.get('family')}")
     return "; ".join(parts)
 
 

@@ -107,7 +107,8 @@ def _name_frames(profile: Profile, hw: Hardware, family: Family, url: str) -> No
     from deltoctl.profile.validate import part_address
 
     addresses = [part_address(profile, hw, c) for c in hw.components()]
-    trace.name_frames(url, family.frame_namer(), [a for a in addresses if a is not None])
+    trace.name_frames(url, family.frame_namer(), [a for a in addresses if a is not None],
+                      registry.trace_label(url))
 
 
 class System:

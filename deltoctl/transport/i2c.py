@@ -145,11 +145,6 @@ class I2CBus:
         self.smbus.close()
 
 
-def shared_bus(links: Any, url: str) -> I2CBus:
-    """The one ``I2CBus`` of a System for this URL (its devices share it)."""
-    return links.shared(url, lambda: I2CBus(open_smbus(url), url))
-
-
 def wire_bits(write: int, read: int) -> int:
     """Bits on the wire for a combined transaction: 9 bits per byte (8 + ACK), the address
     byte sent twice (write, then after the repeated start, read)."""

@@ -13,11 +13,12 @@ import math
 import time
 from typing import Any
 
+from deltoctl import registry
 from deltoctl.core.driver import Block, Driver, HomeProgress, MoveResult, Progress
 from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Refused
 from deltoctl.families.bioscara import codec
 from deltoctl.profile.model import Component
-from deltoctl.transport.i2c import I2CBus, NoAnswer, shared_bus
+from deltoctl.transport.i2c import I2CBus, NoAnswer  # what every I2C link gives
 
 POLL_HOMING = 0.1  # s between flag polls while homing, as the Bioscara driver does
 POLL_MOVE = 0.02
@@ -181,7 +182,7 @@ class BioscaraDriver(Driver):
         return {"packets": bus["packets"], "errors": bus["errors"], "reconnects": 0}
 
     def configure(self) -> None:
-        self.bus = shared_bus(self.block.links, self.url)
+        self.bus = registry.open_link(self.url, self.block.links)  # by its scheme
         self.joints = {c.name: Joint(self.bus, c) for c in self.hw.joints}
         for joint in self.joints.values():
             try:

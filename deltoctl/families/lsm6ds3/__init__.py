@@ -20,4 +20,5 @@ FAMILY = Family(
         SimOption("orientation", "numbers", "The IMU's roll,pitch[,yaw] in degrees (gravity "
                   "follows).", (0.0, 0.0), count=(2, 3), metavar="ROLL,PITCH"),
     ),
+    identity_fields=(("chip", "{}"), ("output_rate_hz", "at {} Hz")),
 )

@@ -12,10 +12,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from deltoctl import registry
 from deltoctl.core.driver import Block, Driver
 from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, ProtocolError
 from deltoctl.families.lsm6ds3 import codec
-from deltoctl.transport.i2c import I2CBus, shared_bus
+from deltoctl.transport.i2c import I2CBus  # what every I2C link gives
 
 AXES = ("x", "y", "z")
 ZERO_RATE = math.radians(codec.ZERO_RATE_DPS)  # rad/s: the gyroscope at rest, per axis
@@ -62,7 +63,7 @@ class Lsm6ds3Driver(Driver):
         return self.bus.transfer(self.address, bytes([register]), 1)[0]
 
     def configure(self) -> None:
-        self.bus = shared_bus(self.block.links, self.url)
+        self.bus = registry.open_link(self.url, self.block.links)  # by its scheme
         who = self._register(codec.WHO_AM_I)
         try:
             self.chip = codec.chip_name(who)
