@@ -245,6 +245,10 @@ def test_a_mock_joint_refuses_outside_its_envelope_and_keeps_its_state():
             system.move({"joint1": 0.7})
         with pytest.raises(InvalidInput, match="finite"):
             system.move({"joint1": NAN})
+        with pytest.raises(InvalidInput, match="at least one joint"):
+            system.move({})
+        with pytest.raises(InvalidInput, match="not a joint"):
+            system.move({"flange_vacuum": 1.0})
         assert system.read() == before  # the mock mirrors a command at once: none came
         system.move({"joint1": 0.4})
         system.set_command("joint2/position", -0.3)

@@ -360,6 +360,8 @@ class System:
         a step beyond ``max_jog_step`` from where the joint is (its last read). ``jog``
         False: a move to a known pose (``home``, a replay's start pose), within the limits
         but not bounded by ``max_jog_step``."""
+        if not targets:
+            raise InvalidInput("a move needs a target for at least one joint")
         bounded = jog and self.profile.safety.max_jog_step is not None
         present = self._positions(targets) if bounded else {}
         for joint, target in targets.items():
