@@ -210,7 +210,7 @@ class Robot:
         m = self.system.member(full)
         if not m.can("gpio"):
             raise InvalidInput(f"{m.name} has no GPIO outputs to set")
-        m.driver.set_command(full, value)
+        self.system.set_command(full, value)
         after = dict(self.system.read())
         if full in after and after[full] != value:
             raise DeviceError(f"{full} reads back {after[full]:g} after setting it to "
