@@ -12,7 +12,7 @@ import pytest
 
 from deltoctl import registry
 from tests.conftest import ros2_messages
-from tests.toyfamily import FAMILY
+from tests.toyfamily import FAMILY, TRANSPORT
 
 PROFILE = """\
 name: toy-robot
@@ -35,10 +35,12 @@ ros2_control:
 @pytest.fixture
 def toy(tmp_path):
     registry.register(FAMILY)
+    registry.register_transport("toy", TRANSPORT)
     path = tmp_path / "toy-robot.yaml"
     path.write_text(PROFILE)
     yield str(path)
     registry.unregister(FAMILY.name)
+    registry.unregister_transport("toy")
 
 
 def test_a_registered_family_runs_the_verbs(cli, toy, tmp_path):

@@ -89,7 +89,7 @@ def document(profile: str, live: dict[str, dict[str, Any]], taken: str) -> dict[
 
 def default_name(profile: str, live: dict[str, dict[str, Any]], stamp: str) -> str:
     """``config-<profile>[-<address>]-<time>.yaml``: the address when one target holds
-    every block (a gripper's host and port, a bus's device)."""
+    every block (a device's host and port, a bus's device node)."""
     import re
     from urllib.parse import urlsplit
 

@@ -27,7 +27,7 @@ def register(app: typer.Typer) -> None:
 def doctor(
     ctx: typer.Context,
     timeout: Annotated[float, typer.Option(
-        "--timeout", help="Seconds to wait for each TCP target to accept a connection.")] = 1.0,
+        "--timeout", help="Seconds to wait for each target to accept a connection.")] = 1.0,
 ) -> None:
     """Check the set-up before a bring-up: profile, ports, buses, routes, targets.
 
@@ -144,7 +144,7 @@ def url_checks(bus: str, url: str, families: set[str], timeout: float) -> list[d
 # -- the host, when no profile is named -------------------------------------------------------
 
 def _host_checks() -> list[dict[str, Any]]:
-    """Each transport's look at this host (its serial adapters, its I2C buses …)."""
+    """Each transport's look at this host (the ports and buses of its kind it finds)."""
     from deltoctl import registry
 
     return [c for t in registry.transports().values() if t.host_checks

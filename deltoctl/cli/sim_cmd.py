@@ -98,7 +98,7 @@ def _command() -> Any:
                               help="Address to listen on.")]),
         inspect.Parameter("port", inspect.Parameter.KEYWORD_ONLY, default=0,
                           annotation=Annotated[int, typer.Option(
-                              help="TCP port (0: any free port).")]),
+                              help="Port to listen on (0: any free one).")]),
     ]
     declared = [_parameter(o) for o in registry.sim_options().values()
                 if o.flag not in GLOBAL_OPTIONS]

@@ -1,35 +1,29 @@
-"""The toy driver: ``I`` → a version line; ``R`` → one little-endian double per joint."""
+"""The toy driver: ``I`` → a version line; ``R`` → one little-endian double per joint; ``C``
+→ the pendulums' period; ``W`` + a double → a new period (the swing restarts), ``K``."""
 
 from __future__ import annotations
 
-import socket
 import struct
-from urllib.parse import urlsplit
+from typing import Any
 
+from deltoctl import registry
 from deltoctl.core.driver import Driver
-from deltoctl.errors import Unreachable
+from deltoctl.errors import Refused
+
+REWIND = "toy-rewind"  # the permission a new period needs (declared in the descriptor)
 
 
 class ToyDriver(Driver):
-    sock: socket.socket | None = None
+    link: Any = None
 
     def configure(self) -> None:
-        parts = urlsplit(self.url)
-        try:
-            self.sock = socket.create_connection((parts.hostname, parts.port), timeout=1.0)
-        except OSError as exc:
-            raise Unreachable(f"{self.hw.name}: cannot reach {self.url}: {exc}") from None
-        self.sock.sendall(b"I")
-        self.version = self.sock.recv(64).decode().strip()
+        self.link = registry.open_link(self.url)  # whatever link its URL names
+        self.version = self.link.ask(b"I", 8).decode().strip()
         self.connected = True
 
     def read(self) -> dict[str, float]:
-        assert self.sock is not None
         n = len(self.hw.joints)
-        self.sock.sendall(b"R")
-        data = b""
-        while len(data) < 8 * n:
-            data += self.sock.recv(8 * n - len(data))
+        data = self.link.ask(b"R", 8 * n)
         self.stats["packets"] += 1
         for joint, value in zip(self.hw.joints, struct.unpack(f"<{n}d", data)):
             self.values[f"{joint.name}/position"] = value
@@ -43,7 +37,24 @@ class ToyDriver(Driver):
                             "device": len(self.hw.joints), "match": True}],
                 "summary": f"{self.hw.name}: {self.version}"}
 
+    def _period(self) -> float:
+        return float(struct.unpack("<d", self.link.ask(b"C", 8))[0])
+
+    def config_read(self) -> dict[str, dict[str, dict[str, Any]]]:
+        return {"pendulums": {"period": {"value": self._period(), "unit": "s", "access": "RW",
+                                         "needs": REWIND}}}
+
+    def config_write(self, changes: dict[str, dict[str, Any]],
+                     allow: frozenset[str] = frozenset()) -> dict[str, dict[str, Any]]:
+        if REWIND not in allow:
+            raise Refused(f"{self.hw.name}: a new period restarts the swing",
+                          hint=f"pass --allow {REWIND}")
+        period = changes.get("pendulums", {}).get("period")
+        if period is not None:
+            self.link.ask(b"W" + struct.pack("<d", float(period)), 1)
+        return {"pendulums": {"period": self._period()}}
+
     def cleanup(self) -> None:
-        if self.sock is not None:
-            self.sock.close()
-            self.sock = None
+        if self.link is not None:
+            self.link.close()
+            self.link = None
