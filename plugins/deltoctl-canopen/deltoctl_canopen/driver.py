@@ -32,6 +32,7 @@ from deltoctl_canopen.transport import parse_can_url
 SDO_TIMEOUT = 0.15  # s per try; canopen retries once
 STATE_TIMEOUT = 0.5  # s for each 402 transition
 TPDO_WAIT = 0.005  # s a cycle waits for the TPDOs its SYNC asked for
+POLL_PERIOD = 0.1  # s between two SDO reads of a value no TPDO carries
 DEFAULT_HEARTBEAT_MS = 100
 NAN = float("nan")
 NMT_CODES = {"INITIALISING": 0, "STOPPED": 4, "OPERATIONAL": 5, "PRE-OPERATIONAL": 127}
@@ -71,7 +72,9 @@ class CanopenDriver(Driver):
         self._expected = 0  # TPDO frames a SYNC triggers
         self._arrived = 0
         self._lock = threading.Lock()
-        self.loop = CommLoop(f"{self.hw.name}_sync", 0.0)
+        self.loop = _BusLoop(f"{self.hw.name}_sync", self)
+        self._polls: list[tuple[Axis, int]] = []
+        self._poll_at = 0.0
 
     def comm_loops(self) -> list[CommLoop]:
         return [self.loop]
@@ -297,17 +300,26 @@ class CanopenDriver(Driver):
         return self.values
 
     def _poll(self) -> None:
-        """SDO reads of what no TPDO carries (and the statusword)."""
-        for axis in self.axes.values():
-            if not axis.identity:
-                continue
-            wanted = {0x6041, *(STATE_INTERFACES[i.name] for j in self.hw.joints
-                                if j.name == axis.joint for i in j.state_interfaces
-                                if i.name in STATE_INTERFACES)}
-            for index in sorted(wanted - axis.tpdo_mapped):
-                if index in axis.node.object_dictionary:
-                    with contextlib.suppress(DeviceError):
-                        axis.values[index] = self.sdo_read(axis, index)
+        """One SDO read a cycle, at most, of what no TPDO carries (round robin, each value
+        every POLL_PERIOD at most): a cycle never waits for more than one round trip."""
+        now = time.monotonic()
+        if now < self._poll_at:
+            return
+        if not self._polls:
+            self._polls = [(a, i) for a in self.axes.values() if a.identity
+                           for i in sorted(self._wanted(a) - a.tpdo_mapped)
+                           if i in a.node.object_dictionary]
+            self._poll_at = now + POLL_PERIOD
+            if not self._polls:
+                return
+        axis, index = self._polls.pop()
+        with contextlib.suppress(DeviceError):
+            axis.values[index] = self.sdo_read(axis, index)
+
+    def _wanted(self, axis: Axis) -> set[int]:
+        joint = next(j for j in self.hw.joints if j.name == axis.joint)
+        return {0x6041, *(STATE_INTERFACES[i.name] for i in joint.state_interfaces
+                          if i.name in STATE_INTERFACES)}
 
     def _store(self) -> None:
         now = time.monotonic()
@@ -687,8 +699,6 @@ class CanopenDriver(Driver):
             entry["unit"] = var.unit
         if var.index in objects.COMMANDS or (not var.writable and var.pdo_mappable):
             entry["state"] = True
-        if var.index in objects.GUARDED and var.writable:
-            entry["needs"] = objects.GUARDED[var.index]
         return entry
 
     def config_write(self, changes: dict[str, dict[str, Any]],
@@ -725,6 +735,29 @@ class CanopenDriver(Driver):
             read_back[axis.joint] = {objects.item_name(v): _plain(self.sdo_read(
                 axis, v.index, v.subindex)) for v, _ in writes if v.readable}
         return read_back
+
+
+class _BusLoop(CommLoop):
+    """The SYNC loop's statistics, with each node's NMT state and the last EMCYs: what
+    /diagnostics carries of the bus once a second."""
+
+    def __init__(self, name: str, driver: CanopenDriver) -> None:
+        super().__init__(name, 0.0)
+        self.driver = driver
+
+    def report(self) -> dict[str, Any]:
+        report: dict[str, Any] = dict(super().report())
+        driver = self.driver
+        for axis in driver.axes.values():
+            state = driver.values.get(f"{axis.joint}/nmt_state", 0.0)
+            report[f"{axis.joint}_nmt"] = _NMT_NAMES.get(int(state), "silent")
+        with driver._lock:
+            for entry in driver.emcy[-4:]:
+                report[f"emcy_{entry['joint']}"] = f"{entry['code']} {entry['text']}".rstrip()
+        return report
+
+
+_NMT_NAMES = {0: "silent", 4: "STOPPED", 5: "OPERATIONAL", 127: "PRE-OPERATIONAL"}
 
 
 def _restore_order(var: Any) -> tuple[int, int, int]:

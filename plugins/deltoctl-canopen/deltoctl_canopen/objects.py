@@ -30,8 +30,8 @@ def variables(od: Any) -> Iterator[Any]:
 
 
 def item_name(var: Any) -> str:
-    parent = getattr(var, "parent", None)
-    name = f"{parent.name}.{var.name}" if parent is not None else var.name
+    parent = getattr(var, "parent", None)  # a record or an array; the dictionary for a VAR
+    name = f"{parent.name}.{var.name}" if hasattr(parent, "subindices") else var.name
     return f"0x{var.index:04X}:{var.subindex:02X} {name}"
 
 
