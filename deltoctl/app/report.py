@@ -399,23 +399,32 @@ def _user() -> str:
 
 # -- the HTML twin -------------------------------------------------------------------------------
 
-def render_html(doc: dict[str, Any]) -> str:
-    """The report as one self-contained HTML5 page (the template ships in the package)."""
+def _number(value: Any) -> Any:
+    """A figure as people read it: six significant digits at most."""
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return value
+
+
+def _environment() -> Any:
     import jinja2
 
     env = jinja2.Environment(loader=jinja2.PackageLoader("deltoctl.app", "templates"),
                              autoescape=True, trim_blocks=True, lstrip_blocks=True)
+    env.filters["num"] = _number
+    return env
+
+
+def render_html(doc: dict[str, Any]) -> str:
+    """The report as one self-contained HTML5 page (the template ships in the package)."""
+    env = _environment()
     counts = {v: sum(c["verdict"] == v for c in doc["checks"]) for v in (PASS, FAIL, WARN,
                                                                           SKIP)}
     return env.get_template("report.html.j2").render(r=doc, counts=counts, size=SVG_SIZE)
 
 
 def render_fleet_html(doc: dict[str, Any]) -> str:
-    import jinja2
-
-    env = jinja2.Environment(loader=jinja2.PackageLoader("deltoctl.app", "templates"),
-                             autoescape=True, trim_blocks=True, lstrip_blocks=True)
-    return env.get_template("fleet.html.j2").render(f=doc)
+    return _environment().get_template("fleet.html.j2").render(f=doc)
 
 
 def fleet_report(runs: list[dict[str, Any]]) -> dict[str, Any]:
