@@ -1,5 +1,7 @@
-"""``deltoctl completion SHELL``: the shell completion script (also shipped in completions/)."""
+"""``deltoctl completion SHELL``: the shell completion script, and ``deltoctl completion man
+--out DIR`` the manual pages (both shipped in completions/)."""
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -20,12 +22,36 @@ def register(app: typer.Typer) -> None:
     @app.command("completion")
     def completion(
         shell: Annotated[str, typer.Argument(
-            help="bash, zsh or fish.",
-            autocompletion=lambda incomplete: [s for s in SHELLS if s.startswith(incomplete)])],
+            help="bash, zsh or fish; or man: the manual pages, written to --out DIR.",
+            autocompletion=lambda incomplete: [s for s in (*SHELLS, "man")
+                                               if s.startswith(incomplete)])],
+        out: Annotated[Path | None, typer.Option(
+            "--out", metavar="DIR", help="Where the manual pages go (with man).")] = None,
     ) -> None:
-        """Print the completion script for a shell (see README: Shell completion)."""
+        """Print the completion script for a shell (see README: Shell completion), or write
+        the manual pages (deltoctl.1, deltoctl-VERB.1) to a directory."""
         from deltoctl.errors import InvalidInput
 
+        if shell == "man":
+            write_manpages(out)
+            return
         if shell not in SHELLS:
-            raise InvalidInput(f"unknown shell {shell!r} (expected one of: {', '.join(SHELLS)})")
+            raise InvalidInput(f"unknown shell {shell!r} (expected one of: "
+                               f"{', '.join(SHELLS)}, or man)")
         typer.echo(completion_script(shell), nl=False)
+
+
+def write_manpages(out: Path | None) -> None:
+    """Every manual page into ``out``, one line each said on stderr."""
+    from deltoctl.cli.manpages import pages
+    from deltoctl.cli.output import info
+    from deltoctl.errors import InvalidInput
+
+    if out is None or not out.is_dir():
+        raise InvalidInput("completion man needs --out DIR, an existing directory")
+    for name, text in pages().items():
+        try:
+            (out / name).write_text(text, encoding="utf-8")
+        except OSError as exc:
+            raise InvalidInput(f"cannot write {out / name}: {exc.strerror}") from None
+        info(f"wrote {out / name}")
