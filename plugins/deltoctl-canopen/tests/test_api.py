@@ -1,0 +1,55 @@
+"""The robot library on CANopen drives, and deltoctl without the plugin."""
+
+import json
+import subprocess
+import sys
+
+from deltoctl import open_robot
+
+from conftest import PROFILE
+
+HIDE_PLUGIN = """
+import importlib.metadata as md, sys
+real = md.entry_points
+def entry_points(**kw):
+    found = real(**kw)
+    return type(found)(ep for ep in found
+                       if not (ep.value.startswith("deltoctl_canopen") or ep.name == "localhub"))
+md.entry_points = entry_points
+class Hidden:
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] == "deltoctl_canopen":
+            raise ModuleNotFoundError(name)
+sys.meta_path.insert(0, Hidden())
+from deltoctl.cli.main import main
+sys.argv = ["deltoctl", *sys.argv[1:]]
+main()
+"""
+
+
+def test_open_robot_moves_and_identifies():
+    with open_robot(str(PROFILE), sim=True) as robot:
+        ident = robot.identify()
+        text = json.dumps(ident, default=str)
+        assert "deltoctl generic CiA 402 drive" in text
+        robot.move({"axis_1": 0.2, "axis_2": -0.1})
+        values = robot.read()
+        assert abs(values["axis_1/position"] - 0.2) < 0.01
+        assert abs(values["axis_2/position"] + 0.1) < 0.01
+
+
+def deltoctl_without_plugin(*args):
+    return subprocess.run([sys.executable, "-c", HIDE_PLUGIN, *args], capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_deltoctl_without_the_plugin_lists_and_runs_everything_else():
+    listed = deltoctl_without_plugin("profile", "list", "--json")
+    assert listed.returncode == 0, listed.stderr
+    assert "dg-5f-right" in listed.stdout and "warning" not in listed.stderr
+    run = deltoctl_without_plugin("-p", "dg-5f-right", "--sim", "--json", "identify")
+    assert run.returncode == 0, run.stderr
+    # a CANopen profile is then a block no family drives: one clear error, no traceback
+    refused = deltoctl_without_plugin("-p", str(PROFILE), "--sim", "identify")
+    assert refused.returncode == 2 and "Traceback" not in refused.stderr
+    assert "canopen" in refused.stderr
