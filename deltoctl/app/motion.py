@@ -4,6 +4,7 @@ and report what happened. Confirmation is the caller's."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -155,6 +156,7 @@ def home(system: System, plan: HomePlan, force: bool = False, velocity: float | 
     if unable:
         system.notes.append(f"{', '.join(unable)}: cannot home")
     targets = {j: t for j, t in plan.targets.items() if system.member(j).can("home")}
+    started = time.monotonic()
     report: dict[str, Any] = {"blocks": []}
     if plan.routine:
         report["blocks"] += _home_routine(system, plan.routine, force, show)
@@ -163,5 +165,9 @@ def home(system: System, plan: HomePlan, force: bool = False, velocity: float | 
         report["blocks"] += moved["blocks"]
         report["settled"], report["unsettled"] = moved["settled"], moved["unsettled"]
         report["seconds"] = moved["seconds"]
+    # one shape whatever the family: a homing routine ends at its stop, settled
+    report.setdefault("settled", True)
+    report.setdefault("unsettled", [])
+    report.setdefault("seconds", round(time.monotonic() - started, 3))
     report["cannot_home"] = unable
     return report

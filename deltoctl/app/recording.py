@@ -71,6 +71,8 @@ def planned_output(template: Path, force: bool = False) -> Path:
 def refuse_existing(path: Path, force: bool) -> None:
     """An existing file (without ``force``) is invalid input: a recording never overwrites
     one unasked."""
+    if path.is_dir():
+        raise InvalidInput(f"cannot write {path}: it is a directory")
     if not force and (path.exists() or path.is_symlink()):
         raise InvalidInput(f"{path} exists: a recording does not overwrite a file",
                            "pass --force to overwrite it, or put {time} in the name")

@@ -6,6 +6,7 @@ Loaded only when help is shown or a command line is completed: a verb that just 
 nothing for it.
 """
 
+from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -87,19 +88,24 @@ def register(holder: typer.Typer) -> None:
 
 
 def _complete_topic(incomplete: str) -> list[str]:
-    return [t for t in ("exit-codes", *VERBS) if t.startswith(incomplete)]
+    return [t for t in ("exit-codes", "schema", *VERBS) if t.startswith(incomplete)]
 
 
 def help_cmd(
     ctx: typer.Context,
     topic: Annotated[list[str] | None, typer.Argument(
-        metavar="[exit-codes | VERB...]", autocompletion=_complete_topic,
-        help="exit-codes, or a verb (e.g. register get).")] = None,
+        metavar="[exit-codes | schema VERB... | VERB...]", autocompletion=_complete_topic,
+        help="exit-codes, schema VERB (its --json document's JSON Schema), or a verb (e.g. "
+             "register get).")] = None,
 ) -> None:
-    """Show the help of deltoctl, of a verb, or the exit codes."""
+    """Show the help of deltoctl, of a verb, the exit codes, or the JSON Schema of a verb's
+    --json document."""
     words = list(topic or [])
     if words == ["exit-codes"]:
         _exit_codes(ctx)
+        return
+    if words[:1] == ["schema"]:
+        typer.echo(schema_text(" ".join(words[1:])), nl=False)
         return
     command, cctx = ctx.find_root().command, ctx.find_root()
     cctx.meta[TEACH] = True  # the verbs loaded from here on show the global options
@@ -116,6 +122,28 @@ def help_cmd(
     text = command.get_help(cctx)  # rich prints it itself and returns ""
     if text:
         typer.echo(text)
+
+
+SCHEMAS = Path(__file__).resolve().parent.parent / "schemas"  # shipped in the package
+
+
+def schema_file(verb: str) -> Path:
+    """The JSON Schema of a verb's --json document (``gpio get`` → gpio-get.json; a
+    stream's frames: ``stream-frame``; an error: ``error``)."""
+    return SCHEMAS / f"{'-'.join(verb.split())}.json"
+
+
+def schema_text(verb: str) -> str:
+    from deltoctl.errors import InvalidInput
+    from deltoctl.suggest import did_you_mean
+
+    path = schema_file(verb)
+    if not verb or not path.is_file():
+        names = sorted(p.stem.replace("-", " ") for p in SCHEMAS.glob("*.json"))
+        raise InvalidInput(f"no schema for {verb!r}" + did_you_mean(verb, names)
+                           if verb else "help schema VERB: which verb's schema?",
+                           f"one of: {', '.join(names)}")
+    return path.read_text(encoding="utf-8")
 
 
 def _exit_codes(ctx: typer.Context) -> None:

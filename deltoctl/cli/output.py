@@ -45,11 +45,13 @@ def write_json(data: Any, err: bool = False) -> None:
 def envelope(verb: str, data: Any, warnings: list[str], exit_code: int,
              profile: str | None) -> dict[str, Any]:
     """Every verb's JSON in one shape: ``verb``, ``profile``, the data — ``blocks`` for a
-    document of blocks (its other keys kept beside them), else ``result`` —, ``warnings``
-    and ``exit_code``."""
+    document of the robot's blocks (its other keys kept beside them), else ``result`` —,
+    ``warnings`` and ``exit_code``."""
     named = data.get("profile") if isinstance(data, dict) else None
     profile = named if isinstance(named, str) else profile
-    if isinstance(data, dict) and isinstance(data.get("blocks"), list):
+    blocks = data.get("blocks") if isinstance(data, dict) else None
+    if isinstance(blocks, list) and all(isinstance(b, dict) for b in blocks) and (
+            named is None or isinstance(named, str)):
         body = {k: v for k, v in data.items() if k != "profile"}
     else:
         body = {"result": data}
