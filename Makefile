@@ -5,9 +5,10 @@ BIN = $(VENV)/bin
 
 .PHONY: demo test lint bench clean
 
-$(BIN)/deltoctl: pyproject.toml
+$(BIN)/deltoctl: pyproject.toml plugins/deltoctl-canopen/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e plugins/deltoctl-canopen
 	@touch $@
 
 demo: $(BIN)/deltoctl
@@ -21,6 +22,8 @@ test: $(BIN)/deltoctl
 	$(BIN)/ruff check deltoctl tests bench
 	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -q
+	$(BIN)/ruff check plugins/deltoctl-canopen
+	$(BIN)/python -m pytest -q plugins/deltoctl-canopen/tests
 
 bench: $(BIN)/deltoctl
 	$(BIN)/python bench/startup.py
