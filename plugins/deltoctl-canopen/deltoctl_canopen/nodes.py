@@ -78,18 +78,27 @@ def _from_bus(profile: Profile, hw: Hardware, joint: Component,
                                f"{bus.source} (its nodes: {', '.join(bus.nodes)})",
                                profile.source, joint.line)
         return node
-    if joint.address is None:
+    address = _node_id(profile, hw, joint)
+    if address is None:
         return None
-    node = bus.by_id().get(joint.address)
+    node = bus.by_id().get(address)
     if node is None:
-        raise ProfileError(f"{joint.name}: node {joint.address} is not in {bus.source} "
+        raise ProfileError(f"{joint.name}: node {address} is not in {bus.source} "
                            f"(its node IDs: {', '.join(str(i) for i in sorted(bus.by_id()))})",
                            profile.source, joint.line)
     return node
 
 
+def _node_id(profile: Profile, hw: Hardware, joint: Component) -> int | None:
+    """The joint's ``address:``, or its ``node_id`` param."""
+    from deltoctl.profile.validate import part_address
+
+    return part_address(profile, hw, joint)
+
+
 def _from_joint(profile: Profile, hw: Hardware, joint: Component) -> NodeConfig | None:
-    if joint.address is None:
+    address = _node_id(profile, hw, joint)
+    if address is None:
         return None
     scales = dict(SCALES)
     for key in SCALES:
@@ -100,7 +109,7 @@ def _from_joint(profile: Profile, hw: Hardware, joint: Component) -> NodeConfig 
             except ValueError:
                 raise ProfileError(f"{joint.name}: {key} must be a number, got {text!r}",
                                    profile.source, joint.line) from None
-    return NodeConfig(joint.name, joint.address, None, scales)
+    return NodeConfig(joint.name, address, None, scales)
 
 
 def import_block(profile: Profile, hw: Hardware) -> None:
