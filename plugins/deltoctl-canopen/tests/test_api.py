@@ -4,9 +4,8 @@ import json
 import subprocess
 import sys
 
-from deltoctl import open_robot
-
 from conftest import PROFILE
+from deltoctl import open_robot
 
 HIDE_PLUGIN = """
 import importlib.metadata as md, sys

@@ -4,8 +4,8 @@ as untrusted input."""
 import json
 
 import pytest
-
 from deltoctl.errors import ProfileError
+
 from deltoctl_canopen import eds
 from deltoctl_canopen.busconfig import load_bus
 from deltoctl_canopen.nodes import GENERIC_EDS, PROFILES
