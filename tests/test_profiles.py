@@ -11,7 +11,7 @@ from deltoctl.profile.catalog import catalog_names, load_profile
 from deltoctl.profile.exporter import to_urdf, to_yaml
 from tests.conftest import REPO
 
-NAMES = catalog_names()
+NAMES = catalog_names(plugins=False)  # deltoctl's own catalog
 DELTO = ["dg-3f-b", "dg-3f-m", "dg-4f", "dg-5f-left", "dg-5f-right", "dg-5f-s-left",
          "dg-5f-s-right", "dg-5f-s15-left", "dg-5f-s15-right"]
 
@@ -92,7 +92,7 @@ def test_mh5_and_bioscara_facts():
 def test_profile_list_json(cli):
     result = cli("profile", "list", "--json")
     assert result.exit_code == 0, result.output
-    rows = json.loads(result.stdout)
+    rows = json.loads(result.stdout)["result"]
     assert [r["name"] for r in rows] == NAMES
     delto = {r["name"]: r for r in rows}
     assert delto["dg-5f-right"]["joints"] == 20
@@ -134,5 +134,33 @@ def test_profile_list_uses_the_cache_and_notices_changes(cli, monkeypatch, tmp_p
     (tmp_path / "fts-2d.yaml").write_text((REPO / "profiles" / "fts-2d.yaml").read_text())
     monkeypatch.setattr(catalog, "load_profile", real_load)
     monkeypatch.setattr(catalog, "catalog_dir", lambda: tmp_path)
-    rows = json.loads(cli("profile", "list", "--json").stdout)
+    rows = json.loads(cli("profile", "list", "--json").stdout)["result"]
     assert [r["name"] for r in rows] == ["fts-2d"]
+
+
+def test_a_package_adds_its_profiles_to_the_catalog(tmp_path, monkeypatch):
+    """The deltoctl.profiles entry-point group: a package's folder of profiles joins the
+    catalog by name, never replacing one of deltoctl's own."""
+    import importlib.metadata
+    import shutil
+    import sys
+
+    from deltoctl.profile import catalog
+
+    package = tmp_path / "robots_pkg"
+    (package / "profiles").mkdir(parents=True)
+    (package / "__init__.py").write_text("")
+    shutil.copy(catalog.catalog_dir() / "rrbot-gpio.yaml", package / "profiles" / "my-rrbot.yaml")
+    shutil.copy(catalog.catalog_dir() / "mh5.yaml", package / "profiles" / "dg-5f-right.yaml")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    ep = importlib.metadata.EntryPoint("robots", "robots_pkg:profiles", catalog.PROFILES_GROUP)
+    real = importlib.metadata.entry_points
+    monkeypatch.setattr(importlib.metadata, "entry_points",
+                        lambda **kw: [ep] if kw.get("group") == catalog.PROFILES_GROUP
+                        else real(**kw))
+    assert "my-rrbot" in catalog.catalog_names()
+    assert "my-rrbot" not in catalog.catalog_names(plugins=False)
+    assert catalog.resolve("my-rrbot") == package / "profiles" / "my-rrbot.yaml"
+    assert catalog.load_profile("my-rrbot").joints()
+    assert catalog.resolve("dg-5f-right") == catalog.catalog_dir() / "dg-5f-right.yaml"
+    assert "robots_pkg" not in sys.modules  # found without importing the package

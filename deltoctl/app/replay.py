@@ -222,15 +222,14 @@ def recorded_profile(recorded: Recorded) -> Profile:
 def catalog_profile(recorded: Profile) -> Profile | None:
     """The catalog's profile of a recorded one: by its name, else the one catalog profile
     of its model. Only catalog names are looked up: nothing in the file names a path."""
-    from deltoctl.profile.catalog import catalog_dir, catalog_names, load_profile
+    from deltoctl.profile.catalog import catalog_files, load_profile
 
-    names = catalog_names()
-    if recorded.name in names:
-        return load_profile(catalog_dir() / f"{recorded.name}.yaml")
+    files = catalog_files()
+    if recorded.name in files:
+        return load_profile(files[recorded.name])
     if not recorded.model:
         return None
-    same = [p for p in (load_profile(catalog_dir() / f"{n}.yaml") for n in names)
-            if p.model == recorded.model]
+    same = [p for p in map(load_profile, files.values()) if p.model == recorded.model]
     return same[0] if len(same) == 1 else None
 
 

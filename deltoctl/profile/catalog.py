@@ -17,15 +17,45 @@ URDF_SUFFIXES = (".urdf", ".xacro", ".xml")
 MAX_PROFILE_BYTES = 16 << 20  # checked before a profile file is read
 
 
+PROFILES_GROUP = "deltoctl.profiles"  # a package's folder of catalog profiles: "package:folder"
+
+
 def catalog_dir() -> Path:
     return data_dir("profiles")
 
 
-def catalog_names() -> list[str]:
-    directory = catalog_dir()
-    if not directory.is_dir():
-        return []
-    return sorted(p.stem for p in directory.glob("*.yaml"))
+def _plugin_dirs() -> list[Path]:
+    """The profile folders installed packages name in the ``deltoctl.profiles`` entry-point
+    group (``name = "package:folder"``), found without importing the packages."""
+    import importlib.util
+    from importlib.metadata import entry_points
+
+    found = []
+    for ep in entry_points(group=PROFILES_GROUP):
+        package, _, folder = ep.value.partition(":")
+        try:
+            spec = importlib.util.find_spec(package)
+        except (ImportError, ValueError):
+            continue
+        for location in (spec.submodule_search_locations or []) if spec else []:
+            found.append(Path(location) / folder)
+    return found
+
+
+def catalog_files(plugins: bool = True) -> dict[str, Path]:
+    """Every catalog profile by name: deltoctl's own, then those of installed packages (a
+    package's profile never replaces one of deltoctl's)."""
+    files: dict[str, Path] = {}
+    for directory in [catalog_dir(), *(_plugin_dirs() if plugins else ())]:
+        if directory.is_dir():
+            for path in sorted(directory.glob("*.yaml")):
+                files.setdefault(path.stem, path)
+    return files
+
+
+def catalog_names(plugins: bool = True) -> list[str]:
+    """The catalog's names; ``plugins`` False: deltoctl's own only."""
+    return sorted(catalog_files(plugins))
 
 
 def resolve(spec: str) -> Path:
@@ -38,6 +68,9 @@ def resolve(spec: str) -> Path:
         return path
     candidate = catalog_dir() / f"{spec}.yaml"
     if candidate.is_file():
+        return candidate
+    candidate = catalog_files().get(spec)
+    if candidate is not None:
         return candidate
     from deltoctl.suggest import close_matches
 
@@ -148,8 +181,7 @@ def catalog_summaries(summarize) -> list[dict]:  # type: ignore[no-untyped-def]
         cache = {}
     summaries = []
     fresh: dict[str, dict] = {}
-    for name in catalog_names():
-        path = catalog_dir() / f"{name}.yaml"
+    for path in catalog_files().values():
         stat = path.stat()
         key = f"{path}:{stat.st_size}:{stat.st_mtime_ns}"
         summary = cache.get(key)
