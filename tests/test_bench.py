@@ -11,7 +11,7 @@ def test_bench_loop_reports_stages(cli):
     result = cli("bench", "loop", "--rate", "200", "--duration", "0.3", "--unpaced", "0.2",
                  "--json")
     assert result.exit_code == 0, result.stderr
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     assert set(report["hands"]) == {"1"}  # one hand by default
     one = report["hands"]["1"]
     assert set(one["paced"]["stage_us_per_cycle"]) == {"codec", "socket", "write",
@@ -25,7 +25,7 @@ def test_bench_loop_reports_stages(cli):
 def test_bench_dynamixel_compares_with_the_sdk(cli):
     result = cli("bench", "dynamixel", "--duration", "0.3", "--json")
     assert result.exit_code == 0, result.stderr
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     assert report["deltoctl_hz"] > 0 and report["deltoctl_errors"] == 0
     assert "ratio" in report  # dynamixel-sdk is a test dependency
 
@@ -33,7 +33,7 @@ def test_bench_dynamixel_compares_with_the_sdk(cli):
 def test_bench_i2c_sets_the_tool_against_the_wire(cli):
     result = cli("bench", "i2c", "--cycles", "20", "--json")
     assert result.exit_code == 0, result.stderr
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     assert report["transactions_per_cycle"] == 8 and report["wire_bits_per_transaction"] == 72
     assert report["wire_us"] == 180.0  # 72 bits at 400 kHz
     assert report["deltoctl_us"] > 0 and report["smbus2_loop_us"] > 0
@@ -48,7 +48,7 @@ def test_bench_loop_reports_its_own_cost_per_hand(cli):
     result = cli("bench", "loop", "--hands", "2", "--rate", "200", "--duration", "0.5",
                  "--unpaced", "0", "--json")
     assert result.exit_code == 0, result.stderr
-    doc = json.loads(result.stdout)
+    doc = json.loads(result.stdout)["result"]
     paced = doc.get("result", doc)["hands"]["2"]["paced"]
     assert paced["loop_thread_cpu_us_per_cycle"] > 0
     assert paced["loop_cpu_us_per_hand_cycle"] == \

@@ -30,7 +30,7 @@ def test_version(cli):
 def test_global_options_before_or_after_the_verb(cli, args):
     result = cli(*args)
     assert result.exit_code == 0, result.stderr
-    assert json.loads(result.stdout)["name"] == "rrbot-gpio"
+    assert json.loads(result.stdout)["result"]["name"] == "rrbot-gpio"
 
 
 def test_hoisting_keeps_verb_arguments_in_place():
@@ -43,7 +43,7 @@ def test_hoisting_keeps_verb_arguments_in_place():
 def test_profile_from_environment(cli):
     result = cli("profile", "show", "--json", env={"DELTOCTL_PROFILE": "fts-2d"})
     assert result.exit_code == 0
-    assert json.loads(result.stdout)["sensors"] == 2
+    assert json.loads(result.stdout)["result"]["sensors"] == 2
 
 
 def test_no_profile_is_a_usage_error(cli):
@@ -66,7 +66,7 @@ def test_export_to_file_and_show_part(cli, tmp_path):
     assert "<ros2_control name=\"upper_body\"" in out.read_text()
     result = cli("profile", "show", "mh5", "l_kne_p", "--json")
     assert result.exit_code == 0
-    part = json.loads(result.stdout)
+    part = json.loads(result.stdout)["result"]
     assert (part["address"], part["inverse"], part["offset"]) == (14, True, 1.570796326794897)
     assert cli("profile", "show", "mh5", "nope").exit_code == 2
 

@@ -39,7 +39,7 @@ def test_snapshot_of_the_mh5_holds_every_servo_table_and_the_imu(cli, deltoctl_s
     result = cli("-p", "mh5", *targets_of(buses), "config", "snapshot", "-o",
                  str(tmp_path / "mh5.yaml"), "--json")
     assert result.exit_code == 0, result.stderr
-    doc = json.loads(result.stdout)
+    doc = json.loads(result.stdout)["result"]
     assert doc == yaml.safe_load((tmp_path / "mh5.yaml").read_text())  # the file, as printed
     assert doc["deltoctl_config"] == 1 and doc["profile"] == "mh5" and doc["deltoctl"]
     blocks = doc["blocks"]
@@ -113,7 +113,7 @@ def test_a_snapshot_matches_the_live_devices(cli, deltoctl_sim, tmp_path, profil
     result = cli("-p", profile, *targets, "config", "diff", str(tmp_path / "snap.yaml"),
                  "--json")
     assert result.exit_code == 0, result.stdout + result.stderr
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     assert report["same"] is True and report["differences"] == [] and report["against"] == "live"
 
 
@@ -125,7 +125,7 @@ def test_diff_shows_what_changed_on_the_device_and_between_files(cli, mh5_buses,
     servo.set("Present Position", 1000)  # a reading: no difference
     result = cli("-p", "mh5", *targets, "config", "diff", str(tmp_path / "snap.yaml"), "--json")
     assert result.exit_code == 3
-    assert json.loads(result.stdout)["differences"] == [
+    assert json.loads(result.stdout)["result"]["differences"] == [
         {"block": "upper_body", "part": "head_y", "item": "Return Delay Time", "unit": "2 µs",
          "snapshot": 250, "live": 20}]
     table = cli("-p", "mh5", *targets, "config", "diff", str(tmp_path / "snap.yaml"))
@@ -136,7 +136,7 @@ def test_diff_shows_what_changed_on_the_device_and_between_files(cli, mh5_buses,
     other = save(tmp_path, doc)
     files = cli("config", "diff", str(tmp_path / "snap.yaml"), other, "--json")
     assert files.exit_code == 3
-    rows = json.loads(files.stdout)["differences"]
+    rows = json.loads(files.stdout)["result"]["differences"]
     assert [(r["part"], r["item"], r["snapshot"], r["other"]) for r in rows] == [
         ("l_hip_r", "LED", 0, 1)]
     assert cli("config", "diff", other, other).exit_code == 0
@@ -154,7 +154,7 @@ def test_restore_writes_only_what_differs_and_verifies_it(cli, mh5_buses, tmp_pa
     edited = save(tmp_path, doc)
     result = cli("-p", "mh5", *targets, "config", "restore", edited, "--yes", "--json")
     assert result.exit_code == 0, result.stderr
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     assert report["summary"] == {"verified": 3}
     assert {(i["part"], i["item"], i["live"], i["after"]) for i in report["items"]} == {
         ("head_y", "Return Delay Time", 250, 100), ("head_y", "Position P Gain", 640, 700),
@@ -171,7 +171,7 @@ def test_restore_writes_only_what_differs_and_verifies_it(cli, mh5_buses, tmp_pa
         .exit_code == 0
     again = cli("-p", "mh5", *targets, "config", "restore", str(tmp_path / "snap.yaml"),
                 "--json")  # nothing differs: nothing to confirm
-    assert again.exit_code == 0 and json.loads(again.stdout)["items"] == []
+    assert again.exit_code == 0 and json.loads(again.stdout)["result"]["items"] == []
 
 
 def test_restore_asks_first_and_writes_nothing_unconfirmed(cli, mh5_buses, tmp_path):
@@ -199,7 +199,7 @@ def test_eeprom_with_torque_on_is_refused_and_leaves_the_servo_unchanged(cli, mh
     assert refused.exit_code == 5, refused.stderr
     error = json.loads(refused.stderr)["error"]
     assert "head_y" in error["message"] and "--allow torque-off" in error["hint"]
-    statuses = {i["item"]: i["status"] for i in json.loads(refused.stdout)["items"]}
+    statuses = {i["item"]: i["status"] for i in json.loads(refused.stdout)["result"]["items"]}
     assert statuses == {"Return Delay Time": "refused", "Position P Gain": "write"}
     assert servo.get("Return Delay Time") == 250 and servo.get("Position P Gain") == 640
     assert servo.get("Torque Enable") == 1
@@ -208,7 +208,7 @@ def test_eeprom_with_torque_on_is_refused_and_leaves_the_servo_unchanged(cli, mh
     allowed = cli("-p", "mh5", *targets, "config", "restore", edited, "--yes",
                   "--allow", "torque-off", "--json")
     assert allowed.exit_code == 0, allowed.stderr
-    assert json.loads(allowed.stdout)["summary"] == {"verified": 2}
+    assert json.loads(allowed.stdout)["result"]["summary"] == {"verified": 2}
     assert servo.get("Return Delay Time") == 100 and servo.get("Position P Gain") == 700
     assert servo.get("Torque Enable") == 1
     assert servo.get("Goal Position") == servo.get("Present Position")
@@ -224,7 +224,7 @@ def test_bus_settings_and_readings_are_not_restored(cli, mh5_buses, tmp_path):
     result = cli("-p", "mh5", *targets, "config", "restore", save(tmp_path, doc), "-y",
                  "--json")
     assert result.exit_code == 3
-    statuses = {i["item"]: i["status"] for i in json.loads(result.stdout)["items"]}
+    statuses = {i["item"]: i["status"] for i in json.loads(result.stdout)["result"]["items"]}
     assert statuses == {"Baud Rate": "skipped", "Firmware Version": "read-only"}
     servo = mh5_buses["upper_body"].bus.servos[51]
     assert servo.get("Baud Rate") == 1 and servo.get("Goal Position") == 2047
@@ -239,7 +239,7 @@ def test_imu_registers_restore_and_profile_settings_stay(cli, mh5_buses, tmp_pat
     result = cli("-p", "mh5", *targets, "config", "restore", save(tmp_path, doc), "-y",
                  "--json")
     assert result.exit_code == 3, result.stderr
-    statuses = {i["item"]: i["status"] for i in json.loads(result.stdout)["items"]}
+    statuses = {i["item"]: i["status"] for i in json.loads(result.stdout)["result"]["items"]}
     assert statuses == {"CTRL6_C": "verified", "CTRL1_XL": "read-only"}
     chip = mh5_buses["i2c"].bus.devices[0x6A]
     assert chip.registers[0x15] == 0x10 and chip.registers[0x10] == 0x62
@@ -265,13 +265,13 @@ def test_home_offset_is_restored_only_when_asked(cli, arm, tmp_path):
     edited = save(tmp_path, doc)
     skipped = cli("-p", "bioscara-arm", "-t", url, "config", "restore", edited, "-y", "--json")
     assert skipped.exit_code == 3
-    statuses = {i["item"]: i["status"] for i in json.loads(skipped.stdout)["items"]}
+    statuses = {i["item"]: i["status"] for i in json.loads(skipped.stdout)["result"]["items"]}
     assert statuses == {"home offset": "skipped", "max velocity": "read-only"}
     assert joints[0x13].home_offset == 0.0
     asked = cli("-p", "bioscara-arm", "-t", url, "config", "restore", edited, "-y",
                 "--allow", "home-offset", "--json")
     assert asked.exit_code == 3  # max velocity comes from the profile
-    statuses = {i["item"]: i["status"] for i in json.loads(asked.stdout)["items"]}
+    statuses = {i["item"]: i["status"] for i in json.loads(asked.stdout)["result"]["items"]}
     assert statuses == {"home offset": "verified", "max velocity": "read-only"}
     assert joints[0x13].home_offset == 0.5
 
@@ -284,11 +284,11 @@ def test_gripper_values_are_read_only_but_compared(cli, deltoctl_sim, tmp_path):
     diff = cli("-p", "dg-5f-right", "-t", target, "config", "diff", edited, "--json")
     assert diff.exit_code == 3
     assert [(r["item"], r["snapshot"], r["live"]) for r in
-            json.loads(diff.stdout)["differences"]] == [("firmware", "2.9", "3.0")]
+            json.loads(diff.stdout)["result"]["differences"]] == [("firmware", "2.9", "3.0")]
     restore = cli("-p", "dg-5f-right", "-t", target, "config", "restore", edited, "-y",
                   "--json")
     assert restore.exit_code == 3
-    assert [(i["item"], i["status"]) for i in json.loads(restore.stdout)["items"]] == [
+    assert [(i["item"], i["status"]) for i in json.loads(restore.stdout)["result"]["items"]] == [
         ("firmware", "read-only")]
 
 
@@ -298,7 +298,7 @@ def test_generic_blocks_restore_their_interface_values(cli, tmp_path):
         "analog_output1"]["value"] = 1.5
     result = cli("-p", "rrbot-gpio", "config", "restore", save(tmp_path, doc), "-y", "--json")
     assert result.exit_code == 0, result.stderr
-    assert [(i["item"], i["status"], i["after"]) for i in json.loads(result.stdout)["items"]] \
+    assert [(i["item"], i["status"], i["after"]) for i in json.loads(result.stdout)["result"]["items"]] \
         == [("analog_output1", "verified", 1.5)]
 
 
@@ -370,7 +370,7 @@ def test_a_servo_that_does_not_answer_is_named_not_compared(cli, deltoctl_sim, t
     result = cli("-p", "mh5", *targets_of(buses), "config", "diff",
                  str(tmp_path / "snap.yaml"), "--json")
     assert result.exit_code == 3
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     assert report["differences"] == []
     assert "upper_body/head_y: in the snapshot, not compared (it does not answer)" in \
         report["warnings"]

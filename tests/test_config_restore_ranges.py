@@ -60,7 +60,7 @@ def test_a_safety_setting_is_written_only_when_allowed(cli, mh5_buses, tmp_path)
     error = json.loads(refused.stderr)["error"]
     assert "head_y" in error["message"] and "--allow max-position-limit" in error["message"]
     assert "--allow max-position-limit" in error["hint"]
-    items = {i["item"]: i for i in json.loads(refused.stdout)["items"]}
+    items = {i["item"]: i for i in json.loads(refused.stdout)["result"]["items"]}
     assert items["Max Position Limit"]["status"] == "refused"
     assert items["Max Position Limit"]["note"] == "needs --allow max-position-limit"
     assert items["LED"]["status"] == "write"
@@ -68,7 +68,7 @@ def test_a_safety_setting_is_written_only_when_allowed(cli, mh5_buses, tmp_path)
     # named (as the snapshot spells it, too): written and read back
     allowed = _restore(cli, targets, edited, "--allow", "Max_Position_Limit")
     assert allowed.exit_code == 0, allowed.stderr
-    report = json.loads(allowed.stdout)
+    report = json.loads(allowed.stdout)["result"]
     assert report["summary"] == {"verified": 2}
     assert {i["item"]: i["after"] for i in report["items"]} == {"Max Position Limit": 3000,
                                                                "LED": 1}
@@ -107,7 +107,7 @@ def test_torque_on_and_a_safety_setting_need_both_permissions(cli, mh5_buses, tm
     for allow in (("--allow", "torque-off"), ("--allow", "temperature-limit")):
         result = _restore(cli, targets, edited, *allow)
         assert result.exit_code == 5, result.stderr
-        note = json.loads(result.stdout)["items"][0]["note"]
+        note = json.loads(result.stdout)["result"]["items"][0]["note"]
         assert note == "needs " + ("--allow temperature-limit" if "torque-off" in allow
                                    else "--allow torque-off")
         assert servo.get("Temperature Limit") == 72 and servo.get("Torque Enable") == 1

@@ -160,12 +160,12 @@ def test_gpio_get_and_set(cli, gripper, tmp_path):
     server = gripper("dg-5f-right")
     server.firmware.input_1 = True
     target = ("-p", "dg-5f-right", "-t", server.endpoint)
-    state = json.loads(cli(*target, "gpio", "get", "--json").stdout)
+    state = json.loads(cli(*target, "gpio", "get", "--json").stdout)["result"]
     assert state == {"gpio/output_1": 0.0, "gpio/output_2": 0.0, "gpio/output_3": 0.0,
                      "gpio/input_1": 1.0}
     result = cli(*target, "gpio", "set", "output_2", "on", "--json")
     assert result.exit_code == 0, result.stderr
-    assert json.loads(result.stdout)["gpio/output_2"] == 1.0
+    assert json.loads(result.stdout)["result"]["gpio/output_2"] == 1.0
     assert server.firmware.gpio_out == [False, True, False]
     cli(*target, "gpio", "set", "output_1", "on")
     assert server.firmware.gpio_out == [True, True, False]  # the others keep their state

@@ -31,7 +31,7 @@ def test_record_decodes_with_expected_counts(cli, tmp_path):
     result = cli("--sim", "-p", "dg-5f-right", "record", str(out), "--duration", "0.5",
                  "--rate", "40", "--json")
     assert result.exit_code == 0, result.stderr
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     n = report["loop"]["cycles"]
     assert 15 <= n <= 21
     counts, last = _topics(out)

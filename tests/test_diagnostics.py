@@ -91,7 +91,7 @@ def test_doctor_passes_on_simulated_devices(cli):
     result = cli("--sim", "-p", "dg-5f-right", "doctor")
     assert result.exit_code == 0, result.stdout
     assert "✘" not in result.stdout and "3 of 3 checks passed" in result.stdout
-    doc = json.loads(cli("--sim", "-p", "mh5", "doctor", "--json").stdout)
+    doc = json.loads(cli("--sim", "-p", "mh5", "doctor", "--json").stdout)["result"]
     assert doc["ok"] is True and doc["profile"] == "mh5"
     subjects = {c["subject"] for c in doc["checks"]}
     assert {"upper_body", "lower_body", "i2c"} <= subjects
@@ -100,7 +100,7 @@ def test_doctor_passes_on_simulated_devices(cli):
 def test_doctor_on_the_fixture_target(cli, deltoctl_sim):
     target = deltoctl_sim("bioscara-arm")
     result = cli("-p", "bioscara-arm", "-t", target, "doctor", "--json")
-    assert result.exit_code == 0 and json.loads(result.stdout)["ok"] is True
+    assert result.exit_code == 0 and json.loads(result.stdout)["result"]["ok"] is True
 
 
 def test_doctor_names_a_refused_target_and_the_fix(cli):
@@ -116,19 +116,19 @@ def test_doctor_finds_a_host_without_a_link_local_address(cli, monkeypatch):
     monkeypatch.setattr(doctor, "source_address", lambda host, port: "192.168.1.20")
     monkeypatch.setattr(doctor, "reach", lambda target, host, port:
                         doctor.check("reachable", target.bus, False, "no connection", "ping"))
-    doc = json.loads(cli("-p", "dg-5f-right", "doctor", "--json").stdout)
+    doc = json.loads(cli("-p", "dg-5f-right", "doctor", "--json").stdout)["result"]
     route = next(c for c in doc["checks"] if c["check"] == "route")
     assert not route["ok"] and "no 169.254.x.x address" in route["detail"]
     assert route["fix"].startswith("sudo ip addr add 169.254.")
     monkeypatch.setattr(doctor, "source_address", lambda host, port: "169.254.186.1")
-    doc = json.loads(cli("-p", "dg-5f-right", "doctor", "--json").stdout)
+    doc = json.loads(cli("-p", "dg-5f-right", "doctor", "--json").stdout)["result"]
     assert next(c for c in doc["checks"] if c["check"] == "route")["ok"]
 
 
 def test_doctor_finds_missing_buses_and_bad_targets(cli):
     result = cli("-p", "bioscara-arm", "-t", "i2c:///dev/i2c-99", "doctor", "--json")
     assert result.exit_code == 4
-    present = json.loads(result.stdout)["checks"][1]
+    present = json.loads(result.stdout)["result"]["checks"][1]
     assert present["check"] == "present" and "modprobe i2c-dev" in present["fix"]
     result = cli("-p", "dg-5f-right", "-t", "tcp://127.0.0.1:1?baud=9600", "doctor")
     assert result.exit_code == 2 and "unknown key 'baud'" in result.stdout
@@ -141,7 +141,7 @@ def test_doctor_names_the_process_holding_a_serial_port(cli):
     path = os.ttyname(slave)
     holder = subprocess.Popen(["sleep", "30"], stdin=slave)
     try:
-        doc = json.loads(cli("-t", f"serial://{path}?baud=1000000", "doctor", "--json").stdout)
+        doc = json.loads(cli("-t", f"serial://{path}?baud=1000000", "doctor", "--json").stdout)["result"]
         checks = {c["check"]: c for c in doc["checks"]}
         assert checks["present"]["ok"] and checks["permission"]["ok"]
         assert not checks["free"]["ok"] and f"{holder.pid} (sleep)" in checks["free"]["detail"]
@@ -159,7 +159,7 @@ def test_doctor_names_a_permission_problem(cli, monkeypatch):
     master, slave = os.openpty()
     monkeypatch.setattr(doctor.os, "access", lambda path, mode: False)
     try:
-        doc = json.loads(cli("-t", f"serial://{os.ttyname(slave)}", "doctor", "--json").stdout)
+        doc = json.loads(cli("-t", f"serial://{os.ttyname(slave)}", "doctor", "--json").stdout)["result"]
     finally:
         os.close(master)
         os.close(slave)

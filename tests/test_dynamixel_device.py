@@ -68,7 +68,7 @@ def test_torque_by_group_and_reboot_after_a_shutdown(cli, mh5_buses):
     targets = mh5_targets(mh5_buses)
     result = cli("-p", "mh5", *targets, "torque", "on", "arms", "--yes", "--json")
     assert result.exit_code == 0, result.stderr
-    assert len(json.loads(result.stdout)["joints"]) == 8
+    assert len(json.loads(result.stdout)["result"]["joints"]) == 8
     assert eventually(lambda: all(upper[i].memory[64] == 1
                                   for i in (31, 32, 33, 34, 41, 42, 43, 44)))
     assert upper[51].memory[64] == 0 and lower[11].memory[64] == 0  # head, legs untouched
@@ -78,7 +78,7 @@ def test_torque_by_group_and_reboot_after_a_shutdown(cli, mh5_buses):
     lower[24].memory[70] = 0x20  # overload shutdown on r_kne_p
     result = cli("-p", "mh5", *targets, "reboot", "right_leg", "--json")
     assert result.exit_code == 0
-    assert "r_kne_p" in json.loads(result.stdout)["rebooted"]
+    assert "r_kne_p" in json.loads(result.stdout)["result"]["rebooted"]
     assert lower[24].memory[70] == 0
     assert cli("-p", "mh5", *targets, "torque", "on", "wings", "--yes").exit_code == 2
 
@@ -130,7 +130,7 @@ def test_register_get_and_set_with_the_eeprom_rule(cli, mh5_buses):
     result = cli("-p", "mh5", *targets, "register", "get", "head_y", "present_temperature",
                  "9", "--json")
     assert result.exit_code == 0, result.stderr
-    assert json.loads(result.stdout)["values"] == {"Present Temperature": 30,
+    assert json.loads(result.stdout)["result"]["values"] == {"Present Temperature": 30,
                                                    "Return Delay Time": 250}
     dump = cli("-p", "mh5", *targets, "register", "get", "head_y")
     assert "Model Number" in dump.stdout and "Present Input Voltage" in dump.stdout

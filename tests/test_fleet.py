@@ -100,8 +100,12 @@ def _without(doc, keys):
 def test_a_remote_verb_prints_what_it_prints_on_the_robot(bench, verb):
     remote, local = bench.remote("--json", *verb), bench.local("--json", *verb)
     assert remote.returncode == local.returncode == 0, remote.stderr + local.stderr
-    assert json.loads(remote.stdout) == json.loads(local.stdout)
-    assert remote.stdout == local.stdout
+    remote_doc, local_doc = json.loads(remote.stdout), json.loads(local.stdout)
+    # the agent serves a simulator (--sim): its verbs say so; a run on the robot's computer
+    # that names the same simulator by -t cannot know it
+    assert all(b.pop("simulated") is True for b in remote_doc.get("blocks", []))
+    assert all(b.pop("simulated") is False for b in local_doc.get("blocks", []))
+    assert remote_doc == local_doc
     text = bench.remote(*verb)  # the tables for people too
     assert text.returncode == 0 and text.stdout == bench.local(*verb).stdout
 
@@ -110,8 +114,9 @@ def test_remote_connect_and_stream_have_the_local_shape(bench):
     remote, local = bench.remote("connect", "--json", "-n", "3"), bench.local("connect", "--json",
                                                                                "-n", "3")
     assert remote.returncode == local.returncode == 0, remote.stderr
-    assert _without(json.loads(remote.stdout), {"rtt_ms"}) == \
-        _without(json.loads(local.stdout), {"rtt_ms"})
+    assert all(b["simulated"] for b in json.loads(remote.stdout)["blocks"])  # agent --sim
+    assert _without(json.loads(remote.stdout), {"rtt_ms", "simulated"}) == \
+        _without(json.loads(local.stdout), {"rtt_ms", "simulated"})
     remote = bench.remote("stream", "--duration", "0.3", "--rate", "100", "-i", "rj_dg_1_*")
     local = bench.local("stream", "--duration", "0.3", "--rate", "100", "-i", "rj_dg_1_*")
     assert remote.returncode == local.returncode == 0, remote.stderr
@@ -370,7 +375,7 @@ def test_an_agent_open_to_unauthenticated_peers_moves_nothing(tmp_path):
             call = RemoteCall(b.session, "hand-3", argv, lambda _: None, lambda _: None)
             assert call.run() == code, argv
         assert not os.path.exists(outside)
-        assert json.loads(b.local("gpio", "get", "--json").stdout)["gpio/output_2"] == 0.0
+        assert json.loads(b.local("gpio", "get", "--json").stdout)["result"]["gpio/output_2"] == 0.0
     finally:
         b.close()
     # and the flag is for a loopback bench only
@@ -419,7 +424,7 @@ def fleet(tmp_path_factory):
 def test_fleet_list_shows_every_robot_with_profile_identity_and_state(fleet):
     result = fleet.run("fleet", "list", "--json")
     assert result.returncode == 0, result.stderr
-    robots = {r["robot"]: r for r in json.loads(result.stdout)}
+    robots = {r["robot"]: r for r in json.loads(result.stdout)["result"]}
     assert {name: r["profile"] for name, r in robots.items()} == FLEET
     assert all(r["state"] == "idle" and "error" not in r["identity"] for r in robots.values())
     assert robots["hand-r"]["identity"]["DG5FRightHardware"]["firmware"] == "3.0"
@@ -431,7 +436,7 @@ def test_fleet_list_shows_every_robot_with_profile_identity_and_state(fleet):
 def test_fleet_run_identify_on_ten_robots(fleet):
     result = fleet.run("fleet", "run", "identify", "--json")
     assert result.returncode == 0, result.stderr
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     assert report["exit_code"] == 0
     rows = {r["robot"]: r for r in report["robots"]}
     assert set(rows) == set(FLEET)
@@ -447,7 +452,7 @@ def test_fleet_run_identify_on_ten_robots(fleet):
 
 def test_fleet_run_exits_with_the_worst_code(fleet):
     result = fleet.run("fleet", "run", "gpio", "get", "--json")
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     codes = {r["robot"]: r["exit_code"] for r in report["robots"]}
     assert codes["hand-r"] == 0 and codes["rrbot"] == 0
     assert codes["arm-1"] == 2  # a robot with no GPIO: invalid input there
@@ -472,7 +477,7 @@ def test_fleet_run_a_bring_up_script(fleet, tmp_path):
         'deltoctl record "$out/x.mcap" --duration 1\n')
     result = fleet.run("fleet", "run", "--robots", "hand-[rl]", str(script), "--json")
     assert result.returncode == 0, result.stdout + result.stderr
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     assert [r["robot"] for r in report["robots"]] == ["hand-l", "hand-r"]
     assert all(r["lines_run"] == r["lines"] == 5 for r in report["robots"])
     # sim serve, set -e, the shell variable, and what follows && (never dropped silently)
@@ -484,7 +489,7 @@ def test_fleet_run_the_shipped_bring_up_script(fleet):
     script = REPO / "examples" / "bringup.sh"
     result = fleet.run("fleet", "run", "--robots", "hand-r", str(script), "--json")
     assert result.returncode == 0, result.stdout + result.stderr
-    row = json.loads(result.stdout)["robots"][0]
+    row = json.loads(result.stdout)["result"]["robots"][0]
     assert row["lines_run"] == row["lines"] >= 9  # home, two jogs, gpio set …
 
 
@@ -563,7 +568,7 @@ def test_ctrl_c_on_a_fleet_run_interrupts_every_robot(fleet):
                           timeout=20)
         run.send_signal(signal.SIGINT)
         out, _ = run.communicate(timeout=30)
-        rows = json.loads(out)["robots"]
+        rows = json.loads(out)["result"]["robots"]
         codes = {r["exit_code"] for r in rows}
         # each stream ends as on Ctrl-C at its terminal: 0 once streaming, 130 before
         assert codes <= {0, 130}, [(r["robot"], r["exit_code"], r["error"]) for r in rows]
@@ -583,7 +588,7 @@ def test_without_its_zygote_the_agent_starts_verbs_as_new_processes(tmp_path):
             proc = launcher.take(["-p", "rrbot-gpio", "--json", "gpio", "get"])
             out, err = collect(proc, 60)
             assert proc.returncode == 0, err
-            assert "flange_vacuum/vacuum" in json.loads(out)
+            assert "flange_vacuum/vacuum" in json.loads(out)["result"]
             launcher.refill()
         assert launcher.spares is not None  # the spare processes did it
     finally:

@@ -184,7 +184,7 @@ def test_the_zygote_refuses_a_command_line_too_long_and_runs_the_next_one(tmp_pa
         proc = zygote.take(["-p", "rrbot-gpio", "--json", "gpio", "get"])
         out, err = collect(proc, 60)
         assert proc.returncode == 0, err
-        assert "flange_vacuum/vacuum" in json.loads(out)  # its own output, not another's
+        assert "flange_vacuum/vacuum" in json.loads(out)["result"]  # its own output, not another's
     finally:
         zygote.close()
 
@@ -318,7 +318,7 @@ def test_a_record_written_on_the_robots_computer_needs_a_bounded_duration(hand, 
     run = deltoctl("--zenoh-config", str(hand.config), "fleet", "run", "--robots", hand.name,
                    "record", "long.mcap", "--rate", "100", "--json")
     assert run.returncode == 2
-    assert "--duration" in json.loads(run.stdout)["robots"][0]["error"]
+    assert "--duration" in json.loads(run.stdout)["result"]["robots"][0]["error"]
     assert not (hand.workdir / "long.mcap").exists()
     code, err = hand.call("record", "short.mcap", "--duration", "0.3", "--rate", "50")
     assert code == 0, err

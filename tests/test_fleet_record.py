@@ -45,7 +45,7 @@ def _read(path):
 def _info(path) -> dict:
     result = deltoctl("info", str(path), "--json")
     assert result.returncode == 0, result.stderr
-    return json.loads(result.stdout)
+    return json.loads(result.stdout)["result"]
 
 
 def test_a_remote_record_writes_the_file_on_the_callers_computer(hand, tmp_path):
@@ -57,7 +57,7 @@ def test_a_remote_record_writes_the_file_on_the_callers_computer(hand, tmp_path)
     assert result.returncode == 0, result.stderr
     assert out.stat().st_size > 0
     assert not (hand.workdir / "here.mcap").exists()  # not on the robot's side
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     assert set(report) >= LOCAL_KEYS and report["robot"] == "hand-rec"
     assert report["loop"]["cycles"] == report["loop"]["robot_cycles"] > 10
     assert report["messages"]["/joint_states"] == report["loop"]["cycles"]
@@ -71,7 +71,7 @@ def test_a_remote_record_writes_the_file_on_the_callers_computer(hand, tmp_path)
     # the same topics as a local record against the same simulator
     local = hand.local("record", str(tmp_path / "local.mcap"), "--duration", "0.3", "--json")
     assert local.returncode == 0, local.stderr
-    assert set(json.loads(local.stdout)["messages"]) == set(report["messages"])
+    assert set(json.loads(local.stdout)["result"]["messages"]) == set(report["messages"])
     # rosbags reads it; each message at the robot's cycle time, increasing, in the window
     messages = _read(out)
     stamps = [t for topic, t, _ in messages if topic == "/joint_states"]
@@ -88,7 +88,7 @@ def test_a_remote_record_of_a_robot_of_two_blocks(arm, tmp_path):
     result = arm.remote("record", "arm.mcap", "--duration", "0.5", "--rate", "50", "--json",
                         cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     summary = _info(tmp_path / "arm.mcap")
     assert summary["profile"]["name"] == "bioscara-dg-3f-m"
     local = arm.local("record", str(tmp_path / "local.mcap"), "--duration", "0.3", "--json")
@@ -97,7 +97,7 @@ def test_a_remote_record_of_a_robot_of_two_blocks(arm, tmp_path):
     names = [b["name"] for b in summary["blocks"]]
     assert len(names) == 2 and names == [b["name"] for b in local_summary["blocks"]]
     assert all(b["family"] for b in summary["blocks"])
-    assert set(json.loads(local.stdout)["messages"]) == set(report["messages"])
+    assert set(json.loads(local.stdout)["result"]["messages"]) == set(report["messages"])
     # every block's link status and the arm's joint flags (the driver's extra states) too
     messages = _read(tmp_path / "arm.mcap")
     gpio = next(m for topic, _, m in messages if topic == "/gpio")
@@ -129,7 +129,7 @@ def test_ctrl_c_on_the_caller_stops_the_stream_and_leaves_a_valid_file(hand, tmp
         if caller.poll() is None:
             caller.kill()
     assert caller.returncode == 0, stderr
-    report = json.loads(stdout)
+    report = json.loads(stdout)["result"]
     assert report["loop"]["cycles"] == report["loop"]["robot_cycles"] > 0
     assert _info(out)["messages"] == sum(report["messages"].values())
     assert sum(1 for topic, _, _ in _read(out) if topic == "/joint_states") == \

@@ -51,7 +51,7 @@ def request(argv: object, **extra: object) -> bytes:
 
 
 def output_2(agent) -> float:
-    return json.loads(agent.local("gpio", "get", "--json").stdout)["gpio/output_2"]
+    return json.loads(agent.local("gpio", "get", "--json").stdout)["result"]["gpio/output_2"]
 
 
 # -- what a command line does is what the CLI will run -----------------------------------------
@@ -75,7 +75,7 @@ def test_double_dash_shapes_are_refused_without_mtls_and_switch_nothing(agent, a
 
 def test_reading_verbs_still_run_for_an_unauthenticated_peer(agent):
     code, out, _ = call(agent, ["--json", "gpio", "--", "get"])
-    assert code == 0 and "gpio/output_2" in json.loads(out)
+    assert code == 0 and "gpio/output_2" in json.loads(out)["result"]
 
 
 @pytest.mark.parametrize("argv", [["--install-completion"], ["--show-completion", "bash"],
@@ -130,7 +130,7 @@ def test_after_malformed_and_oversized_requests_each_verb_is_its_own(agent):
     for payload in MALFORMED.values():
         raw(agent, payload)
     code, out, _ = call(agent, ["gpio", "get", "--json"])
-    assert code == 0 and "gpio/output_2" in json.loads(out)
+    assert code == 0 and "gpio/output_2" in json.loads(out)["result"]
     code, out, _ = call(agent, ["identify", "--json"])
     assert code == 0 and "blocks" in json.loads(out)
     assert "Traceback" not in agent.agent.text()

@@ -162,7 +162,7 @@ def test_record_serves_the_very_bytes_it_records(tmp_path):
     finally:
         code = _stop(proc)
     assert code == 0, "".join(err)
-    result = json.loads("".join(out))
+    result = json.loads("".join(out))["result"]
     assert result["foxglove"]["url"] == url and result["foxglove"]["cycles_sent"] > 0
     recorded: dict[tuple[str, int], bytes] = {}
     with mcap.open("rb") as f:
@@ -238,7 +238,7 @@ def test_bench_loop_runs_beside_a_foxglove_client(cli):
     result = cli("bench", "loop", "--rate", "200", "--duration", "0.5", "--unpaced", "0",
                  "--foxglove", "--json")
     assert result.exit_code == 0, result.stderr
-    one = json.loads(result.stdout)["hands"]["1"]
+    one = json.loads(result.stdout)["result"]["hands"]["1"]
     assert one["paced"]["cycles"] > 0 and "foxglove" not in one["paced"]
     live = one["paced_foxglove"]
     assert "foxglove" in live["stage_us_per_cycle"]

@@ -70,7 +70,7 @@ def test_verbs_on_generic_profiles(cli, name, tmp_path):
     for verb in (["connect"], ["identify"], ["detect"], ["stream", "-d", "0.05"]):
         result = cli("-p", name, *verb, "--json")
         assert result.exit_code == 0, (verb, result.stderr)
-    assert json.loads(cli("-p", name, "gpio", "get", "--json").stdout)
+    assert json.loads(cli("-p", name, "gpio", "get", "--json").stdout)["result"]
     out = tmp_path / f"{name}.mcap"
     assert cli("-p", name, "record", str(out), "-d", "0.2").exit_code == 0
     assert out.stat().st_size > 0
@@ -80,7 +80,7 @@ def test_gpio_and_jog_on_rrbot(cli):
     result = cli("-p", "rrbot-gpio", "gpio", "set", "flange_analog_IOs/analog_output1", "2.5",
                  "--json")
     assert result.exit_code == 0
-    assert json.loads(result.stdout)["flange_analog_IOs/analog_output1"] == 2.5
+    assert json.loads(result.stdout)["result"]["flange_analog_IOs/analog_output1"] == 2.5
     result = cli("-p", "rrbot-gpio", "jog", "joint1", "--to", "0.4", "--yes", "--json")
     assert block_of(json.loads(result.stdout))["joints"]["joint1"]["position"] == 0.4
     assert cli("-p", "rrbot-gpio", "jog", "joint1", "--to", "1.5", "--yes").exit_code == 5

@@ -34,7 +34,7 @@ def right_hand(tmp_path_factory):
 def _info(cli, path) -> dict:
     result = cli("info", str(path), "--json")
     assert result.exit_code == 0, result.stderr
-    return json.loads(result.stdout)
+    return json.loads(result.stdout)["result"]
 
 
 # -- info ----------------------------------------------------------------------------------------
@@ -162,10 +162,10 @@ def test_info_reads_a_file_whose_recorder_was_killed(cli, tmp_path):
     out.close()  # no close(): the provisional end stays
     result = cli("info", str(path), "--json")
     assert result.exit_code == 0, result.stderr
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     assert not report["indexed"] and report["messages"] == 50 * len(recorder.topics)
     assert "has no index" in result.stderr
-    plotted = json.loads(cli("plot", str(path), "j_dg_1_1/position", "--json").stdout)
+    plotted = json.loads(cli("plot", str(path), "j_dg_1_1/position", "--json").stdout)["result"]
     assert plotted["interfaces"][0]["count"] == 50
 
 
@@ -254,7 +254,7 @@ def test_plot_to_png_and_json(cli, right_hand, tmp_path):
                  "--json")
     assert result.exit_code == 0, result.stderr
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     assert report["out"] == str(png)
     assert [i["interface"] for i in report["interfaces"]] == [
         f"right_fingertip_finger_1/force.{a}" for a in "xyz"]
@@ -265,9 +265,9 @@ def test_plot_to_png_and_json(cli, right_hand, tmp_path):
 
 
 def test_plot_a_time_window(cli, right_hand):
-    whole = json.loads(cli("plot", str(right_hand), "rj_dg_1_1/position", "--json").stdout)
+    whole = json.loads(cli("plot", str(right_hand), "rj_dg_1_1/position", "--json").stdout)["result"]
     part = json.loads(cli("plot", str(right_hand), "rj_dg_1_1/position", "--start", "0.25",
-                          "--end", "0.5", "--json").stdout)
+                          "--end", "0.5", "--json").stdout)["result"]
     (w,), (p,) = whole["interfaces"], part["interfaces"]
     assert 20 <= p["count"] <= 30 < w["count"]
     assert p["first_ns"] >= w["first_ns"] + 250_000_000

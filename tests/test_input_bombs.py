@@ -252,7 +252,7 @@ def test_a_chunk_that_unpacks_to_what_it_declares_reads(tmp_path, summary):
     path = bomb_mcap(tmp_path / "small.mcap", "zstd", 31 + 1000, 1000, summary=summary)
     result = deltoctl("info", str(path), "--json")
     assert result["code"] in (0, 3), result
-    assert json.loads(result["stdout"])["topics"][0]["messages"] == 1
+    assert json.loads(result["stdout"])["result"]["topics"][0]["messages"] == 1
 
 
 def test_plot_is_bounded_as_info_is(tmp_path):
@@ -348,6 +348,6 @@ def test_a_file_without_a_summary_beyond_what_is_kept_is_read_again_whole(tmp_pa
     path = commands_mcap(tmp_path / "killed.mcap", 150_000, summary=False)
     result = deltoctl("plot", str(path), "j_dg_1_1/position", "--json")
     assert result["code"] in (0, 3), result
-    (plotted,) = json.loads(result["stdout"])["interfaces"]
+    (plotted,) = json.loads(result["stdout"])["result"]["interfaces"]
     assert plotted["count"] == 150_000 and plotted["max"] == 0.1
     assert result["peak_mb"] < PEAK_MB, result

@@ -26,7 +26,8 @@ TOLERANCE = 0.05  # rad or m
 def run_json(cli, *args):
     result = cli(*args, "--json")
     assert result.exit_code == 0, result.stderr
-    return json.loads(result.stdout)
+    document = json.loads(result.stdout)
+    return document.get("result", document)  # the data inside the envelope
 
 
 def replayed(cli, path, *args):
@@ -140,7 +141,7 @@ def test_a_difference_beyond_the_tolerance_exits_3(cli, tmp_path):
              str(out))
     result = cli("replay", str(out), "--tolerance", "0", "--json")
     assert result.exit_code == 3
-    assert json.loads(result.stdout)["exceeded"] == ["j_dg_1_2"]
+    assert json.loads(result.stdout)["result"]["exceeded"] == ["j_dg_1_2"]
     assert cli("replay", str(out), "--tolerance", "lots").exit_code == 2
 
 
@@ -301,7 +302,7 @@ def test_a_joint_straying_from_its_recording_stops_every_block(cli, gripper, tmp
     assert result.exit_code == 5, result.stderr
     assert "j_dg_1_2 at" in result.stderr and "from its recorded position" in result.stderr
     assert "--max-deviation" in result.stderr and "every block was stopped" in result.stderr
-    report = json.loads(result.stdout)  # the replay until it was stopped
+    report = json.loads(result.stdout)["result"]  # the replay until it was stopped
     assert 0 < report["commands"] < len(rows) and report["stopped"]
     assert report["max_deviation"] == 0.2
     assert report["joints"]["j_dg_1_2"]["max"] > 0.2

@@ -148,7 +148,7 @@ def test_the_recordings_bus_urls_never_choose_a_device(cli, hand, elsewhere, tmp
     result = cli("replay", str(out), "--device", "-t", hand.endpoint, "--yes", "--json",
                  "--max-deviation", "100")
     assert result.exit_code == 0, result.stderr
-    report = json.loads(result.stdout)
+    report = json.loads(result.stdout)["result"]
     assert report["on"] == "device" and report["target"] == hand.endpoint
     assert hand.firmware.pushed > 0 and accepted == []
     assert eventually(lambda: hand.firmware.duty == [0] * 20)
@@ -168,7 +168,7 @@ def test_device_sim_rehearses_under_the_catalogs_limits(cli, elsewhere, tmp_path
                str(jogged)).exit_code == 0
     result = cli("replay", str(jogged), "--device", "--sim", "--json")
     assert result.exit_code == 0, result.stderr
-    assert json.loads(result.stdout)["on"] == "simulator"
+    assert json.loads(result.stdout)["result"]["on"] == "simulator"
     assert accepted == []
 
 

@@ -113,7 +113,7 @@ def test_package_path_from_environment(cli, monkeypatch):
     result = cli("profile", "show", "--json",
                  str(SAMPLES / "harness/bioscara_standalone.urdf.xacro"))
     assert result.exit_code == 0, result.stderr
-    assert json.loads(result.stdout)["joints"] == 4
+    assert json.loads(result.stdout)["result"]["joints"] == 4
 
 
 def test_import_writes_a_yaml_profile_that_loads(cli, tmp_path):

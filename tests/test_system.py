@@ -88,7 +88,7 @@ def test_cell_homes_the_arm_by_its_routine_then_jogs_both(cli, deltoctl_sim):
 def test_gpio_by_name_on_either_hand(cli, deltoctl_sim):
     t = _targets(deltoctl_sim.buses(BIMANUAL))
     assert cli("-p", BIMANUAL, *t, "gpio", "set", "right_gpio/output_2", "on").exit_code == 0
-    values = json.loads(cli("-p", BIMANUAL, *t, "--json", "gpio", "get").stdout)
+    values = json.loads(cli("-p", BIMANUAL, *t, "--json", "gpio", "get").stdout)["result"]
     assert values["right_gpio/output_2"] == 1.0 and values["left_gpio/output_2"] == 0.0
 
 
@@ -203,10 +203,10 @@ def test_mh5_torque_reboot_register_reach_both_buses(cli, deltoctl_sim):
     t = _targets(deltoctl_sim.buses("mh5"))
     result = cli("-p", "mh5", *t, "--yes", "--json", "torque", "on", "all")
     assert result.exit_code == 0, result.stderr
-    assert len(json.loads(result.stdout)["joints"]) == 22
+    assert len(json.loads(result.stdout)["result"]["joints"]) == 22
     result = cli("-p", "mh5", *t, "--json", "reboot", "legs")
     assert result.exit_code == 0, result.stderr
-    assert len(json.loads(result.stdout)["rebooted"]) == 12
+    assert len(json.loads(result.stdout)["result"]["rebooted"]) == 12
     result = cli("-p", "mh5", *t, "--json", "register", "get", "r_ank_r", "present_temperature")
     assert result.exit_code == 0, result.stderr
-    assert json.loads(result.stdout)["values"] == {"Present Temperature": 30}
+    assert json.loads(result.stdout)["result"]["values"] == {"Present Temperature": 30}

@@ -87,7 +87,7 @@ def test_every_verb_lists_the_global_options_an_example_and_the_exit_codes(cli, 
 
 def test_the_root_help_and_help_exit_codes(cli):
     assert "Exit codes: 0 ok" in cli("-h").stdout
-    codes = json.loads(cli("help", "exit-codes", "--json").stdout)
+    codes = json.loads(cli("help", "exit-codes", "--json").stdout)["result"]
     assert [c["code"] for c in codes] == [0, 1, 2, 3, 4, 5, 130]
     assert "refused for safety" in cli("help", "exit-codes").stdout
     assert "Move one joint" in cli("help", "jog").stdout
@@ -119,17 +119,17 @@ def test_yq_after_the_verb_runs(cli):
 
 def test_profile_export_and_import_answer_in_json(cli, tmp_path):
     plain = cli("profile", "export", "dg-4f", "--format", "yaml").stdout
-    doc = json.loads(cli("profile", "export", "dg-4f", "--format", "yaml", "--json").stdout)
+    doc = json.loads(cli("profile", "export", "dg-4f", "--format", "yaml", "--json").stdout)["result"]
     assert doc["content"] == plain and doc["output"] is None and doc["format"] == "yaml"
     assert doc["blocks"] == ["dg4f_driver"] and doc["joints"] == 18
     out = tmp_path / "dg4f.urdf"
-    doc = json.loads(cli("--json", "profile", "export", "dg-4f", "-o", str(out)).stdout)
+    doc = json.loads(cli("--json", "profile", "export", "dg-4f", "-o", str(out)).stdout)["result"]
     assert doc["output"] == str(out) and doc["bytes"] == out.stat().st_size
     assert "content" not in doc
     yaml_out = tmp_path / "rrbot.yaml"
     result = cli("profile", "import", str(REPO / "urdf" / "rrbot-gpio.urdf"), "-o",
                  str(yaml_out), "--json")
-    doc = json.loads(result.stdout)
+    doc = json.loads(result.stdout)["result"]
     assert doc["format"] == "yaml" and doc["output"] == str(yaml_out) and doc["gpios"] == 3
     assert cli("profile", "validate", str(yaml_out)).exit_code == 0
 
@@ -266,7 +266,7 @@ def test_completion_of_values_profiles_and_options(cli):
     assert complete(cli, "deltoctl -p mh5 detect --hardware up") == ["upper_body"]
     assert complete(cli, "deltoctl identify --js") == ["--json"]
     assert complete(cli, "deltoctl help exit") == ["exit-codes"]
-    assert complete(cli, "deltoctl completion ") == ["bash", "zsh", "fish"]
+    assert complete(cli, "deltoctl completion ") == ["bash", "zsh", "fish", "man"]
 
 
 def test_servo_completion_never_runs_xacro(cli, tmp_path, monkeypatch):

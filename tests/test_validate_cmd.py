@@ -24,7 +24,7 @@ def test_warnings_then_strict(cli, tmp_path):
     path.write_text(URDF)
     result = cli("--json", "profile", "validate", str(path))
     assert result.exit_code == 3, result.stderr
-    [report] = json.loads(result.stdout)
+    [report] = json.loads(result.stdout)["result"]
     assert report["ok"] and any("effort" in w for w in report["warnings"])
     result = cli("profile", "validate", "--strict", str(path))
     assert result.exit_code == 2 and "effort" in result.stderr

@@ -20,6 +20,10 @@ def stdout_is_terminal() -> bool:
 
 
 WARNINGS = "deltoctl.warnings"  # root ctx.meta key: the warnings said so far
+# verbs that report each block of the robot: their document's keys stay, beside the envelope's
+BLOCK_VERBS = ("connect", "identify", "detect", "home", "jog", "calibrate ft")
+# verbs that read no profile (a file, the fleet, this computer): their envelope's is null
+NO_PROFILE = ("info", "plot", "help", "completion", "bench", "fleet")
 
 
 def emit_json(data: Any, err: bool = False) -> None:
@@ -49,9 +53,7 @@ def envelope(verb: str, data: Any, warnings: list[str], exit_code: int,
     ``warnings`` and ``exit_code``."""
     named = data.get("profile") if isinstance(data, dict) else None
     profile = named if isinstance(named, str) else profile
-    blocks = data.get("blocks") if isinstance(data, dict) else None
-    if isinstance(blocks, list) and all(isinstance(b, dict) for b in blocks) and (
-            named is None or isinstance(named, str)):
+    if verb in BLOCK_VERBS and isinstance(data, dict) and isinstance(data.get("blocks"), list):
         body = {k: v for k, v in data.items() if k != "profile"}
     else:
         body = {"result": data}
@@ -66,7 +68,8 @@ def flush_document(ctx: Any, exit_code: int) -> None:
     if pending is None:
         return
     verb, data, err = pending
-    profile = getattr(ctx.find_root().obj, "profile", None)
+    profile = None if verb.split(" ")[0] in NO_PROFILE else \
+        getattr(ctx.find_root().obj, "profile", None)
     write_json(envelope(verb, data, meta.get(WARNINGS, []), exit_code, profile), err)
 
 
