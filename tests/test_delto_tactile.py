@@ -314,7 +314,7 @@ def test_info_and_plot_read_a_tactile_recording(cli, tmp_path):
                "-d", "0.3").exit_code == 0
     info = cli("info", str(out), "--json")
     assert info.exit_code == 0, info.stderr
-    topics = {t["topic"]: t for t in json.loads(info.stdout)["topics"]}
+    topics = {t["topic"]: t for t in json.loads(info.stdout)["result"]["topics"]}
     assert topics["/tactile/finger_1"]["type"] == "sensor_msgs/msg/Image"
     assert topics["/tactile/finger_1"]["messages"] == topics["/joint_states"]["messages"]
     assert cli("info", str(out)).exit_code == 0

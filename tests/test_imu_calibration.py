@@ -157,7 +157,7 @@ def test_the_tumble_finds_bias_and_scale_and_stream_applies_them(cli, imu_server
     run_file = tmp_path / "run.mcap"
     result = run(cli, imu_server, calibrated, "record", str(run_file), "--duration", "0.2")
     assert result.exit_code == 0, result.stderr
-    info = json.loads(cli("info", str(run_file), "--json").stdout)
+    info = json.loads(cli("info", str(run_file), "--json").stdout)["result"]
     (chest,) = [b for b in info["blocks"] if b["name"] == "chest"]
     applied = chest["identity"]["calibration"]
     assert applied["applied"] is True and applied["file"] == block["calibration_file"]
