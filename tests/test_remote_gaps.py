@@ -105,3 +105,14 @@ def test_fleet_run_exits_cleanly_under_load(bench):
             proc.kill()
             proc.wait()
     assert codes == [0] * 30, codes
+
+
+def test_a_remote_record_fills_serial_and_refuses_an_existing_file(bench, tmp_path):
+    result = bench.remote("record", str(tmp_path / "r-{serial}.mcap"), "--duration", "0.2")
+    assert result.returncode == 0, result.stderr
+    (written,) = tmp_path.iterdir()
+    assert written.name.startswith("r-127.0.0.1-") and written.stat().st_size > 0
+    again = bench.remote("record", str(written), "--duration", "0.2")
+    assert again.returncode == 2 and "exists" in again.stderr
+    forced = bench.remote("record", str(written), "--duration", "0.2", "--force")
+    assert forced.returncode == 0, forced.stderr

@@ -172,6 +172,19 @@ def _positional(args: list[str]) -> int | None:
     return None
 
 
+def _output_name(template: Any, identities: dict[str, dict[str, Any]], force: bool) -> Any:
+    """A remote record's file: ``{serial}`` from the robot's blocks, as a local record fills
+    it; refused when it exists (without --force)."""
+    from deltoctl.app.recording import SERIAL, block_serial, output_path, refuse_existing
+
+    path = template
+    if SERIAL in path.name:
+        path = output_path(path, [block_serial(block, ident.get("target"), ident)
+                                  for block, ident in identities.items()])
+    refuse_existing(path, force)
+    return path
+
+
 def _record_params(args: list[str], robot: str) -> dict[str, Any]:
     """The record's own options, checked here; its file's directory must be there."""
     params = record_options(args)
@@ -242,9 +255,10 @@ def _remote_record(opts: Options, robot: str, argv: list[str],
         rec = RemoteRecord(session, robot, params["output"], params["rate"],
                            params["duration"], [f"--hardware={h}" for h in opts.hardware],
                            params["gpio_type"], params["allow_model_mismatch"], err,
-                           force=params["force"],
                            opened=lambda: info(f"recording {rec.output} from robot {robot} "
-                                               "(its cycle times; Ctrl-C ends it)"))
+                                               "(its cycle times; Ctrl-C ends it)"),
+                           name=lambda template, identities: _output_name(
+                               template, identities, params["force"]))
         with cancelled_by_signals(rec.cancel):
             try:
                 code = rec.run()

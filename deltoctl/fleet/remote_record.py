@@ -102,10 +102,11 @@ class RemoteRecord:
     def __init__(self, session: Any, robot: str, output: Path, rate: float,
                  duration: float | None, options: list[str], gpio_type: str = "group-values",
                  allow_model_mismatch: bool = False,
-                 err: Callable[[bytes], None] = lambda _: None, force: bool = False,
-                 opened: Callable[[], None] = lambda: None) -> None:
+                 err: Callable[[bytes], None] = lambda _: None,
+                 opened: Callable[[], None] = lambda: None,
+                 name: Callable[[Path, dict[str, dict[str, Any]]], Path] | None = None) -> None:
         self.session, self.robot, self.output = session, robot, output
-        self.force = force  # overwrite an existing file
+        self.name = name  # the file's name from each block's identity (and its checks)
         self.opened = opened  # called once the file is created (the first frame came)
         self.rate, self.duration, self.options = rate, duration, list(options)
         self.gpio_type, self.err = gpio_type, err
@@ -194,17 +195,11 @@ class RemoteRecord:
         return identities, code
 
     def _name_output(self, identities: dict[str, str]) -> None:
-        """``{serial}`` in the file's name, from the blocks the robot identified; the file
-        refused when it exists (without ``force``)."""
-        from deltoctl.app.recording import SERIAL, block_serial, output_path, refuse_existing
-
-        if SERIAL in self.output.name:
-            serials = []
-            for name, text in identities.items():
-                ident = json.loads(text)
-                serials.append(block_serial(name, ident.get("target"), ident))
-            self.output = output_path(self.output, serials)
-        refuse_existing(self.output, self.force)
+        """The file's name (``{serial}`` …) from the blocks the robot identified, by
+        ``name``, which may refuse it."""
+        if self.name is not None:
+            self.output = self.name(self.output, {block: json.loads(text)
+                                                  for block, text in identities.items()})
 
     # -- frames -----------------------------------------------------------------------------
 
