@@ -6,14 +6,9 @@ interface through ``can.interface``. This module is what deltoctl reads at start
 strings only; the driver, the emulator, python-can and canopen load when a block is opened.
 """
 
-import logging
-
 from deltoctl.registry import Family, Permission, SimOption
 
 __version__ = "0.1.0"
-
-for _name in ("canopen", "can"):  # a library's log records go where deltoctl sends its own
-    logging.getLogger(_name).addHandler(logging.NullHandler())
 
 FAMILY = Family(
     name="canopen",

@@ -25,7 +25,10 @@ from deltoctl.core.driver import Block, Driver, HomeProgress, MoveResult, Progre
 from deltoctl.core.loop import CommLoop
 from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Refused, Unreachable
 
-from deltoctl_canopen import codec
+from deltoctl_canopen import (
+    codec,
+    quiet,  # noqa: F401  (the libraries' log records)
+)
 from deltoctl_canopen.busconfig import NodeConfig
 from deltoctl_canopen.transport import parse_can_url
 

@@ -80,6 +80,8 @@ def load(path: Path, node_id: int | None = None, required: bool = True) -> Any:
 
     from canopen.objectdictionary.eds import import_eds
 
+    from deltoctl_canopen import quiet  # noqa: F401  (the library's log records)
+
     source = str(path)
     text = read_text(path)
     sections = scan(text, source)

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from deltoctl_canopen import quiet  # noqa: F401  (the libraries' log records)
 from deltoctl_canopen.drive import Drive402
 
 if TYPE_CHECKING:
