@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import select
 import socket
 import time
 
@@ -11,6 +12,7 @@ from deltoctl.errors import DeviceError, InvalidInput, Unreachable
 from deltoctl.transport import Check, Target, Transport, split_url
 
 DEFAULT_PORT = 502  # Modbus TCP's, which a Delto's developer mode keeps
+RECV_ROOM = 65536  # free bytes a receive asks for: any frame fits (its length is 2 bytes)
 
 
 def parse_tcp_url(url: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
@@ -53,6 +55,10 @@ class LinkLost(DeviceError):
 
 
 class TcpLink:
+    """A connection in non-blocking mode: a send or a receive is one system call when the
+    socket is ready, as it nearly always is, and a wait is one poll() bounded by the
+    caller's timeout (a socket with a timeout would poll() before every call)."""
+
     def __init__(self, host: str, port: int, connect_timeout: float = 3.0) -> None:
         self.host, self.port = host, port
         started = time.perf_counter()
@@ -69,51 +75,96 @@ class TcpLink:
         for name, value in (("TCP_KEEPIDLE", 1), ("TCP_KEEPINTVL", 1), ("TCP_KEEPCNT", 3)):
             if hasattr(socket, name):
                 sock.setsockopt(socket.IPPROTO_TCP, getattr(socket, name), value)
+        sock.setblocking(False)
         self.sock = sock
-        self._pending = bytearray()
-        self._timeout: float | None = None
+        self._readable, self._writable = select.poll(), select.poll()
+        self._readable.register(sock, select.POLLIN)
+        self._writable.register(sock, select.POLLOUT)
+        self._buf = bytearray(2 * RECV_ROOM)  # received; not yet taken: [_start:_end]
+        self._view = memoryview(self._buf)
+        self._start = self._end = 0
+        self._timeout = connect_timeout  # a send's, should it wait: the last receive's
         trace.link("tcp %s:%d: connected in %.1f ms", host, port,
                    (time.perf_counter() - started) * 1e3)
         if trace.PACKETS:  # checked once per link: an untraced link's methods stay as they are
             trace.trace_tcp(self)
 
     def send(self, data: bytes) -> None:
+        """The frame in one call; the rest, should the socket's buffer be full, as it drains."""
         try:
-            self.sock.sendall(data)
+            sent = self.sock.send(data)
+        except BlockingIOError:
+            sent = 0
         except OSError as exc:
             raise LinkLost(f"send to {self.host}:{self.port} failed: {exc}") from None
+        if sent < len(data):
+            self._send_rest(memoryview(data)[sent:])
 
-    def recv_frame(self, timeout: float) -> bytes:
-        """One frame prefixed by its 2-byte big-endian total length; usually one recv call."""
-        buf = self._pending
-        deadline = None
-        while True:
-            if len(buf) >= 2:
-                length = (buf[0] << 8) | buf[1]
-                if length < 3:
-                    raise LinkLost(f"bad frame length {length} from {self.host}:{self.port}")
-                if len(buf) >= length:
-                    frame = bytes(buf[:length])
-                    del buf[:length]
-                    return frame
-            if deadline is None:
-                deadline = time.monotonic() + timeout
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise LinkLost(f"no complete reply from {self.host}:{self.port} within "
-                               f"{timeout:g} s ({len(buf)} bytes received)")
-            if timeout != self._timeout:  # a syscall: only when the timeout changes
-                self.sock.settimeout(timeout)
-                self._timeout = timeout
+    def _send_rest(self, rest: memoryview) -> None:
+        deadline = time.monotonic() + self._timeout
+        while rest:
+            if not self._wait(self._writable, deadline):
+                raise LinkLost(f"send to {self.host}:{self.port} failed: timed out")
             try:
-                chunk = self.sock.recv(65536)
-            except TimeoutError:
+                rest = rest[self.sock.send(rest):]
+            except BlockingIOError:
                 continue
             except OSError as exc:
-                raise LinkLost(f"receive from {self.host}:{self.port} failed: {exc}") from None
-            if not chunk:
-                raise LinkLost(f"{self.host}:{self.port} closed the connection")
-            buf += chunk
+                raise LinkLost(f"send to {self.host}:{self.port} failed: {exc}") from None
+
+    def recv_frame(self, timeout: float) -> bytes:
+        """One frame prefixed by its 2-byte big-endian total length: usually one recv_into
+        the link's own buffer, after a poll() when the frame has not arrived yet."""
+        self._timeout = timeout
+        deadline = None
+        while True:
+            frame = self._frame()
+            if frame is not None:
+                return frame
+            if self._receive():
+                continue
+            if deadline is None:
+                deadline = time.monotonic() + timeout
+            if not self._wait(self._readable, deadline):
+                raise LinkLost(f"no complete reply from {self.host}:{self.port} within "
+                               f"{timeout:g} s ({self._end - self._start} bytes received)")
+
+    def _frame(self) -> bytes | None:
+        """The next whole frame of the buffer, taken out of it; None until it is all there."""
+        start, end, buf = self._start, self._end, self._buf
+        if end - start < 2:
+            return None
+        length = (buf[start] << 8) | buf[start + 1]
+        if length < 3:
+            raise LinkLost(f"bad frame length {length} from {self.host}:{self.port}")
+        if end - start < length:
+            return None
+        self._start = start + length
+        if self._start == end:  # all taken (the usual case): the buffer starts over
+            self._start = self._end = 0
+        return bytes(self._view[start:start + length])
+
+    def _receive(self) -> bool:
+        """What has arrived, appended to the buffer; False when nothing has."""
+        if self._end > RECV_ROOM:  # room for a whole frame: the unread bytes to the front
+            unread = self._end - self._start
+            self._buf[:unread] = self._buf[self._start:self._end]
+            self._start, self._end = 0, unread
+        try:
+            received = self.sock.recv_into(self._view[self._end:])
+        except BlockingIOError:
+            return False
+        except OSError as exc:
+            raise LinkLost(f"receive from {self.host}:{self.port} failed: {exc}") from None
+        if not received:
+            raise LinkLost(f"{self.host}:{self.port} closed the connection")
+        self._end += received
+        return True
+
+    def _wait(self, poller: select.poll, deadline: float) -> bool:
+        """Until the socket is ready as ``poller`` asks, or (False) the deadline passes."""
+        remaining = deadline - time.monotonic()
+        return remaining > 0 and bool(poller.poll(remaining * 1000))
 
     def close(self) -> None:
         trace.link("tcp %s:%d: closed", self.host, self.port)
