@@ -19,8 +19,9 @@ from deltoctl.errors import DeltoctlError, DeviceError
 from deltoctl.profile.model import Profile
 
 
-def _serve(profile: str) -> tuple[subprocess.Popen, str]:
-    """A simulated device for the profile in a process of its own; its endpoint."""
+def _serve(profile: str) -> tuple[subprocess.Popen, list[str]]:
+    """The simulated devices of a profile in a process of their own; their endpoints, in
+    the order of its blocks."""
     import json
 
     proc = subprocess.Popen([sys.executable, "-m", "deltoctl", "sim", "serve", profile,
@@ -29,7 +30,32 @@ def _serve(profile: str) -> tuple[subprocess.Popen, str]:
     if not line:
         proc.kill()
         raise DeviceError("sim serve did not start")
-    return proc, json.loads(line)["endpoint"]
+    return proc, list(json.loads(line)["buses"].values())
+
+
+def _serve_hands(prof: Profile, count: int, per_process: int, tmp: Path,
+                 procs: list[subprocess.Popen]) -> list[str]:
+    """``count`` simulated hands, ``per_process`` of them to a ``sim serve`` process; their
+    endpoints. Each process joins ``procs`` as soon as it runs."""
+    endpoints: list[str] = []
+    while len(endpoints) < count:
+        k = min(per_process, count - len(endpoints))
+        proc, served = _serve(str(prof.source) if k == 1 else str(_hands_file(prof, k, tmp)))
+        procs.append(proc)
+        endpoints += served[:k]
+    return endpoints
+
+
+def _hands_file(prof: Profile, hands: int, tmp: Path) -> Path:
+    """A profile of ``hands`` copies of the profile's first block, for ``sim serve``."""
+    from deltoctl.profile.exporter import to_yaml
+
+    robot = robot_of(prof, hands)
+    for hw in robot.hardware:
+        hw.bus = None  # served by block name, each block on a port of its own
+    path = tmp / f"hands-{hands}.yaml"
+    path.write_text(to_yaml(dataclasses.replace(robot, buses={})))
+    return path
 
 
 def robot_of(prof: Profile, hands: int) -> Profile:
@@ -331,46 +357,52 @@ def _foxglove_report(live: Any, client: subprocess.Popen) -> dict:
 
 
 def measure(prof: Profile, rate: float, duration: float, unpaced: float,
-            hands: tuple[int, ...] = (1,), foxglove: bool = False) -> dict:
-    """The idle baseline, then for each number of hands (each served by its own process) the
-    paced run, (``foxglove``) the paced run with the live view and a subscribed client, and
-    (``unpaced`` > 0) the unpaced run, with the goals."""
-    import contextlib
+            hands: tuple[int, ...] = (1,), foxglove: bool = False,
+            hands_per_process: int | None = None) -> dict:
+    """The idle baseline, then for each number of hands N (served by ``sim serve``,
+    ``hands_per_process`` to a process; by default all N by one) the paced run, the loop
+    thread's system calls, (``foxglove``) the paced run with the live view and a subscribed
+    client, and (``unpaced`` > 0) the unpaced run, with the goals."""
     import tempfile
-
-    from deltoctl.core.system import System
 
     if foxglove:
         from deltoctl.record.foxglove_live import load_foxglove
 
         load_foxglove()  # the extra is there, before any device is started
     results: dict[str, Any] = {"profile": prof.name, "python": sys.version.split()[0],
+                               "hands_per_process": hands_per_process,
                                "idle_loop": _idle_loop(rate, duration), "hands": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in hands:
+            runs = {"paced": (rate, duration, False), "syscalls": (rate, min(duration, 2.0)),
+                    "paced_foxglove": (rate, duration, True) if foxglove else None,
+                    "unpaced": (0.0, unpaced, False) if unpaced > 0 else None}
+            results["hands"][str(n)] = _hands_runs(prof, n, hands_per_process or n, Path(tmp),
+                                                   {k: v for k, v in runs.items() if v})
+    results["goals"] = _goals(results["hands"], hands)
+    return results
+
+
+def _hands_runs(prof: Profile, n: int, per_process: int, tmp: Path,
+                runs: dict[str, tuple]) -> dict[str, Any]:
+    """``n`` hands served for the runs (name: rate, duration and, but for ``syscalls``,
+    whether with the live view), one after the other; their emulators stopped after."""
+    import contextlib
+
+    from deltoctl.core.system import System
+
     with contextlib.ExitStack() as stack:
         procs: list[subprocess.Popen] = []
         stack.callback(_stop, procs)
-        endpoints = []
-        for _ in range(max(hands)):
-            proc, endpoint = _serve(str(prof.source))
-            procs.append(proc)
-            endpoints.append(endpoint)
-        tmp = Path(stack.enter_context(tempfile.TemporaryDirectory()))
-        for n in hands:
-            robot = robot_of(prof, n)
-            targets = [f"hand{i + 1}={endpoints[i]}" for i in range(n)]
-            with System(robot, targets) as system:
-                run = {"endpoints": endpoints[:n],
-                       "paced": _run(system, rate, duration, tmp / f"paced-{n}.mcap")}
-                run["syscalls"] = _syscalls(system, rate, min(duration, 2.0),
-                                            tmp / f"traced-{n}.mcap")
-                if foxglove:
-                    run["paced_foxglove"] = _run(system, rate, duration,
-                                                 tmp / f"foxglove-{n}.mcap", foxglove=True)
-                if unpaced > 0:
-                    run["unpaced"] = _run(system, 0.0, unpaced, tmp / f"unpaced-{n}.mcap")
-            results["hands"][str(n)] = run
-    results["goals"] = _goals(results["hands"], hands)
-    return results
+        endpoints = _serve_hands(prof, n, per_process, tmp, procs)
+        targets = [f"hand{i + 1}={endpoints[i]}" for i in range(n)]
+        report: dict[str, Any] = {"endpoints": endpoints}
+        with System(robot_of(prof, n), targets) as system:
+            for name, (rate, duration, *live) in runs.items():
+                mcap = tmp / f"{name}-{n}.mcap"
+                report[name] = _syscalls(system, rate, duration, mcap) if name == "syscalls" \
+                    else _run(system, rate, duration, mcap, foxglove=live[0])
+    return report
 
 
 def _stop(procs: list[subprocess.Popen]) -> None:

@@ -25,6 +25,10 @@ def bench_loop(
     foxglove: Annotated[bool, typer.Option(
         "--foxglove", help="Also the paced run with the live view (record --foxglove) serving "
                            "every topic to a subscribed Foxglove client.")] = False,
+    hands_per_process: Annotated[int | None, typer.Option(
+        "--hands-per-process", help="Hands each sim serve process serves, one thread "
+                                    "answering them (default: all; 1: a process per hand).")
+    ] = None,
 ) -> None:
     """The read+write cycle of N hands while recording, paced and unpaced.
 
@@ -36,8 +40,10 @@ def bench_loop(
 
     opts = options(ctx)
     counts = _loop_options(rate, duration, unpaced, hands)
+    if hands_per_process is not None and not 1 <= hands_per_process <= 16:
+        raise InvalidInput("--hands-per-process takes 1 to 16")
     prof = opts.load_profile(opts.profile or "dg-5f-right")
-    results = measure(prof, rate, duration, unpaced, counts, foxglove)
+    results = measure(prof, rate, duration, unpaced, counts, foxglove, hands_per_process)
     if opts.json:
         emit_json(results)
         return
@@ -63,8 +69,10 @@ def _loop_options(rate: float, duration: float, unpaced: float, hands: str) -> t
 def _say_loop(results: dict, counts: tuple[int, ...], rate: float) -> None:
     import os
 
-    say(f"bench loop: {results['profile']}, {', '.join(map(str, counts))} hand(s), each "
-        f"against its own sim serve ({os.cpu_count()} CPUs)")
+    per = results["hands_per_process"]
+    say(f"bench loop: {results['profile']}, {', '.join(map(str, counts))} hand(s), served by "
+        + ("one sim serve process" if per is None else f"sim serve, {per} to a process")
+        + f" ({os.cpu_count()} CPUs)")
     idle = results["idle_loop"]
     say(f"  baseline: an idle {rate:g} Hz loop here reaches {100 * idle['achieved_fraction']:.2f}"
         f" %, lateness p99 {idle['lateness_p99_ms']:.3f} ms, misses {idle['deadline_misses']}"
@@ -73,11 +81,11 @@ def _say_loop(results: dict, counts: tuple[int, ...], rate: float) -> None:
         for name in ("paced", "paced_foxglove", "unpaced"):
             if name in run:
                 _say_run(n, "+foxglove" if name == "paced_foxglove" else name, run[name])
-        calls = run.get("syscalls")
-        if calls:
-            by_call = ", ".join(f"{k} {v:g}" for k, v in calls["by_call"].items())
-            say(f"      system calls of the loop thread per paced cycle: {calls['per_cycle']:g}"
-                f" ({by_call})")
+            calls = run.get("syscalls") if name == "paced" else None
+            if calls:
+                by_call = ", ".join(f"{k} {v:g}" for k, v in calls["by_call"].items())
+                say(f"      system calls of the loop thread per paced cycle (strace): "
+                    f"{calls['per_cycle']:g} ({by_call})")
     say("  goals: " + ", ".join(f"{k}={'yes' if v else 'NO'}"
                                 for k, v in results["goals"].items()))
 

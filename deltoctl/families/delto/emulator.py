@@ -11,8 +11,10 @@ the finger moves freely. Faults: dropped connection, stalled joint, delay, trunc
 from __future__ import annotations
 
 import contextlib
+import heapq
 import math
 import random
+import selectors
 import socket
 import socketserver
 import threading
@@ -297,15 +299,128 @@ class _Handler(socketserver.BaseRequestHandler):
             self.server.track(sock, False)
 
 
+class DeltoHub:
+    """One thread serving the connections of several emulated grippers (``serve``): a
+    wake-up answers every request that has arrived, so a controller asking four grippers at
+    once wakes one thread, not four, and their replies go out together. A delayed reply
+    (the delay fault) waits in a queue, not in a sleep that would hold the others'."""
+
+    def __init__(self) -> None:
+        self.selector = selectors.DefaultSelector()
+        self._wake, self._waker = socket.socketpair()
+        self._wake.setblocking(False)
+        self.selector.register(self._wake, selectors.EVENT_READ)
+        self._added: list[tuple[socket.socket, DeltoServer]] = []
+        self._due: list[tuple[float, int, socket.socket, DeltoServer, bytes]] = []
+        self._count = 0  # orders delayed replies due at the same time
+        self._lock = threading.Lock()
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name="delto-sim-hub", daemon=True)
+        self._thread.start()
+
+    def add(self, sock: socket.socket, server: DeltoServer) -> None:
+        """A client's connection to ``server``, served by the hub's thread from now on."""
+        with self._lock:
+            self._added.append((sock, server))
+        self._waker.send(b"\0")
+
+    def close(self) -> None:
+        self._closed = True
+        with contextlib.suppress(OSError):
+            self._waker.send(b"\0")
+        self._thread.join(timeout=5)
+        for key in list(self.selector.get_map().values()):
+            key.fileobj.close()  # type: ignore[union-attr]
+        self.selector.close()
+        self._waker.close()
+
+    def _run(self) -> None:
+        while not self._closed:
+            timeout = max(0.0, self._due[0][0] - time.monotonic()) if self._due else None
+            replies: list[tuple[socket.socket, DeltoServer, bytes]] = []
+            for key, _ in self.selector.select(timeout):
+                if key.data is None:
+                    self._take_added()
+                else:
+                    replies += self._answer(key.fileobj, *key.data)  # type: ignore[arg-type]
+            while self._due and self._due[0][0] <= time.monotonic():
+                replies.append(heapq.heappop(self._due)[2:])
+            for sock, server, reply in replies:
+                self._send(sock, server, reply)
+
+    def _take_added(self) -> None:
+        with contextlib.suppress(OSError):
+            self._wake.recv(4096)
+        with self._lock:
+            added, self._added = self._added, []
+        for sock, server in added:
+            sock.setblocking(False)
+            self.selector.register(sock, selectors.EVENT_READ, (server, codec.FrameReader()))
+
+    def _answer(self, sock: socket.socket, server: DeltoServer,
+                reader: codec.FrameReader) -> list[tuple[socket.socket, DeltoServer, bytes]]:
+        """The replies due now to what the client sent; its connection closed when it
+        closed it or sent what is not a frame (after the replies to the frames before)."""
+        try:
+            data = sock.recv(4096)
+        except BlockingIOError:
+            return []
+        except OSError:
+            data = b""
+        replies, alive = [], bool(data)
+        firmware = server.firmware
+        try:
+            for request in reader.feed(data) if alive else ():
+                reply = firmware.handle(request)
+                if reply is None:
+                    continue
+                if firmware.faults.delay:
+                    self._count += 1
+                    heapq.heappush(self._due, (time.monotonic() + firmware.faults.delay,
+                                               self._count, sock, server, reply))
+                else:
+                    replies.append((sock, server, reply))
+        except ProtocolError:
+            alive = False
+        if alive:
+            return replies
+        for reply in replies:
+            self._send(*reply)
+        self._drop(sock, server)
+        return []
+
+    def _send(self, sock: socket.socket, server: DeltoServer, reply: bytes) -> None:
+        """A reply, whole in one call (a client that leaves its replies unread until the
+        socket's buffer is full is cut off)."""
+        if server.firmware.faults.truncate_next:
+            server.firmware.faults.truncate_next = False
+            reply = reply[: len(reply) // 2]
+        try:
+            if sock.send(reply) == len(reply):
+                return
+        except OSError:
+            pass
+        self._drop(sock, server)
+
+    def _drop(self, sock: socket.socket, server: DeltoServer) -> None:
+        with contextlib.suppress(KeyError, ValueError):
+            self.selector.unregister(sock)
+        sock.close()
+        server.track(sock, False)
+
+
 class DeltoServer(socketserver.ThreadingTCPServer):
-    """``with DeltoServer(firmware) as server: server.endpoint``; serves until closed."""
+    """``with DeltoServer(firmware) as server: server.endpoint``; serves until closed: each
+    connection in a thread of its own, or by ``hub``'s thread."""
 
     daemon_threads = True
     allow_reuse_address = True
 
-    def __init__(self, firmware: DeltoFirmware, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(self, firmware: DeltoFirmware, host: str = "127.0.0.1", port: int = 0,
+                 hub: DeltoHub | None = None) -> None:
         super().__init__((host, port), _Handler)
         self.firmware = firmware
+        self.hub = hub
         self.clients: set[socket.socket] = set()
         self._clients_lock = threading.Lock()
         self._thread = threading.Thread(target=self.serve_forever, name="delto-sim",
@@ -320,6 +435,13 @@ class DeltoServer(socketserver.ThreadingTCPServer):
         self._thread.start()
         return self
 
+    def process_request(self, request: Any, client_address: Any) -> None:
+        if self.hub is None:
+            super().process_request(request, client_address)
+            return
+        self.track(request, True)
+        self.hub.add(request, self)
+
     def track(self, sock: socket.socket, alive: bool) -> None:
         with self._clients_lock:
             (self.clients.add if alive else self.clients.discard)(sock)
@@ -330,7 +452,8 @@ class DeltoServer(socketserver.ThreadingTCPServer):
             for sock in list(self.clients):
                 with contextlib.suppress(OSError):
                     sock.shutdown(socket.SHUT_RDWR)
-                sock.close()
+                if self.hub is None:  # else the hub closes it, seeing it shut
+                    sock.close()
             self.clients.clear()
 
     def close(self) -> None:
@@ -379,6 +502,10 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
         raise InvalidInput(f"--model-id {o.model_id:#06x} is not a Delto model "
                            f"({', '.join(f'{m:#06x}' for m in MODELS)})")
     buses = {}
+    hub = None  # one gripper: a thread per connection; several: one thread answers all
+    if len(blocks) > 1:
+        hub = DeltoHub()
+        ctx.stack.callback(hub.close)
     for n, hw in enumerate(blocks):
         device = firmware_for_block(hw, model_id=o.model_id, firmware=(major, minor),
                                     short_version=o.short_version)
@@ -386,7 +513,7 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
         device.faults.delay = o.delay
         device.faults.stalled |= {hw.joints.index(j) for j in ctx.named("stall", hw)}
         server = ctx.stack.enter_context(
-            DeltoServer(device, host=o.host, port=o.port if n == 0 else 0))
+            DeltoServer(device, host=o.host, port=o.port if n == 0 else 0, hub=hub))
         buses[hw.bus or hw.name] = server.endpoint
         ctx.blocks[hw.name] = {"endpoint": server.endpoint, "model": device.model.name,
                                "firmware": o.firmware}
