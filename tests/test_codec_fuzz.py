@@ -380,7 +380,8 @@ def test_lsm6ds3_round_trip(block, scales):
 
 @pytest.mark.parametrize("sensor_type", [6, 0x7F, 0xFF])
 def test_a_gripper_reporting_an_unknown_sensor_type_streams_without_its_block(cli, sensor_type):
-    """The driver sizes the reply and places its fields by the same rule: no sensor block."""
+    """The driver sizes the reply and places its fields by the same rule: no sensor block,
+    and the stream says which values the profile's sensors lack (exit 3)."""
     import json
 
     from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
@@ -390,7 +391,8 @@ def test_a_gripper_reporting_an_unknown_sensor_type_streams_without_its_block(cl
     with DeltoServer(firmware) as server:
         result = cli("-p", "dg-5f-right", "-t", server.endpoint, "--json", "stream", "-d", "0.2",
                      "-i", "rj_dg_1_1/position,right_fingertip_finger_1/force.z")
-    assert result.exit_code == 0, result.stderr
+    assert result.exit_code == 3, result.stderr
+    assert "no values for right_fingertip_finger_1/*" in result.stderr
     last = json.loads(result.stdout.splitlines()[-1])["values"]
     assert last["rj_dg_1_1/position"] is not None
     assert last["right_fingertip_finger_1/force.z"] is None

@@ -679,7 +679,7 @@ def test_profile_show_reports_soft_limits_apart(tmp_path: Path, cli) -> None:
     assert "soft limits [-1, 0.5] (k_position 10, k_velocity 20)" in part.stdout
     import json
 
-    data = json.loads(cli("profile", "show", "--json", str(path)).stdout)
+    data = json.loads(cli("profile", "show", "--json", str(path)).stdout)["result"]
     assert data["soft_limits"]["RRBotSystemPositionOnly"]["joint2"] == {"lower": -1, "upper": 0.5, "k_position": 10,
                                              "k_velocity": 20}
     assert data["profile"]["ros2_control"][0]["joints"][0]["limits"] == {

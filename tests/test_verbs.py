@@ -50,7 +50,7 @@ def test_the_table_declares_every_command_of_the_cli_and_nothing_else():
 
 
 def test_the_fleet_sets_and_help_examples_come_from_the_table():
-    assert MOTION.declared() == {"home", "jog", "replay", "fleet run"}
+    assert MOTION.declared() == {"home", "jog", "replay", "report", "fleet run"}
     assert ACTUATING.declared() == MOTION.declared() | {
         "gpio set", "torque", "reboot", "register set", "config restore", "calibrate ft",
         "calibrate imu"}
