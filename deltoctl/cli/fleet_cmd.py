@@ -3,9 +3,7 @@ and one verb (or a bring-up script's verbs) on many robots at once."""
 
 from __future__ import annotations
 
-import contextlib
 import sys
-import time
 from typing import Annotated, Any, NoReturn
 
 import typer
@@ -16,19 +14,12 @@ from deltoctl.errors import DeltoctlError, InvalidInput
 app = typer.Typer(help="The robots whose agents answer over Zenoh, and verbs on many at once.",
                   no_args_is_help=True)
 
-# exit codes from best to worst: the fleet's code is the worst of its robots'
-SEVERITY = (0, 3, 1, 4, 2, 5, 130)
 FORWARDED = {"json": "--json", "yes": "--yes", "quiet": "--quiet"}
 AGENT_RECORD_MAX = 3600.0  # s: the longest record an agent writes in its own directory
 
 
 def register(root: typer.Typer) -> None:
     root.add_typer(app, name="fleet")
-
-
-def worst(codes: list[int]) -> int:
-    rank = {c: i for i, c in enumerate(SEVERITY)}
-    return max(codes, key=lambda c: rank.get(c, len(SEVERITY)), default=0)
 
 
 # -- --robot ---------------------------------------------------------------------------------
@@ -45,15 +36,6 @@ def strip_remote(argv: list[str]) -> list[str]:
         elif not arg.startswith(("--robot=", "--zenoh-config=")):
             out.append(arg)
     return out
-
-
-def _check(argv: list[str], robot: str) -> str:
-    from deltoctl.fleet.argv import check_argv
-
-    try:
-        return check_argv(argv)
-    except InvalidInput as exc:
-        raise InvalidInput(f"robot {robot}: {exc.message}", exc.hint) from None
 
 
 def _confirmed(opts: Options, verb: str, what: str) -> list[str]:
@@ -92,13 +74,14 @@ def forward(ctx: typer.Context) -> NoReturn:
     from deltoctl.cli.main import ARGV
     from deltoctl.fleet import check_robot
     from deltoctl.fleet.client import ErrorLines, RemoteCall, caller_session
+    from deltoctl.fleet.run import verb_of
 
     opts = options(ctx)
     robot = check_robot(opts.robot or "")
     argv = strip_remote(list(ctx.find_root().meta.get(ARGV, [])))
     errors = ErrorLines(robot, opts.json, _write_err)
     try:
-        verb = _check(_record_file_dropped(argv), robot)
+        verb = verb_of(_record_file_dropped(argv), robot)
         if verb == "record" and not {"--help", "-h"} & set(argv):
             code = _remote_record(opts, robot, argv, errors.feed)
             raise typer.Exit(code)
@@ -336,131 +319,12 @@ def list_cmd(
 
 # -- fleet run -------------------------------------------------------------------------------
 
-class Job:
-    """One robot's part of a fleet run: its command lines, run one after the other."""
-
-    def __init__(self, robot: str, profile: str, lines: list[list[str]]) -> None:
-        self.robot, self.profile, self.lines = robot, profile, lines
-        self.state = "waiting"
-        self.done = 0
-        self.codes: list[int] = []
-        self.out: list[bytes] = []
-        self.err: list[bytes] = []
-        self.started = self.ended = 0.0
-        self.call: Any = None
-
-    @property
-    def code(self) -> int:
-        return worst(self.codes)
-
-    def last_error(self) -> str:
-        """The verb's error message (text or --json), else its last line on stderr."""
-        import json
-
-        lines = b"".join(self.err).decode(errors="replace").strip().splitlines()
-        for line in reversed(lines):
-            if line.startswith("deltoctl: error: "):
-                return line.removeprefix("deltoctl: error: ")
-            if line.startswith('{"error"'):
-                with contextlib.suppress(ValueError, KeyError, TypeError):
-                    return str(json.loads(line)["error"]["message"])
-        return lines[-1] if lines else ""
-
-    def run(self, session: Any) -> None:
-        from deltoctl.errors import DeltoctlError
-        from deltoctl.fleet.client import RemoteCall
-
-        self.started = time.monotonic()
-        for argv in self.lines:
-            self.state = " ".join(a for a in argv if not a.startswith("--"))[:40]
-            self.out, self.err = [], []
-            try:
-                self.call = RemoteCall(session, self.robot, argv, self.out.append,
-                                       self.err.append)
-                code = self.call.run()
-            except DeltoctlError as exc:
-                self.err.append(f"deltoctl: error: {exc.message}\n".encode())
-                code = exc.exit_code
-            except Exception as exc:  # a broken session: this robot's part only
-                self.err.append(f"deltoctl: error: {exc}\n".encode())
-                code = 1
-            self.codes.append(code)
-            self.done += 1
-            if code not in (0, 3):
-                break
-        self.ended = time.monotonic()
-        self.state = "ok" if self.code == 0 else f"exit {self.code}"
-
-    def seconds(self) -> float:
-        return (self.ended or time.monotonic()) - self.started if self.started else 0.0
-
-    def report(self) -> dict[str, Any]:
-        import json
-
-        text = b"".join(self.out).decode(errors="replace")
-        try:
-            output: Any = json.loads(text) if text.strip() else None
-        except ValueError:
-            output = text
-        return {"robot": self.robot, "profile": self.profile, "exit_code": self.code,
-                "seconds": round(self.seconds(), 3), "lines_run": self.done,
-                "lines": len(self.lines), "output": output,
-                "error": self.last_error() if self.code not in (0, 3) else None}
-
-
-def script_lines(path: str, opts: Options) -> tuple[list[list[str]], list[str]]:
-    """The deltoctl command lines of a bring-up script (``deltoctl VERB …`` or
-    ``"$deltoctl" VERB …``; a pipe or redirection ends one), and the lines skipped: shell
-    lines, verbs that do not run remotely, arguments with shell variables."""
-    import shlex
-
-    from deltoctl.cmdline import hoist_global_options
-
-    try:
-        with open(path, encoding="utf-8") as f:
-            text = f.read(1 << 20)
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InvalidInput(f"{path}: cannot read the script: {exc}") from None
-    lines: list[list[str]] = []
-    skipped: list[str] = []
-    for n, line in enumerate(text.splitlines(), start=1):
-        lexer = shlex.shlex(line, posix=True, punctuation_chars=True)
-        lexer.whitespace_split, lexer.commenters = True, "#"
-        try:
-            words = list(lexer)
-        except ValueError as exc:
-            skipped.append(f"{path}:{n}: {exc}")
-            continue
-        if not words or words[0] not in ("deltoctl", "$deltoctl", "${deltoctl}"):
-            if words and not words[0].endswith("=") and "=" not in words[0]:
-                skipped.append(f"{path}:{n}: not a deltoctl command line")
-            continue
-        ends = [i for i, w in enumerate(words) if w in ("|", "||", "&&", ";", ">", ">>", "&")]
-        if ends and words[ends[0]] in ("||", "&&", ";", "&"):
-            skipped.append(f"{path}:{n}: what follows '{words[ends[0]]}' (one deltoctl "
-                           "command a line runs remotely)")
-        argv = hoist_global_options(words[1:ends[0] if ends else len(words)])
-        if any("$" in w for w in argv):
-            skipped.append(f"{path}:{n}: uses shell variables")
-            continue
-        try:
-            _check(argv, "")
-        except InvalidInput as exc:
-            skipped.append(f"{path}:{n}: {exc.message.removeprefix('robot : ')}")
-            continue
-        lines.append(_globals(opts) + argv)
-    if not lines:
-        raise InvalidInput(f"{path}: no deltoctl command line to run remotely",
-                           "a line of the script is: deltoctl VERB [ARGS]")
-    return lines, skipped
-
-
 def _globals(opts: Options) -> list[str]:
     return [flag for name, flag in FORWARDED.items() if getattr(opts, name)] + \
         [f"--hardware={h}" for h in opts.hardware]
 
 
-def _live(jobs: list[Job]) -> Any:
+def _live(jobs: list[Any]) -> Any:
     from rich.table import Table
 
     t = Table(title="fleet run", title_justify="left")
@@ -486,53 +350,34 @@ def run_cmd(
 ) -> None:
     """Run one verb (or a script's verbs) on many robots in parallel: a live table while they
     run, one report at the end; the exit code is the worst of the robots'."""
-    import fnmatch
     import os
-    import threading
 
     from deltoctl.cli.main import VERBS
     from deltoctl.cli.output import emit_json, info, table
     from deltoctl.cmdline import hoist_global_options
     from deltoctl.fleet import MOTION
     from deltoctl.fleet.client import agents, caller_session
+    from deltoctl.fleet.run import choose, script_lines, start, verb_of, worst
 
     opts = options(ctx)
     skipped: list[str] = []
-    verb_argv: list[str] | None = None  # one verb, checked once the robots are known
-    if command[0] not in VERBS and os.path.isfile(command[0]) and len(command) == 1:
-        lines, skipped = script_lines(command[0], opts)
+    one_verb = not (command[0] not in VERBS and os.path.isfile(command[0]) and len(command) == 1)
+    if one_verb:  # checked once the robots are known, to name them
+        lines = [hoist_global_options(list(command))]
     else:
-        verb_argv = hoist_global_options(list(command))
-        lines = [_globals(opts) + verb_argv]
+        lines, skipped = script_lines(command[0])
+    lines = [_globals(opts) + ln for ln in lines]
     for note in skipped:
         info(f"skipped {note}")
     with caller_session(opts.zenoh_config, "fleet") as session:
-        found = agents(session, wait=wait)
-        chosen = {r: p for r, p in found.items() if fnmatch.fnmatchcase(r, robots)}
-        if not chosen:
-            from deltoctl.errors import Unreachable
-
-            raise Unreachable(f"no robot matches {robots!r}"
-                              + (f" (found: {', '.join(sorted(found))})" if found else
-                                 ": no agent answers on this Zenoh network"))
-        if verb_argv is not None:  # refused naming the robots it was for
-            _check(verb_argv, ", ".join(sorted(chosen)))
-        moving = [ln for ln in lines if _verb(ln) in MOTION]
-        if moving and not opts.yes and sys.stdin.isatty():
-            names = ", ".join(sorted(chosen))
-            if not typer.confirm(f"motion on {len(chosen)} robots ({names}). Move?",
-                                 default=False, err=True):
-                from deltoctl.errors import Refused
-
-                raise Refused("not confirmed; nothing moved")
-            lines = [["--yes", *ln] if _verb(ln) in MOTION else ln for ln in lines]
-        report = len(lines) == 1 and _verb(lines[0]) == "report"
+        chosen = choose(agents(session, wait=wait), robots)
+        if one_verb:
+            verb_of(lines[0], ", ".join(sorted(chosen)))
+        lines = _confirm_motion(opts, chosen, lines, MOTION)
+        report = len(lines) == 1 and verb_of(lines[0]) == "report"
         if report and "--json" not in lines[0]:  # each robot's JSON, gathered below
             lines = [[*lines[0], "--json"]]
-        jobs = [Job(r, chosen[r], lines) for r in sorted(chosen)]
-        threads = [threading.Thread(target=j.run, args=(session,), daemon=True) for j in jobs]
-        for t in threads:
-            t.start()
+        jobs, threads = start(session, chosen, lines)
         _watch(jobs, threads, opts)
     code = worst([j.code for j in jobs])
     if report:
@@ -549,13 +394,24 @@ def run_cmd(
     raise typer.Exit(code)
 
 
-def _verb(argv: list[str]) -> str:
-    from deltoctl.fleet.argv import check_argv
+def _confirm_motion(opts: Options, chosen: dict[str, str], lines: list[list[str]],
+                    motion: Any) -> list[list[str]]:
+    """Motion on many robots is confirmed here, once (--yes, or yes on a terminal); each
+    moving line then carries --yes."""
+    from deltoctl.fleet.run import verb_of
 
-    return check_argv(argv)
+    if not any(verb_of(ln) in motion for ln in lines) or opts.yes or not sys.stdin.isatty():
+        return lines
+    names = ", ".join(sorted(chosen))
+    if not typer.confirm(f"motion on {len(chosen)} robots ({names}). Move?", default=False,
+                         err=True):
+        from deltoctl.errors import Refused
+
+        raise Refused("not confirmed; nothing moved")
+    return [["--yes", *ln] if verb_of(ln) in motion else ln for ln in lines]
 
 
-def _watch(jobs: list[Job], threads: list[Any], opts: Options) -> None:
+def _watch(jobs: list[Any], threads: list[Any], opts: Options) -> None:
     """Wait for every robot, with a live table on a terminal; Ctrl-C interrupts them all."""
     live = None
     if not (opts.json or opts.quiet) and sys.stderr.isatty():
