@@ -11,7 +11,7 @@ from urllib.parse import urlsplit
 
 import pytest
 
-from tests.test_foxglove import SUBPROTOCOLS, WAIT, _start, _stop, decode
+from tests.record.test_foxglove import SUBPROTOCOLS, WAIT, _start, _stop, decode
 
 websockets = pytest.importorskip("websockets")
 pytest.importorskip("foxglove")

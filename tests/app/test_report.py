@@ -213,7 +213,7 @@ def test_fleet_run_report_gathers_every_robot_the_worst_first(tmp_path):
     report, a table per robot, the failing one first."""
     pytest.importorskip("zenoh")
     from deltoctl.fleet import lab
-    from tests.test_fleet import deltoctl
+    from tests.fleet.test_fleet import deltoctl
 
     relaxed = hand(tmp_path)
     strict = tmp_path / "strict.yaml"  # a round trip under a nanosecond: never met

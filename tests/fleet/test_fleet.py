@@ -141,7 +141,7 @@ def test_a_remote_stream_publishes_its_frames(bench):
 
 
 def test_a_remote_recording_is_written_on_the_callers_computer(bench, tmp_path):
-    """--robot: here (tests/test_fleet_record.py says more); fleet run: on each robot, in its
+    """--robot: here (tests/fleet/test_fleet_record.py says more); fleet run: on each robot, in its
     agent's directory (one file name, many robots)."""
     result = bench.remote("record", "remote.mcap", "--duration", "0.5", "--rate", "100",
                           cwd=tmp_path)

@@ -17,7 +17,7 @@ from deltoctl.record.mcap_recorder import McapFile, McapRecorder
 from deltoctl.record.reader import read_recording, series
 from deltoctl.record.ros2_msgs import MSGDEFS
 from tests.conftest import record_with_a_dropped_link, ros2_messages
-from tests.test_recordings_rosbag2 import FAMILIES, family_recordings  # noqa: F401
+from tests.record.test_recordings_rosbag2 import FAMILIES, family_recordings  # noqa: F401
 
 
 @pytest.fixture(scope="module")

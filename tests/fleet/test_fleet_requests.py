@@ -16,7 +16,7 @@ from deltoctl.fleet import EXIT, MAX_VERBS, key, lab, zenoh_module
 from deltoctl.fleet.argv import MAX_ARG, MAX_ARGS, REQUEST
 from deltoctl.fleet.client import RemoteCall
 from tests.conftest import eventually
-from tests.test_fleet import Bench
+from tests.fleet.test_fleet import Bench
 
 ROBOT = "hand-q"
 

@@ -35,7 +35,7 @@ from deltoctl.profile.model import (
     TransmissionEnd,
 )
 
-ASSETS = Path(__file__).parent / "conformance" / "assets"
+ASSETS = Path(__file__).parent.parent / "conformance" / "assets"
 PI = 3.14159265359
 
 

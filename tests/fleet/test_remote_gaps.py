@@ -14,7 +14,7 @@ import pytest
 pytest.importorskip("zenoh")
 
 from deltoctl.fleet import lab
-from tests.test_fleet import Bench, deltoctl
+from tests.fleet.test_fleet import Bench, deltoctl
 
 LOCAL_LOOP = ("lateness_p50_ms", "lateness_p99_ms", "packets", "errors", "error_rate_perc")
 

@@ -24,7 +24,7 @@ from deltoctl.errors import InvalidInput
 from deltoctl.fleet import key, lab, zenoh_module
 from deltoctl.fleet.client import RemoteCall
 from tests.conftest import eventually
-from tests.test_fleet import JOINT, _children, deltoctl, popen
+from tests.fleet.test_fleet import JOINT, _children, deltoctl, popen
 
 linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 SLOW = ("--velocity", "2deg")  # a 20° jog takes 10 s: still moving when the test looks

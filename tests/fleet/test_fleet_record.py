@@ -14,7 +14,7 @@ pytest.importorskip("zenoh")
 
 from deltoctl.fleet import lab
 from tests.conftest import eventually
-from tests.test_fleet import Bench, deltoctl
+from tests.fleet.test_fleet import Bench, deltoctl
 
 LOCAL_KEYS = {"output", "messages", "link_losses", "loop"}  # a local record's report
 

@@ -17,8 +17,8 @@ import pytest
 
 from deltoctl.families.delto.emulator import DeltoServer, firmware_for_profile
 from deltoctl.profile.catalog import load_profile
+from tests.app.test_replay import _recording_with
 from tests.conftest import eventually
-from tests.test_replay import _recording_with
 
 JOINT = "rj_dg_2_2"  # 0°..115° on a DG-5F-R (2.0071 rad): the emulator's stop is there
 INDEX = 5  # its motor

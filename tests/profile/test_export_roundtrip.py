@@ -2,7 +2,7 @@
 model, and validate without a warning of the export's own.
 
 The sources are every catalog profile and every valid case of ros2_control's own parser tests
-(tests/test_conformance.py). Each is exported with deltoctl's exporter, written to a file, and
+(tests/profile/test_conformance.py). Each is exported with deltoctl's exporter, written to a file, and
 loaded back the way every verb loads a profile (the catalog's load_profile: the real loaders,
 xacro included, and validation).
 """
@@ -18,7 +18,7 @@ from deltoctl.errors import ProfileError
 from deltoctl.profile.catalog import catalog_names, load_profile
 from deltoctl.profile.exporter import profile_data, to_urdf, to_yaml
 from deltoctl.profile.model import Profile
-from tests.test_conformance import VALID, _load
+from tests.profile.test_conformance import VALID, _load
 
 FORMATS = ("urdf", "xacro", "yaml")
 CASES = {case.id: case for case in VALID}

@@ -10,8 +10,8 @@ import json
 
 import pytest
 
+from tests.app.test_config import save, servo_items, take
 from tests.conftest import mh5_targets
-from tests.test_config import save, servo_items, take
 
 HEAD_Y = 52  # its Dynamixel ID on upper_body
 
