@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 from deltoctl.errors import DeltoctlError, InvalidInput
 
 if TYPE_CHECKING:
+    from deltoctl.core.serving import Emulator
     from deltoctl.transport import Transport
 
 GROUP = "deltoctl.families"
@@ -184,7 +185,7 @@ class Family:
     # a third-party block names its device by params: (host param, port param, default port)
     endpoint_params: tuple[str, str, int] | None = None
     capabilities: frozenset[str] = frozenset()
-    emulator: str | None = None  # "module:function" serving a simulated device (sim/serve.py)
+    emulator: str | None = None  # "module:function", a core.serving.Emulator (sim/serve.py)
     serve_options: tuple[SimOption, ...] = ()  # the `sim serve` faults and settings it takes
     permissions: tuple[Permission, ...] = ()  # what `config restore --allow` names for it
     # how a table (fleet list) shows a block's identify report: (key, template), in order,
@@ -226,7 +227,7 @@ class Family:
                                      "report it to its authors")
         return cls
 
-    def emulator_function(self) -> Callable[..., Any] | None:
+    def emulator_function(self) -> Emulator | None:
         return _load(self.emulator) if self.emulator else None
 
     def frame_namer(self) -> Callable[[bytes], str | None] | None:

@@ -9,6 +9,7 @@ import contextlib
 from typing import Any
 
 from deltoctl import registry
+from deltoctl.core.serving import ServeContext
 from deltoctl.errors import InvalidInput
 from deltoctl.profile.model import Component, Hardware, Profile
 
@@ -35,9 +36,10 @@ class ServeOptions:
         return f"ServeOptions(host={self.host!r}, port={self.port!r}, faults={self.faults!r})"
 
 
-class ServeContext:
-    """What an emulator gets: the options, the stack that closes what it starts, and the
-    simulated I2C buses that devices of several families share."""
+class _SimContext:
+    """The :class:`~deltoctl.core.serving.ServeContext` each emulator of a profile gets: the
+    options, the stack that closes what it starts, and the simulated I2C buses that devices of
+    several families share."""
 
     def __init__(self, stack: contextlib.ExitStack, profile: Profile,
                  options: ServeOptions) -> None:
@@ -78,7 +80,7 @@ def serve_profile(stack: contextlib.ExitStack, prof: Profile, options: ServeOpti
         by_family.setdefault(name, []).append(hw)
         families[name] = family
     options = _checked(prof, blocks, options, [f for f in families.values() if f])
-    ctx = ServeContext(stack, prof, options)
+    ctx: ServeContext = _SimContext(stack, prof, options)
     buses: dict[str, str] = {}
     for name, family in families.items():
         serve = family.emulator_function() if family else None

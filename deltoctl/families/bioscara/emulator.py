@@ -15,11 +15,11 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from deltoctl.core.serving import ServeContext
 from deltoctl.families.bioscara import codec
 
 if TYPE_CHECKING:
     from deltoctl.profile.model import Hardware
-    from deltoctl.sim.serve import ServeContext
 
 TICK = 0.01  # s, the firmware's loop period
 DEADMAN = 0.05  # s without an I2C request while a velocity is set

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from operator import add, sub
 from typing import TYPE_CHECKING, Any
 
+from deltoctl.core.serving import ServeContext
 from deltoctl.errors import InvalidInput, ProtocolError
 from deltoctl.families.delto import codec
 from deltoctl.families.delto.models import (
@@ -41,7 +42,6 @@ from deltoctl.families.delto.models import (
 
 if TYPE_CHECKING:
     from deltoctl.profile.model import Hardware, Profile
-    from deltoctl.sim.serve import ServeContext
 
 INERTIA = 0.01  # kg·m², seen at the joint
 DAMPING = 0.5  # N·m·s/rad

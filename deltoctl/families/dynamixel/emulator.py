@@ -25,6 +25,7 @@ import tty
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from deltoctl.core.serving import ServeContext
 from deltoctl.errors import ProtocolError
 from deltoctl.families.dynamixel import codec
 from deltoctl.families.dynamixel.control_table import BAUD_RATES, item_at
@@ -40,7 +41,6 @@ from deltoctl.families.dynamixel.models import (
 
 if TYPE_CHECKING:
     from deltoctl.profile.model import Component, Hardware
-    from deltoctl.sim.serve import ServeContext
 
 _SPEEDS = {getattr(termios, f"B{b}"): b for b in BAUD_RATES.values() if hasattr(termios, f"B{b}")}
 ACCESS_ERROR, DATA_LENGTH_ERROR, INSTRUCTION_ERROR, RESULT_FAIL = 7, 5, 2, 1

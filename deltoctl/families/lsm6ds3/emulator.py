@@ -9,11 +9,11 @@ import math
 import random
 from typing import TYPE_CHECKING
 
+from deltoctl.core.serving import ServeContext
 from deltoctl.families.lsm6ds3 import codec
 
 if TYPE_CHECKING:
     from deltoctl.profile.model import Hardware
-    from deltoctl.sim.serve import ServeContext
 
 ACCEL_NOISE = 0.02  # m/s², one sigma
 GYRO_NOISE = 0.002  # rad/s

@@ -26,8 +26,8 @@ from deltoctl_canopen import quiet  # noqa: F401  (the libraries' log records)
 from deltoctl_canopen.drive import Drive402
 
 if TYPE_CHECKING:
+    from deltoctl.core.serving import ServeContext
     from deltoctl.profile.model import Hardware
-    from deltoctl.sim.serve import ServeContext
 
 
 TICK = 0.005  # s: event TPDOs, the following error, a node falling silent
