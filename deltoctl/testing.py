@@ -18,32 +18,41 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Iterator
+from typing import Any
 
 import pytest
 
 
+class SimDevices:
+    """What ``deltoctl_sim`` yields: called, the target URL of a one-bus device; ``buses``,
+    ``{bus: URL}`` for any profile. Every device stops with ``stack``."""
+
+    def __init__(self, stack: contextlib.ExitStack) -> None:
+        self._stack = stack
+
+    def buses(self, profile: str, **faults: Any) -> dict[str, str]:
+        from deltoctl.profile.catalog import load_profile
+        from deltoctl.sim.serve import ServeOptions, serve_profile
+
+        options = ServeOptions(**faults)
+        buses: dict[str, str] = serve_profile(self._stack, load_profile(profile),
+                                              options)["buses"]
+        return buses
+
+    def __call__(self, profile: str, firmware: str = "3.0", short_version: bool = False,
+                 model_id: int | None = None) -> str:
+        served = self.buses(profile, firmware=firmware, short_version=short_version,
+                            model_id=model_id)
+        if len(served) != 1:
+            raise ValueError(f"{profile} has {len(served)} buses "
+                             f"({', '.join(served)}): use deltoctl_sim.buses({profile!r})")
+        return next(iter(served.values()))
+
+
 @pytest.fixture
-def deltoctl_sim() -> Iterator[Callable[..., str]]:
+def deltoctl_sim() -> Iterator[SimDevices]:
     with contextlib.ExitStack() as stack:
-
-        def buses(profile: str, **faults: object) -> dict[str, str]:
-            from deltoctl.profile.catalog import load_profile
-            from deltoctl.sim.serve import ServeOptions, serve_profile
-
-            options = ServeOptions(**faults)  # type: ignore[arg-type]
-            return serve_profile(stack, load_profile(profile), options)["buses"]
-
-        def start(profile: str, firmware: str = "3.0", short_version: bool = False,
-                  model_id: int | None = None) -> str:
-            served = buses(profile, firmware=firmware, short_version=short_version,
-                           model_id=model_id)
-            if len(served) != 1:
-                raise ValueError(f"{profile} has {len(served)} buses "
-                                 f"({', '.join(served)}): use deltoctl_sim.buses({profile!r})")
-            return next(iter(served.values()))
-
-        start.buses = buses  # type: ignore[attr-defined]
-        yield start
+        yield SimDevices(stack)
 
 
 @pytest.fixture

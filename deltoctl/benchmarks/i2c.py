@@ -21,11 +21,11 @@ from deltoctl.transport.i2c import I2CBus, wire_bits
 class _Timed:
     """An SMBus-compatible wrapper that adds up the time spent inside the bus it wraps."""
 
-    def __init__(self, smbus) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, smbus: SimSMBus) -> None:
         self.smbus = smbus
         self.seconds = 0.0
 
-    def i2c_rdwr(self, *msgs) -> None:  # type: ignore[no-untyped-def]
+    def i2c_rdwr(self, *msgs: i2c_msg) -> None:
         start = time.perf_counter()
         self.smbus.i2c_rdwr(*msgs)
         self.seconds += time.perf_counter() - start

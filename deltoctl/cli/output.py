@@ -8,11 +8,14 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
 from deltoctl.cli.main import DOCUMENT  # root ctx.meta key: the document, until the verb exits
+
+if TYPE_CHECKING:
+    from rich.progress import Progress
 
 
 def stdout_is_terminal() -> bool:
@@ -145,7 +148,7 @@ def _quiet() -> bool:
     return ctx is not None and bool(getattr(ctx.find_root().obj, "quiet", False))
 
 
-def progress(opts: Any, transient: bool = True, elapsed: bool = False):  # type: ignore[no-untyped-def]
+def progress(opts: Any, transient: bool = True, elapsed: bool = False) -> Progress | None:
     """A started rich Progress on stderr while a person watches; None for scripts (--json, -q,
     stderr not a terminal). stdout stays for the verb's result. ``elapsed``: the time so far
     instead of the time left."""

@@ -1,13 +1,16 @@
 """``deltoctl profile list|show|validate|import|export``."""
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, info, say, table
 from deltoctl.errors import WARNINGS, DeltoctlError, InvalidInput
+
+if TYPE_CHECKING:
+    from deltoctl.profile.model import Profile
 
 app = typer.Typer(help="Browse, check and convert device profiles.", no_args_is_help=True)
 
@@ -76,7 +79,7 @@ def _warn(prof: Any) -> None:
         info(f"warning: {warning}")
 
 
-def _completion_profile(ctx: typer.Context):  # type: ignore[no-untyped-def]
+def _completion_profile(ctx: typer.Context) -> "Profile | None":
     """The profile named on the command line being completed, or None.
 
     Completion runs while a command line is typed, on a file nobody chose to load yet: it

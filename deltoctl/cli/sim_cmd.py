@@ -2,7 +2,7 @@
 
 import contextlib
 import inspect
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any, cast
 
 import typer
 
@@ -107,7 +107,7 @@ def _command() -> Any:
         serve(**kwargs)
 
     command.__doc__ = serve.__doc__
-    command.__signature__ = inspect.Signature(fixed + declared)  # type: ignore[attr-defined]
+    cast(Any, command).__signature__ = inspect.Signature(fixed + declared)  # what typer reads
     return command
 
 

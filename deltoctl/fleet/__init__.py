@@ -22,6 +22,7 @@ zenoh is imported only by the modules that talk over it, never at the CLI's star
 from __future__ import annotations
 
 import re
+from types import ModuleType
 
 from deltoctl import verbs
 from deltoctl.errors import InvalidInput
@@ -57,7 +58,7 @@ def key(robot: str, *parts: str) -> str:
     return "/".join((ROOT, robot, *parts))
 
 
-def zenoh_module():  # type: ignore[no-untyped-def]
+def zenoh_module() -> ModuleType:
     """``import zenoh``, or one clear message saying how to install it."""
     try:
         import zenoh

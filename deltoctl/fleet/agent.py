@@ -648,8 +648,9 @@ def start_simulator(command: list[str], env: dict[str, str] | None = None,
 
 def _readline(proc: subprocess.Popen[bytes], timeout: float) -> bytes:
     box: list[bytes] = []
-    reader = threading.Thread(target=lambda: box.append(proc.stdout.readline()),  # type: ignore[union-attr]
-                              daemon=True)
+    stdout = proc.stdout
+    assert stdout is not None  # started with stdout=PIPE
+    reader = threading.Thread(target=lambda: box.append(stdout.readline()), daemon=True)
     reader.start()
     reader.join(timeout)
     return box[0] if box else b""

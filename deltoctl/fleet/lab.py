@@ -13,6 +13,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +30,7 @@ def endpoint(port: int, scheme: str = "tcp") -> str:
     return f"{scheme}/127.0.0.1:{port}"
 
 
-def write_config(path: Path, mode: str, connect: list[str] = (), listen: list[str] = (),  # type: ignore[assignment]
+def write_config(path: Path, mode: str, connect: Sequence[str] = (), listen: Sequence[str] = (),
                  tls: dict[str, Any] | None = None) -> Path:
     """A Zenoh JSON5 config file (JSON is JSON5): no multicast scouting, explicit endpoints."""
     doc: dict[str, Any] = {"mode": mode, "scouting": {"multicast": {"enabled": False}}}
@@ -91,7 +92,10 @@ class AgentProcess:
                                      stdout=subprocess.PIPE if background else subprocess.DEVNULL,
                                      stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env,
                                      cwd=cwd)
-        self.pid = int(self.proc.stdout.readline()) if background else self.proc.pid  # type: ignore[union-attr]
+        self.pid = self.proc.pid
+        if background:  # the agent's own pid: the shell's first line
+            assert self.proc.stdout is not None
+            self.pid = int(self.proc.stdout.readline())
         self.log: list[str] = []
         self.ready = threading.Event()
         threading.Thread(target=self._read, daemon=True).start()

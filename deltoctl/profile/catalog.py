@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from deltoctl.data import data_dir
 from deltoctl.errors import InvalidInput, ProfileError
@@ -69,9 +69,9 @@ def resolve(spec: str) -> Path:
     candidate = catalog_dir() / f"{spec}.yaml"
     if candidate.is_file():
         return candidate
-    candidate = catalog_files().get(spec)
-    if candidate is not None:
-        return candidate
+    installed = catalog_files().get(spec)
+    if installed is not None:
+        return installed
     from deltoctl.suggest import close_matches
 
     close = close_matches(spec, catalog_names())
@@ -165,7 +165,7 @@ def _cache_file() -> Path:
     return Path(base) / "deltoctl" / f"catalog-{__version__}.json"
 
 
-def catalog_summaries(summarize) -> list[dict]:  # type: ignore[no-untyped-def]
+def catalog_summaries(summarize: Callable[[Profile], dict[str, Any]]) -> list[dict[str, Any]]:
     """``summarize(profile)`` for every catalog profile, cached by file size and mtime.
 
     A bring-up script runs ``profile list`` often and the catalog rarely changes: a hit
@@ -180,7 +180,7 @@ def catalog_summaries(summarize) -> list[dict]:  # type: ignore[no-untyped-def]
     except (OSError, ValueError):
         cache = {}
     summaries = []
-    fresh: dict[str, dict] = {}
+    fresh: dict[str, dict[str, Any]] = {}
     for path in catalog_files().values():
         stat = path.stat()
         key = f"{path}:{stat.st_size}:{stat.st_mtime_ns}"

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 
 COMPONENT_KINDS = ("joint", "sensor", "gpio")
@@ -395,7 +395,8 @@ def merge_interface_limits(urdf: Limits | None, joint: Component) -> Limits | No
     return None if lim == Limits() else lim
 
 
-def _tighter(current: float | None, bound: float | None, pick) -> float | None:  # type: ignore[no-untyped-def]
+def _tighter(current: float | None, bound: float | None,
+             pick: Callable[[float, float], float]) -> float | None:
     if bound is None:
         return current
     return bound if current is None else pick(current, bound)

@@ -35,6 +35,7 @@ from deltoctl.profile.model import (
 
 URDF_SUFFIXES = (".urdf", ".xacro", ".xml")
 Fail = Callable[[str, "int | None"], ProfileError]
+Doubt = Callable[[str, "int | None"], None]  # a warning: ros2_control accepts it, deltoctl doubts
 
 
 def part_address(profile: Profile, hw: Hardware, comp: Component) -> int | None:
@@ -175,7 +176,7 @@ def _check_profile(profile: Profile, fail: Fail) -> None:
                        "(expected tcp://HOST:PORT, serial:///dev/PORT or i2c:///dev/i2c-N)", None)
 
 
-def _check_block(profile: Profile, hw: Hardware, fail: Fail, doubt) -> None:  # type: ignore[no-untyped-def]
+def _check_block(profile: Profile, hw: Hardware, fail: Fail, doubt: Doubt) -> None:
     if hw.type not in HARDWARE_TYPES:
         raise fail(f"ros2_control block {hw.name!r}: type must be one of "
                    f"{', '.join(HARDWARE_TYPES)}, got {hw.type!r}", hw.line)
@@ -210,7 +211,7 @@ def _check_block(profile: Profile, hw: Hardware, fail: Fail, doubt) -> None:  # 
                            "be a finite number", where)
 
 
-def _check_joint(hw: Hardware, joint: Component, fail: Fail, doubt) -> None:  # type: ignore[no-untyped-def]
+def _check_joint(hw: Hardware, joint: Component, fail: Fail, doubt: Doubt) -> None:
     where = joint.line or hw.line
     if joint.joint_type not in JOINT_TYPES:
         raise fail(f"joint {joint.name!r}: type must be one of {', '.join(JOINT_TYPES)}, "
@@ -263,7 +264,7 @@ def _check_limits(joint: Component, where: int | None, fail: Fail) -> None:
 
 
 def _check_interfaces(hw: Hardware, comp: Component, seen: dict[tuple[str, str], str],
-                      fail: Fail, doubt) -> None:  # type: ignore[no-untyped-def]
+                      fail: Fail, doubt: Doubt) -> None:
     where = comp.line or hw.line
     for which in ("command", "state"):
         names: set[str] = set()
@@ -285,7 +286,7 @@ def _check_interfaces(hw: Hardware, comp: Component, seen: dict[tuple[str, str],
 
 
 def _check_interface(comp: Component, itf: Interface, line: int | None, fail: Fail,
-                     doubt) -> None:  # type: ignore[no-untyped-def]
+                     doubt: Doubt) -> None:
     what = f"{comp.name}/{itf.name}"
     for key in ("min", "max"):
         value = getattr(itf, key)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import stat
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
@@ -39,7 +39,10 @@ def param_text(value: Any) -> str:
         return format_number(value)
     return str(value)
 
-_BaseLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+if TYPE_CHECKING:  # one class to type against; libyaml's loader behaves the same
+    from yaml import SafeLoader as _BaseLoader
+else:
+    _BaseLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 MAX_YAML_DEPTH = 64
 MAX_YAML_NODES = 100_000  # counting each alias as the nodes it stands for
@@ -63,7 +66,7 @@ class LineList(list):
         self.lines: list[int] = []
 
 
-class _Loader(_BaseLoader):  # type: ignore[misc,valid-type]
+class _Loader(_BaseLoader):
     pass
 
 

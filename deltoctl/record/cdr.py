@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import re
 import struct
+from typing import Any
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR, little-endian
 SEC, NANOSEC = "@sec", "@nanosec"  # the stamp's fields in a template
@@ -46,7 +47,7 @@ class _IntFields(struct.Struct):
         super().__init__(fmt)
         self.runs = runs  # (first index among the values, end, lowest, highest)
 
-    def pack(self, *values: float) -> bytes:  # type: ignore[override]
+    def pack(self, *values: Any) -> bytes:  # floats; Any as in struct.Struct.pack
         v = list(values)
         for start, end, lo, hi in self.runs:
             v[start:end] = [0 if x != x else lo if x <= lo else hi if x >= hi else round(x)

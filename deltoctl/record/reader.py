@@ -39,7 +39,7 @@ from array import array
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any, BinaryIO, cast
 
 from deltoctl.errors import InvalidInput
 from deltoctl.profile.catalog import MAX_PROFILE_BYTES
@@ -464,8 +464,8 @@ def _decompress(data: memoryview, compression: str, size: int, path: Path) -> by
     if compression == "lz4":
         import lz4.frame
 
-        return lz4.frame.LZ4FrameDecompressor().decompress(  # type: ignore[no-any-return]
-            data, max_length=size + 1)
+        return cast(bytes, lz4.frame.LZ4FrameDecompressor().decompress(  # lz4 has no types
+            data, max_length=size + 1))
     if compression == "zstd":
         import zstandard
 
@@ -853,7 +853,8 @@ def _extract(chunks: list[Any], path: Path, channel_id: int, type_name: str, top
 
     layout_of = LAYOUTS[type_name]
     eight = np.arange(8)
-    times_parts, value_parts = [], {n: [] for n in names}  # type: ignore[var-annotated]
+    times_parts: list[Any] = []  # numpy arrays, joined at the end
+    value_parts: dict[str, list[Any]] = {n: [] for n in names}
     for batch in _batches(path, chunks, channel_id):
         if not len(batch.offsets):
             continue
@@ -885,7 +886,8 @@ def _scanned_parts(rec: Recording, channel: Channel, layout_of: Callable[[Cdr, s
                    names: list[str]) -> list[tuple[Any, dict[str, Any]]]:
     import numpy as np
 
-    times, values = [], {n: [] for n in names}  # type: ignore[var-annotated]
+    times: list[int] = []
+    values: dict[str, list[float]] = {n: [] for n in names}
     for t, data in rec.read(channel.id):
         layout = dict(layout_of(Cdr(data), channel.topic))
         times.append(t)

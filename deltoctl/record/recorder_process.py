@@ -27,10 +27,16 @@ from array import array
 from collections.abc import Iterator
 from operator import itemgetter
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 from deltoctl.errors import DeviceError
 from deltoctl.profile.model import Profile
+
+if TYPE_CHECKING:
+    from multiprocessing.connection import Connection
+    from multiprocessing.context import ForkContext, SpawnContext
+
+    from deltoctl.record.mcap_recorder import McapFile, McapRecorder
 
 NAN = float("nan")
 # Cycles go to the child in batches: at least every 5 ms (a slow loop: every cycle), at most
@@ -48,7 +54,7 @@ def _nothing(values: dict) -> tuple:
     return ()
 
 
-def _widen(conn) -> None:  # type: ignore[no-untyped-def]
+def _widen(conn: Connection) -> None:
     """Up to a second of cycles in flight: a pipe of 1 MiB where Linux allows it."""
     try:
         import fcntl
@@ -58,9 +64,10 @@ def _widen(conn) -> None:  # type: ignore[no-untyped-def]
         pass
 
 
-def _context():  # type: ignore[no-untyped-def]
-    methods = multiprocessing.get_all_start_methods()
-    return multiprocessing.get_context("fork" if "fork" in methods else "spawn")
+def _context() -> ForkContext | SpawnContext:
+    if "fork" in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("fork")
+    return multiprocessing.get_context("spawn")
 
 
 @contextlib.contextmanager
@@ -192,9 +199,9 @@ class RecorderProcess:
 
 # -- the child -----------------------------------------------------------------------------------
 
-def _record(pipe, parent_end, results, path: str, profile: Profile,  # type: ignore[no-untyped-def]
-            metadata: dict, extra_states: tuple[str, ...], gpio_type: str,
-            parent_pid: int, commands: bool = False) -> None:
+def _record(pipe: Connection, parent_end: Connection, results: Connection, path: str,
+            profile: Profile, metadata: dict[str, Any], extra_states: tuple[str, ...],
+            gpio_type: str, parent_pid: int, commands: bool = False) -> None:
     """The child: values in, MCAP out, until told to close or the parent is gone."""
     parent_end.close()  # else the pipe would never close while this process holds its end
     if _context().get_start_method() == "fork":  # spawn passes only the pipes
@@ -245,7 +252,8 @@ def _close_inherited(keep: set[int]) -> None:
         os.closerange(low, os.sysconf("SC_OPEN_MAX"))
 
 
-def _receive(pipe, recorder: Any, out: Any, parent_pid: int) -> dict | None:  # type: ignore[no-untyped-def]
+def _receive(pipe: Connection, recorder: McapRecorder, out: McapFile,
+             parent_pid: int) -> dict[str, Any] | None:
     """Hand the parent's messages to the recorder until it closes (returns the loop's summary)
     or goes away, or the file is removed (None). The chunk in progress goes to disk at least
     every CHUNK_SECONDS."""
@@ -269,7 +277,7 @@ def _receive(pipe, recorder: Any, out: Any, parent_pid: int) -> dict | None:  # 
             elif kind == b"d":
                 recorder.diagnostics(*pickle.loads(msg[1:]))
             elif kind == b"c":
-                return pickle.loads(msg[1:])
+                return cast("dict[str, Any]", pickle.loads(msg[1:]))
         elif os.getppid() != parent_pid:
             return None  # the parent died while something else holds the pipe open
         now = time.monotonic()

@@ -24,6 +24,7 @@ import hashlib
 import json
 import re
 from functools import cache
+from typing import TypedDict
 
 SEP = "=" * 80 + "\n"
 
@@ -93,12 +94,31 @@ FIELD_TYPE_IDS = {
     "string": 17, "wstring": 18, "bounded_string": 21, "bounded_wstring": 22,
 }
 ARRAY, BOUNDED_SEQUENCE, UNBOUNDED_SEQUENCE = 48, 96, 144
+
+
+class FieldType(TypedDict):
+    type_id: int
+    capacity: int
+    string_capacity: int
+    nested_type_name: str
+
+
+class Field(TypedDict):
+    name: str
+    type: FieldType
+
+
+class TypeDescription(TypedDict):  # IndividualTypeDescription
+    type_name: str
+    fields: list[Field]
+
+
 _FIELD = re.compile(r"^(?P<type>[\w/]+)(?:<=(?P<strmax>\d+))?(?:\[(?P<bound><=)?(?P<size>\d*)\])?"
                     r"\s+(?P<name>\w+)(?:\s+(?P<default>.+))?$")
 
 
 def _field_type(text: str, strmax: str | None, bound: str | None, size: str | None,
-                package: str, is_array: bool) -> dict[str, object]:
+                package: str, is_array: bool) -> FieldType:
     """A field's FieldType: type_id, capacity, string_capacity, nested_type_name."""
     nested = ""
     if text in FIELD_TYPE_IDS and text != "nested":
@@ -122,11 +142,11 @@ def _field_type(text: str, strmax: str | None, bound: str | None, size: str | No
             "string_capacity": int(strmax) if strmax else 0, "nested_type_name": nested}
 
 
-def parse_msg(type_name: str, text: str) -> dict[str, object]:
+def parse_msg(type_name: str, text: str) -> TypeDescription:
     """One ros2msg section → its IndividualTypeDescription (without default values, which the
     hash leaves out)."""
     package = type_name.split("/")[0]
-    fields = []
+    fields: list[Field] = []
     for raw in text.splitlines():
         line = raw.split("#", 1)[0].strip()
         if not line:
@@ -163,7 +183,7 @@ def type_description(type_name: str, text: str) -> dict[str, object]:
     referenced: set[str] = set()
     pending = [type_name]
     while pending:
-        for field in described[pending.pop()]["fields"]:  # type: ignore[attr-defined]
+        for field in described[pending.pop()]["fields"]:
             nested = field["type"]["nested_type_name"]
             if nested and nested not in referenced:
                 if nested not in described:
