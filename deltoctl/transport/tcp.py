@@ -84,7 +84,6 @@ class TcpLink:
         self._view = memoryview(self._buf)
         self._start = self._end = 0
         self._timeout = connect_timeout  # a send's, should it wait: the last receive's
-        self._waited = False  # the last frame was not there at once: poll() first this time
         trace.link("tcp %s:%d: connected in %.1f ms", host, port,
                    (time.perf_counter() - started) * 1e3)
         if trace.PACKETS:  # checked once per link: an untraced link's methods stay as they are
@@ -114,25 +113,21 @@ class TcpLink:
                 raise LinkLost(f"send to {self.host}:{self.port} failed: {exc}") from None
 
     def recv_frame(self, timeout: float) -> bytes:
-        """One frame prefixed by its 2-byte big-endian total length: one recv_into the
-        link's own buffer when it is there, after a poll() when it was not the last time
-        (a receive finding nothing costs more than the poll)."""
+        """One frame prefixed by its 2-byte big-endian total length: usually one recv_into
+        the link's own buffer, after a poll() when the frame has not arrived yet."""
         self._timeout = timeout
         deadline = None
-        ready = not self._waited
         while True:
             frame = self._frame()
             if frame is not None:
-                self._waited = deadline is not None
                 return frame
-            if ready and self._receive():
+            if self._receive():
                 continue
             if deadline is None:
                 deadline = time.monotonic() + timeout
             if not self._wait(self._readable, deadline):
                 raise LinkLost(f"no complete reply from {self.host}:{self.port} within "
                                f"{timeout:g} s ({self._end - self._start} bytes received)")
-            ready = True
 
     def _frame(self) -> bytes | None:
         """The next whole frame of the buffer, taken out of it; None until it is all there."""
