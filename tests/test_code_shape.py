@@ -49,3 +49,8 @@ def _long_functions(limit: int) -> list[str]:
                 if lines > limit:
                     long.append(f"{path.name}:{node.name} ({lines} lines)")
     return long
+
+
+def test_no_function_of_the_command_line_is_over_60_lines():
+    assert _long_functions(MAX_CLI_FUNCTION_LINES) == []
+    assert _long_functions(20)  # the walk sees the functions (and their signatures)

@@ -3,15 +3,20 @@ another computer (``deltoctl --robot ROBOT VERB …``, ``deltoctl fleet …``)."
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import sys
-from typing import Annotated
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from deltoctl.cli.context import Options, options
 from deltoctl.errors import InvalidInput
+
+if TYPE_CHECKING:
+    from deltoctl.fleet.agent import Agent
 
 # the agent's verb processes: argv[1] the profile, then SIMULATED when --sim serves the robot
 # (the zygote's socket comes last)
@@ -43,37 +48,47 @@ def _default_name() -> str:
     return name.strip("-.")[:63] or "robot"
 
 
+NameOpt = Annotated[str | None, typer.Option(
+    "--name", help="The robot's name on the network (default: this computer's).")]
+ListenOpt = Annotated[list[str] | None, typer.Option(
+    "--listen", metavar="ENDPOINT",
+    help="Zenoh endpoint to listen on (repeatable; default tcp/127.0.0.1:7447, or the "
+         "config file's).")]
+ConnectOpt = Annotated[list[str] | None, typer.Option(
+    "--connect", metavar="ENDPOINT",
+    help="Zenoh endpoint to connect to, e.g. a router (repeatable).")]
+DeadlineOpt = Annotated[float, typer.Option(
+    "--deadline", help="Seconds without the caller's heartbeat before a verb is "
+                       "interrupted (motion stops).")]
+UnauthenticatedOpt = Annotated[bool, typer.Option(
+    "--allow-unauthenticated-motion",
+    help="Lab bench: allow motion and outputs without mutual TLS; only when every "
+         "endpoint is on loopback.")]
+WorkdirOpt = Annotated[str | None, typer.Option(
+    "--workdir", metavar="DIR",
+    help="Where remote verbs run (their reports and recordings go there; default: a "
+         "directory of the agent's own, $XDG_STATE_HOME/deltoctl/agent/NAME).")]
+
+
 def agent(
     ctx: typer.Context,
-    name: Annotated[str | None, typer.Option(
-        "--name", help="The robot's name on the network (default: this computer's).")] = None,
-    listen: Annotated[list[str] | None, typer.Option(
-        "--listen", metavar="ENDPOINT",
-        help="Zenoh endpoint to listen on (repeatable; default tcp/127.0.0.1:7447, or the "
-             "config file's).")] = None,
-    connect: Annotated[list[str] | None, typer.Option(
-        "--connect", metavar="ENDPOINT",
-        help="Zenoh endpoint to connect to, e.g. a router (repeatable).")] = None,
-    deadline: Annotated[float, typer.Option(
-        "--deadline", help="Seconds without the caller's heartbeat before a verb is "
-                           "interrupted (motion stops).")] = 0.2,
-    allow_unauthenticated_motion: Annotated[bool, typer.Option(
-        "--allow-unauthenticated-motion",
-        help="Lab bench: allow motion and outputs without mutual TLS; only when every "
-             "endpoint is on loopback.")] = False,
-    workdir: Annotated[str | None, typer.Option(
-        "--workdir", metavar="DIR",
-        help="Where remote verbs run (their reports and recordings go there; default: a "
-             "directory of the agent's own, $XDG_STATE_HOME/deltoctl/agent/NAME).")] = None,
+    name: NameOpt = None,
+    listen: ListenOpt = None,
+    connect: ConnectOpt = None,
+    deadline: DeadlineOpt = 0.2,
+    allow_unauthenticated_motion: UnauthenticatedOpt = False,
+    workdir: WorkdirOpt = None,
 ) -> None:
     """Serve the robot of --profile (its links from --target, or --sim) over Zenoh until
     Ctrl-C or SIGTERM: every verb as a queryable, a liveliness token, a deadman on motion.
 
     Motion and outputs are served only to authenticated callers: when every link of the
     agent is mutual TLS (see the README, Remote robots)."""
+    from deltoctl.cli.fleet_cmd import agent_checks
     from deltoctl.fleet import check_robot
     from deltoctl.fleet import config as zconfig
-    from deltoctl.fleet.agent import Agent, log, signals_stop, start_simulator, stop_process
+    from deltoctl.fleet.agent import Agent
+    from deltoctl.profile.exporter import to_yaml
 
     opts = options(ctx)
     if opts.robot:
@@ -81,10 +96,7 @@ def agent(
     robot = check_robot(name or _default_name())
     if not (math.isfinite(deadline) and 0.1 <= deadline <= 10):
         raise InvalidInput(f"--deadline must be 0.1 to 10 seconds, got {deadline:g}")
-    if workdir is None:
-        workdir = _own_workdir(robot)
-    elif not os.path.isdir(workdir):
-        raise InvalidInput(f"--workdir {workdir}: no such directory")
+    workdir = _workdir(workdir, robot)
     profile = opts.load_profile()  # a bad profile stops here, with its file:line
     own_files = _profile_files(opts)
     spec = opts.profile or profile.name
@@ -94,37 +106,59 @@ def agent(
     config = zconfig.load(config_path, "agent", listen, connect)
     own_files += [*([config_path] if config_path else []), *zconfig.tls_files(config)]
     motion, why_not = _motion_rule(config, allow_unauthenticated_motion)
-    links = _links(opts, spec)
-    python = [sys.executable, "-m", "deltoctl"]
-    simulator = None
-    try:
-        if opts.sim:
-            simulator, served = start_simulator(
-                [*python, *links, "sim", "serve", "--json"],
-                env={k: v for k, v in os.environ.items() if not k.startswith("DELTOCTL_")})
-            links = [a for a in links if not a.startswith("--target=")]
-            links += [f"--target={bus}={url}" for bus, url in served["buses"].items()]
+    with _served_links(opts, spec) as links:
         marks = [SIMULATED] if opts.sim else []
         children = ([sys.executable, "-c", ZYGOTE, spec, *marks],
                     [sys.executable, "-c", SPARE, spec, *marks])
-        from deltoctl.cli.fleet_cmd import agent_checks
-        from deltoctl.profile.exporter import to_yaml
-
         node = Agent(robot, spec, profile.name, links, children, config, motion, why_not,
-                     deadline, os.path.abspath(workdir), simulated=opts.sim,
+                     deadline, workdir, simulated=opts.sim,
                      profile_yaml=to_yaml(profile), own_files=own_files, check=agent_checks)
-        signals_stop(node.stop)
-        try:
-            node.start()
-            log(f"robot {robot}: serving {profile.name} on Zenoh ({zconfig.describe(config)});"
-                f" motion {'allowed' if motion else 'refused: ' + why_not}")
-            node.serve()
-            log(f"robot {robot}: stopping")
-        finally:
-            node.close()
+        _serve(node, f"robot {robot}: serving {profile.name} on Zenoh "
+                     f"({zconfig.describe(config)}); motion "
+                     f"{'allowed' if motion else 'refused: ' + why_not}")
+
+
+def _workdir(given: str | None, robot: str) -> str:
+    """Where remote verbs run: --workdir (which must exist), or the agent's own."""
+    if given is None:
+        return os.path.abspath(_own_workdir(robot))
+    if not os.path.isdir(given):
+        raise InvalidInput(f"--workdir {given}: no such directory")
+    return os.path.abspath(given)
+
+
+@contextlib.contextmanager
+def _served_links(opts: Options, spec: str) -> Iterator[list[str]]:
+    """The global options that point a verb at the robot; with --sim, at the simulator
+    started here (stopped on the way out)."""
+    from deltoctl.fleet.agent import start_simulator, stop_process
+
+    links = _links(opts, spec)
+    if not opts.sim:
+        yield links
+        return
+    simulator, served = start_simulator(
+        [sys.executable, "-m", "deltoctl", *links, "sim", "serve", "--json"],
+        env={k: v for k, v in os.environ.items() if not k.startswith("DELTOCTL_")})
+    try:
+        links = [a for a in links if not a.startswith("--target=")]
+        yield links + [f"--target={bus}={url}" for bus, url in served["buses"].items()]
     finally:
-        if simulator is not None:
-            stop_process(simulator)
+        stop_process(simulator)
+
+
+def _serve(node: Agent, serving: str) -> None:
+    """Serve until a signal stops the agent; ``serving`` is said once it is up."""
+    from deltoctl.fleet.agent import log, signals_stop
+
+    signals_stop(node.stop)
+    try:
+        node.start()
+        log(serving)
+        node.serve()
+        log(f"robot {node.robot}: stopping")
+    finally:
+        node.close()
 
 
 def _own_workdir(robot: str) -> str:

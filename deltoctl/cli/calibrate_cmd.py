@@ -6,7 +6,7 @@ from typing import Annotated, Any
 
 import typer
 
-from deltoctl.cli.context import options
+from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import emit_json, info, table
 from deltoctl.errors import DeviceError
@@ -56,20 +56,30 @@ def calibrate_ft(
             result["checks"] = verify_ft(
                 robot.system, result, mass, sensor, watch,
                 lambda text: typer.echo(f"{text} …", err=True), timeout, samples)
+    _show_ft(opts, result, verify)
+    _fail_ft(result)
+    finish(robot.system)
+
+
+def _show_ft(opts: Options, result: dict[str, Any], verify: bool) -> None:
     reports = result["blocks"]
     if opts.json:
         emit_json(result)
-    elif verify:
+        return
+    if verify:
         table(None, ["check", "value", "unit", "limit", "verdict"], check_rows(result["checks"]))
     else:
         table(None, ["block", "sensor", "residual force N", "residual torque N·m", "pass"],
               [[r["block"], s, v["residual_force_n"], v["residual_torque_nm"],
                 "yes" if v["pass"] else "NO"]
                for r in reports for s, v in r["sensors"].items()])
-    if not opts.json:
-        for r in reports:
-            info(f"report: {r['report_file']}")
-    bad = [s for r in reports for s, v in r["sensors"].items() if not v["pass"]]
+    for r in reports:
+        info(f"report: {r['report_file']}")
+
+
+def _fail_ft(result: dict[str, Any]) -> None:
+    """A residual over tolerance, or a failed check (beyond the residuals), is exit 1."""
+    bad = [s for r in result["blocks"] for s, v in r["sensors"].items() if not v["pass"]]
     if bad:
         raise DeviceError(f"residual over tolerance after the tare on: {', '.join(bad)}",
                           hint="check the firmware (OFFSET needs v2.3 or later) and that "
@@ -80,7 +90,6 @@ def calibrate_ft(
         raise DeviceError(f"F/T checks failed: {', '.join(failed)}",
                           hint="a known mass read wrong is a scale or mounting fault; drift "
                                "wants the sensor warmed up")
-    finish(robot.system)
 
 
 def check_rows(checks: list[dict[str, Any]], *first: str) -> list[list[Any]]:

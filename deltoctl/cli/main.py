@@ -189,51 +189,66 @@ def _complete_hardware(ctx: typer.Context, incomplete: str) -> list[str]:
     return complete_blocks(ctx, incomplete)
 
 
+# the global options (root's), each declared once here
+ProfileOpt = Annotated[str | None, typer.Option(
+    "--profile", "-p", envvar="DELTOCTL_PROFILE", autocompletion=_complete_profile,
+    help="Device profile: a catalog name or a YAML/URDF/xacro file.")]
+TargetOpt = Annotated[list[str] | None, typer.Option(
+    "--target", "-t", envvar="DELTOCTL_TARGET", metavar="[BUS=]URL",
+    help="Where the device is, e.g. tcp://169.254.186.72:502 (repeatable).")]
+SimOpt = Annotated[bool, typer.Option(
+    "--sim", help="Run against a simulated device started for this command.")]
+JsonOpt = Annotated[bool, typer.Option(
+    "--json", help="Write one JSON document (NDJSON for streams) on stdout; an error is "
+                   "one JSON object on stderr.")]
+YesOpt = Annotated[bool, typer.Option(
+    "--yes", "-y", help="Do not ask for confirmation before motion.")]
+VerboseOpt = Annotated[int, typer.Option(
+    "--verbose", "-v", count=True, metavar="", show_default=False,
+    help="More diagnostics on stderr: -v each link, -vv every packet too.")]
+QuietOpt = Annotated[bool, typer.Option(
+    "--quiet", "-q", help="No progress or notes on stderr (results and warnings stay).")]
+LogFileOpt = Annotated[str | None, typer.Option(
+    "--log-file", envvar="DELTOCTL_LOG", metavar="FILE",
+    help="Append the log and the packet trace to FILE as NDJSON.")]
+XacroArgOpt = Annotated[list[str] | None, typer.Option(
+    "--arg", metavar="NAME:=VALUE", help="A xacro argument (repeatable).")]
+HardwareOpt = Annotated[list[str] | None, typer.Option(
+    "--hardware", metavar="NAME", autocompletion=_complete_hardware,
+    help="Only this <ros2_control> block of the profile (repeatable; default: all).")]
+XacroOpt = Annotated[bool, typer.Option(
+    "--xacro", help="Run xacro on a profile file that is not named .xacro.")]
+PackagePathOpt = Annotated[list[str] | None, typer.Option(
+    "--package-path", metavar="PKG=DIR",
+    help="Where $(find PKG) points, for xacro files (repeatable).")]
+RobotOpt = Annotated[str | None, typer.Option(
+    "--robot", metavar="ROBOT",
+    help="Run the verb on this robot, through its 'deltoctl agent' over Zenoh.")]
+ZenohConfigOpt = Annotated[str | None, typer.Option(
+    "--zenoh-config", envvar="DELTOCTL_ZENOH_CONFIG", metavar="FILE",
+    help="Zenoh configuration (JSON5: endpoints, TLS) for --robot, agent and fleet.")]
+VersionOpt = Annotated[bool, typer.Option(
+    "--version", callback=_version, is_eager=True, help="Show the version and exit.")]
+
+
 @app.callback()
 def root(
     ctx: typer.Context,
-    profile: Annotated[str | None, typer.Option(
-        "--profile", "-p", envvar="DELTOCTL_PROFILE", autocompletion=_complete_profile,
-        help="Device profile: a catalog name or a YAML/URDF/xacro file.")] = None,
-    target: Annotated[list[str] | None, typer.Option(
-        "--target", "-t", envvar="DELTOCTL_TARGET", metavar="[BUS=]URL",
-        help="Where the device is, e.g. tcp://169.254.186.72:502 (repeatable).")] = None,
-    sim: Annotated[bool, typer.Option(
-        "--sim", help="Run against a simulated device started for this command.")] = False,
-    json_out: Annotated[bool, typer.Option(
-        "--json", help="Write one JSON document (NDJSON for streams) on stdout; an error is "
-                       "one JSON object on stderr.")] = False,
-    yes: Annotated[bool, typer.Option(
-        "--yes", "-y", help="Do not ask for confirmation before motion.")] = False,
-    verbose: Annotated[int, typer.Option(
-        "--verbose", "-v", count=True, metavar="", show_default=False,
-        help="More diagnostics on stderr: -v each link, -vv every packet too.")] = 0,
-    quiet: Annotated[bool, typer.Option(
-        "--quiet", "-q", help="No progress or notes on stderr (results and warnings stay).")]
-        = False,
-    log_file: Annotated[str | None, typer.Option(
-        "--log-file", envvar="DELTOCTL_LOG", metavar="FILE",
-        help="Append the log and the packet trace to FILE as NDJSON.")] = None,
-    xacro_arg: Annotated[list[str] | None, typer.Option(
-        "--arg", metavar="NAME:=VALUE", help="A xacro argument (repeatable).")] = None,
-    hardware: Annotated[list[str] | None, typer.Option(
-        "--hardware", metavar="NAME", autocompletion=_complete_hardware,
-        help="Only this <ros2_control> block of the profile (repeatable; default: all).")]
-        = None,
-    xacro: Annotated[bool, typer.Option(
-        "--xacro", help="Run xacro on a profile file that is not named .xacro.")] = False,
-    package_path: Annotated[list[str] | None, typer.Option(
-        "--package-path", metavar="PKG=DIR",
-        help="Where $(find PKG) points, for xacro files (repeatable).")] = None,
-    robot: Annotated[str | None, typer.Option(
-        "--robot", metavar="ROBOT",
-        help="Run the verb on this robot, through its 'deltoctl agent' over Zenoh.")] = None,
-    zenoh_config: Annotated[str | None, typer.Option(
-        "--zenoh-config", envvar="DELTOCTL_ZENOH_CONFIG", metavar="FILE",
-        help="Zenoh configuration (JSON5: endpoints, TLS) for --robot, agent and fleet.")]
-        = None,
-    version: Annotated[bool, typer.Option(
-        "--version", callback=_version, is_eager=True, help="Show the version and exit.")] = False,
+    profile: ProfileOpt = None,
+    target: TargetOpt = None,
+    sim: SimOpt = False,
+    json_out: JsonOpt = False,
+    yes: YesOpt = False,
+    verbose: VerboseOpt = 0,
+    quiet: QuietOpt = False,
+    log_file: LogFileOpt = None,
+    xacro_arg: XacroArgOpt = None,
+    hardware: HardwareOpt = None,
+    xacro: XacroOpt = False,
+    package_path: PackagePathOpt = None,
+    robot: RobotOpt = None,
+    zenoh_config: ZenohConfigOpt = None,
+    version: VersionOpt = False,
 ) -> None:
     """Global options may come before or after the verb."""
     # --robot: the robot's agent refuses --log-file (a file on its computer): none is made here

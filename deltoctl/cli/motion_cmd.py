@@ -11,7 +11,7 @@ import typer
 
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
-from deltoctl.cli.output import emit_json, info, progress, say
+from deltoctl.cli.output import advancing, emit_json, info, progress, say
 from deltoctl.errors import InvalidInput, Refused
 from deltoctl.units import parse_quantity
 
@@ -63,10 +63,8 @@ def _move(opts: Options, system: Any, targets: dict[str, float], velocity: float
     from deltoctl.app.motion import move
 
     bar = progress(opts)
-    task = bar.add_task(label, total=1.0) if bar else None
     try:
-        report = move(system, targets, velocity, None if bar is None else
-                      lambda fraction: bar.update(task, completed=fraction), jog=jog)
+        report = move(system, targets, velocity, advancing(bar, label), jog=jog)
     finally:
         if bar is not None:
             bar.stop()
@@ -147,6 +145,15 @@ class _Bars:
             self.bar = None
 
 
+JogRecordOpt = Annotated[Path | None, typer.Option(
+    "--record", metavar="FILE.mcap",
+    help="Record the motion to MCAP: every block's states and each cycle's commands "
+         "(/joint_commands), for `deltoctl replay`; {time} and {serial} in its name "
+         "are filled as record fills them.")]
+JogForceOpt = Annotated[bool, typer.Option(
+    "--force", help="Overwrite --record's file when it exists (without: exit 2).")]
+
+
 def jog(
     ctx: typer.Context,
     joint: Annotated[str, typer.Argument(autocompletion=_complete_joint,
@@ -158,30 +165,18 @@ def jog(
         help="More joints to move at the same time, each with its delta.")] = None,
     to: Annotated[str | None, typer.Option("--to", help="Absolute target instead.")] = None,
     velocity: VelocityOpt = None,
-    record: Annotated[Path | None, typer.Option(
-        "--record", metavar="FILE.mcap",
-        help="Record the motion to MCAP: every block's states and each cycle's commands "
-             "(/joint_commands), for `deltoctl replay`; {time} and {serial} in its name "
-             "are filled as record fills them.")] = None,
+    record: JogRecordOpt = None,
     allow_model_mismatch: AllowMismatch = False,
-    force: Annotated[bool, typer.Option(
-        "--force", help="Overwrite --record's file when it exists (without: exit 2).")]
-        = False,
+    force: JogForceOpt = False,
 ) -> None:
     """Move one joint by DELTA (or --to POS), within its limits and the profile's jog step;
     more JOINT DELTA pairs move at the same time (blocks on several links at once)."""
     from deltoctl.app.motion import fail_unsettled, moving_joints, ready_to_jog
-    from deltoctl.app.recording import new_output, planned_output, recorded_moves
+    from deltoctl.app.recording import new_output, planned_output
 
     opts = options(ctx)
     profile = opts.load_profile()
-    if (delta is None) == (to is None):
-        raise InvalidInput("give either DELTA or --to POS")
-    pairs = [(joint, delta)]
-    if more:
-        if to is not None or len(more) % 2:
-            raise InvalidInput("more joints come as JOINT DELTA pairs (and not with --to)")
-        pairs += list(zip(more[0::2], more[1::2]))
+    pairs = _pairs(joint, delta, more, to)
     moving_joints(profile, [name for name, _ in pairs])
     speed = _speed(velocity)
 
@@ -192,29 +187,55 @@ def jog(
             contextlib.nullcontext() as record:
         system = robot.system
         ready_to_jog(system, [name for name, _ in pairs])  # e.g. not homed: before asking
-        values = system.read()
-        targets, moves = {}, []
-        for name, step in pairs:
-            start = values[f"{name}/position"]
-            target = _quantity(to, "--to") if to is not None else \
-                start + _quantity(step or "", "DELTA")
-            if not math.isfinite(target):
-                raise InvalidInput(f"the target of {name} must be finite")
-            targets[name] = target
-            moves.append(f"{name} ({system.member(name).name}) from {start:.4f} to "
-                         f"{target:.4f} ({math.degrees(target - start):+.1f}°)")
+        targets, moves = _targets(system, pairs, to)
         system.check_move(targets, speed)  # the System's envelope, before anyone is asked
         confirm_motion(opts, "jog " + "; ".join(moves))
-        label = f"jog {', '.join(targets)}"
-        if record is None:
-            report = _move(opts, system, targets, speed, label)
-        else:
-            report = recorded_moves(system, record,
-                                    lambda: _move(opts, system, targets, speed, label))
-            if not opts.json:
-                info(f"wrote {record}: {report['recording']['cycles']} cycles of states and "
-                     "commands")
+        report = _jog(opts, system, targets, speed, record)
     if opts.json:
         emit_json(report)
     fail_unsettled(report)
     finish(robot.system)
+
+
+def _pairs(joint: str, delta: str | None, more: list[str] | None,
+           to: str | None) -> list[tuple[str, str | None]]:
+    """(joint, its DELTA) of each joint the command line moves."""
+    if (delta is None) == (to is None):
+        raise InvalidInput("give either DELTA or --to POS")
+    pairs = [(joint, delta)]
+    if more:
+        if to is not None or len(more) % 2:
+            raise InvalidInput("more joints come as JOINT DELTA pairs (and not with --to)")
+        pairs += list(zip(more[0::2], more[1::2]))
+    return pairs
+
+
+def _targets(system: Any, pairs: list[tuple[str, str | None]],
+             to: str | None) -> tuple[dict[str, float], list[str]]:
+    """Each joint's target (its DELTA from where it is now, or --to), and the moves said."""
+    values = system.read()
+    targets, moves = {}, []
+    for name, step in pairs:
+        start = values[f"{name}/position"]
+        target = _quantity(to, "--to") if to is not None else \
+            start + _quantity(step or "", "DELTA")
+        if not math.isfinite(target):
+            raise InvalidInput(f"the target of {name} must be finite")
+        targets[name] = target
+        moves.append(f"{name} ({system.member(name).name}) from {start:.4f} to "
+                     f"{target:.4f} ({math.degrees(target - start):+.1f}°)")
+    return targets, moves
+
+
+def _jog(opts: Options, system: Any, targets: dict[str, float], speed: float | None,
+         record: Path | None) -> dict[str, Any]:
+    """The move, recorded to ``record`` when given; its report."""
+    from deltoctl.app.recording import recorded_moves
+
+    label = f"jog {', '.join(targets)}"
+    if record is None:
+        return _move(opts, system, targets, speed, label)
+    report = recorded_moves(system, record, lambda: _move(opts, system, targets, speed, label))
+    if not opts.json:
+        info(f"wrote {record}: {report['recording']['cycles']} cycles of states and commands")
+    return report

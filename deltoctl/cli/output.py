@@ -7,7 +7,7 @@ plain aligned text and pay no import cost for it.
 from __future__ import annotations
 
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import typer
@@ -162,6 +162,15 @@ def progress(opts: Any, transient: bool = True, elapsed: bool = False) -> Progre
     bar = Progress(*columns, console=Console(stderr=True), transient=transient)
     bar.start()
     return bar
+
+
+def advancing(bar: Progress | None, label: str) -> Callable[[float], None] | None:
+    """A task named ``label`` on ``bar`` and what moves it to a fraction done; None without
+    a bar."""
+    if bar is None:
+        return None
+    task = bar.add_task(label, total=1.0)
+    return lambda fraction: bar.update(task, completed=fraction)
 
 
 def table(title: str | None, columns: Sequence[str], rows: Sequence[Sequence[Any]]) -> None:

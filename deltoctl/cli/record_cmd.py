@@ -1,13 +1,13 @@
 """``deltoctl record OUT.mcap``: interface values to MCAP (ROS 2 encoding)."""
 
 import contextlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from deltoctl.cli.context import options
+from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import (
     AllowMismatch,
     DurationOpt,
@@ -16,6 +16,9 @@ from deltoctl.cli.device_cmd import (
     open_robot,
 )
 from deltoctl.cli.output import emit_json, info, progress, warn
+
+if TYPE_CHECKING:
+    from rich.progress import Progress
 
 
 def _status(output: Path, cycles: int, link: float | None) -> str:
@@ -41,6 +44,15 @@ FoxgloveOriginOpt = Annotated[list[str] | None, typer.Option(
     help="Also let in browser pages of this origin (repeatable, e.g. http://localhost:8080 for "
          "a self-hosted Foxglove); by default only Foxglove's own (https://app.foxglove.dev, "
          "the desktop app) and clients that send no Origin.")]
+OutputArg = Annotated[Path, typer.Argument(
+    help="The .mcap file to write; {time} in its name becomes the start time (UTC, "
+         "20261125T211400Z), {serial} each block's device serial, or its target's "
+         "address where the device reports none (joined by +).")]
+GpioTypeOpt = Annotated[str, typer.Option(
+    "--gpio-type", metavar="TYPE",
+    help="/gpio's type: group-values (control_msgs/DynamicInterfaceGroupValues, control_msgs "
+         "4.7+ on Humble, 5.3+ on Jazzy) or joint-state (control_msgs/DynamicJointState, "
+         "every control_msgs).")]
 
 
 @contextlib.contextmanager
@@ -81,18 +93,11 @@ def foxglove_result(live: Any) -> dict[str, Any]:
 
 def record(
     ctx: typer.Context,
-    output: Annotated[Path, typer.Argument(
-        help="The .mcap file to write; {time} in its name becomes the start time (UTC, "
-             "20261125T211400Z), {serial} each block's device serial, or its target's "
-             "address where the device reports none (joined by +).")],
+    output: OutputArg,
     rate: RateOpt = 100.0,
     duration: DurationOpt = None,
     allow_model_mismatch: AllowMismatch = False,
-    gpio_type: Annotated[str, typer.Option(
-        "--gpio-type", metavar="TYPE",
-        help="/gpio's type: group-values (control_msgs/DynamicInterfaceGroupValues, control_msgs "
-             "4.7+ on Humble, 5.3+ on Jazzy) or joint-state (control_msgs/DynamicJointState, "
-             "every control_msgs).")] = "group-values",
+    gpio_type: GpioTypeOpt = "group-values",
     foxglove: FoxgloveOpt = False,
     foxglove_port: FoxglovePortOpt = 8765,
     foxglove_host: FoxgloveHostOpt = "127.0.0.1",
@@ -110,10 +115,7 @@ def record(
     check_record(output, rate, duration, gpio_type)
     output = planned_output(output, force)  # an existing file is refused before anything opens
     bar = progress(opts, elapsed=True)
-    task = bar.add_task(f"recording {output.name}", total=duration) if bar else None
-
-    def show(seconds: float, cycles: int, link: float | None) -> None:
-        bar.update(task, completed=seconds, description=_status(output, cycles, link))
+    show = _shown(bar, output, duration)
 
     # the file is created once the devices answer: an unreachable one leaves no empty file;
     # SIGTERM and SIGHUP before the loop interrupt like Ctrl-C, so the file is finished too
@@ -127,14 +129,33 @@ def record(
                                tuple(robot.system.extra_states()), gpio_type)
                 sinks.append(live)
             result, links = record_robot(robot.system, output, rate, duration, gpio_type,
-                                         sinks, show if bar else None, force)
+                                         sinks, show, force)
             output = Path(result["output"])
     finally:
         if bar is not None:
             bar.stop()
-    summary, counts = result["loop"], result["messages"]
     if live is not None:
         result["foxglove"] = foxglove_result(live)
+    _show(opts, result, output)
+    links.finish()
+    finish(robot.system)  # exit 3 on warnings (a servo that never answered, a link lost)
+
+
+def _shown(bar: "Progress | None", output: Path,
+           duration: float | None) -> Callable[[float, int, float | None], None] | None:
+    """What updates the status line on ``bar`` (None without one)."""
+    if bar is None:
+        return None
+    task = bar.add_task(f"recording {output.name}", total=duration)
+
+    def show(seconds: float, cycles: int, link: float | None) -> None:
+        bar.update(task, completed=seconds, description=_status(output, cycles, link))
+
+    return show
+
+
+def _show(opts: Options, result: dict[str, Any], output: Path) -> None:
+    summary, counts = result["loop"], result["messages"]
     if opts.json:
         emit_json(result)
     else:
@@ -142,8 +163,6 @@ def record(
              f"{summary['cycles']} cycles at {summary['real_rate']} Hz")
     if result["link_losses"]:
         info("the gaps are marked on /diagnostics")
-    links.finish()
-    finish(robot.system)  # exit 3 on warnings (a servo that never answered, a link lost)
 
 
 def register(root: typer.Typer) -> None:

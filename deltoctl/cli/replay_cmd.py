@@ -11,14 +11,18 @@ larger difference exit 3.
 """
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
-from deltoctl.cli.output import emit_json, info, progress, say, table, warn
+from deltoctl.cli.output import advancing, emit_json, info, progress, say, table, warn
 from deltoctl.errors import WARNINGS, InvalidInput
+
+if TYPE_CHECKING:
+    from deltoctl.app.replay import Deviated, ReplayPlan, ReplayResult
+    from deltoctl.app.robot import Robot
 
 MAX_DEVIATION = 0.2  # rad or m: a replayed joint further than this from its recording stops
 
@@ -62,23 +66,28 @@ def _where(opts: Options, device: bool, profile: Any, blocks: list[str]) -> Opti
     return run
 
 
+RecordingArg = Annotated[Path, typer.Argument(
+    metavar="FILE.mcap", help="A recording with commands (jog --record).")]
+DeviceOpt = Annotated[bool, typer.Option(
+    "--device", help="Replay on the devices -t/--target names (or, with --sim, on "
+                     "simulators) under the limits of -p PROFILE or of the catalog's "
+                     "profile, never the recording's; asks for confirmation unless --yes.")]
+ToleranceOpt = Annotated[str | None, typer.Option(
+    "--tolerance", metavar="X", help="The largest difference allowed between recorded "
+                                     "and replayed position (rad or m, e.g. 0.01 or "
+                                     "1deg); beyond it, exit 3.")]
+MaxDeviationOpt = Annotated[str | None, typer.Option(
+    "--max-deviation", metavar="X",
+    help="While replaying, a joint further than this from its recorded position (rad or "
+         f"m) stops every block, exit 5 (default {MAX_DEVIATION:g}).")]
+
+
 def replay(
     ctx: typer.Context,
-    recording: Annotated[Path, typer.Argument(
-        metavar="FILE.mcap", help="A recording with commands (jog --record).")],
-    device: Annotated[bool, typer.Option(
-        "--device", help="Replay on the devices -t/--target names (or, with --sim, on "
-                         "simulators) under the limits of -p PROFILE or of the catalog's "
-                         "profile, never the recording's; asks for confirmation unless --yes.")
-    ] = False,
-    tolerance: Annotated[str | None, typer.Option(
-        "--tolerance", metavar="X", help="The largest difference allowed between recorded "
-                                         "and replayed position (rad or m, e.g. 0.01 or "
-                                         "1deg); beyond it, exit 3.")] = None,
-    max_deviation: Annotated[str | None, typer.Option(
-        "--max-deviation", metavar="X",
-        help="While replaying, a joint further than this from its recorded position (rad or "
-             f"m) stops every block, exit 5 (default {MAX_DEVIATION:g}).")] = None,
+    recording: RecordingArg,
+    device: DeviceOpt = False,
+    tolerance: ToleranceOpt = None,
+    max_deviation: MaxDeviationOpt = None,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Play a recording's commands back at their recorded timing, then report per joint the
@@ -92,7 +101,7 @@ def replay(
     a terminal): then on the device -t names, under the limits of -p PROFILE or of the
     catalog's profile of the recorded name; a recorded profile looser than that is refused
     (exit 5)."""
-    from deltoctl.app.replay import plan_replay, replay_report, run_replay
+    from deltoctl.app.replay import plan_replay, replay_report
     from deltoctl.cli.motion_cmd import confirm_motion
 
     opts = options(ctx)
@@ -111,16 +120,8 @@ def replay(
                              f"then replay {len(recorded.times)} commands "
                              f"({recorded.seconds:.2f} s) of {recording.name} on "
                              f"{', '.join(plan.blocks)} at {', '.join(opts.target)}")
-    bar = progress(opts)
-    task = bar.add_task(f"replay {recording.name}", total=1.0) if bar else None
-    try:
-        with open_robot(run_opts, allow_model_mismatch, plan.profile) as robot:
-            result, stopped = run_replay(
-                robot.system, recorded, deviation, run_opts.sim,
-                None if bar is None else lambda f: bar.update(task, completed=f), info)
-    finally:
-        if bar is not None:
-            bar.stop()
+    robot, result, stopped = _run(opts, run_opts, allow_model_mismatch, plan, recording,
+                                  deviation)
     report = replay_report(recording, robot.system, recorded, result, limit, on_device)
     report["max_deviation"] = deviation
     report["stopped"] = stopped.message if stopped else None
@@ -137,6 +138,22 @@ def replay(
     finish(robot.system)
     if plan.notes:  # shown before the replay
         raise typer.Exit(WARNINGS)
+
+
+def _run(opts: Options, run_opts: Options, allow_model_mismatch: bool, plan: "ReplayPlan",
+         recording: Path, deviation: float) -> "tuple[Robot, ReplayResult, Deviated | None]":
+    """The replay with a progress bar: (the robot, its result, what stopped it or None)."""
+    from deltoctl.app.replay import run_replay
+
+    bar = progress(opts)
+    try:
+        with open_robot(run_opts, allow_model_mismatch, plan.profile) as robot:
+            result, stopped = run_replay(robot.system, plan.recorded, deviation, run_opts.sim,
+                                         advancing(bar, f"replay {recording.name}"), info)
+    finally:
+        if bar is not None:
+            bar.stop()
+    return robot, result, stopped
 
 
 def _show(opts: Options, report: dict[str, Any]) -> None:
