@@ -74,21 +74,28 @@ def open_robot(profile: str | Path | Profile,
         simulated = (dict.fromkeys(hardware or [hw.name for hw in prof.hardware], "--sim")
                      if sim else mock_blocks(prof, hardware))
         if simulated:
-            from deltoctl.sim.serve import ServeOptions, serve_profile
-
-            faults = dict(sim) if isinstance(sim, Mapping) else {}
-            try:
-                options = ServeOptions(**faults)
-            except TypeError as exc:
-                raise InvalidInput(f"sim: {exc}") from None
-            served = serve_profile(stack, prof, options, list(simulated))
-            urls += [f"{bus}={url}" for bus, url in served["buses"].items()]
+            served = serve_simulators(stack, prof, list(simulated),
+                                      sim if isinstance(sim, Mapping) else None)
+            urls += [f"{bus}={url}" for bus, url in served.items()]
             for name, why in simulated.items():
                 if why != "--sim" and notice is not None:
                     notice(f"{name}: simulated ({why}): no hardware is driven")
         with System(prof, urls, hardware, probe=probe, allow_model_mismatch=allow_model_mismatch,
                     simulated=simulated) as system:
             yield Robot(system)
+
+
+def serve_simulators(stack: contextlib.ExitStack, profile: Profile, blocks: Sequence[str] = (),
+                     faults: Mapping[str, Any] | None = None) -> dict[str, str]:
+    """Start the simulated devices of ``blocks`` (every block without), with ``faults`` (those
+    of ``deltoctl sim serve``), closed with ``stack``; returns ``{bus: target URL}``."""
+    from deltoctl.sim.serve import ServeOptions, serve_profile
+
+    try:
+        options = ServeOptions(**dict(faults or {}))
+    except TypeError as exc:
+        raise InvalidInput(f"sim: {exc}") from None
+    return dict(serve_profile(stack, profile, options, list(blocks))["buses"])
 
 
 def block_entry(m: Member, **data: Any) -> dict[str, Any]:

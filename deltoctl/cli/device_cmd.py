@@ -49,14 +49,6 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
         yield robot
 
 
-@contextlib.contextmanager
-def open_system(opts: Options, allow_model_mismatch: bool = False, profile: Any = None,
-                probe: bool = False) -> Iterator[Any]:
-    """The System of ``open_robot``, for verbs that drive the blocks themselves."""
-    with open_robot(opts, allow_model_mismatch, profile, probe) as robot:
-        yield robot.system
-
-
 def finish(system: Any, extra: list[str] | None = None) -> None:
     """Exit 3 when the verb finished but with warnings (a block left out, a model mismatch
     allowed, reconnects)."""

@@ -90,9 +90,9 @@ def _targets(opts: Options, prof: Any, stack: contextlib.ExitStack,
         blocks = select_blocks(prof, opts.hardware)
         named, bare = parse_targets(prof, opts.target)
         if opts.sim:
-            from deltoctl.sim.serve import ServeOptions, serve_profile
+            from deltoctl.app.robot import serve_simulators
 
-            named = serve_profile(stack, prof, ServeOptions(), opts.hardware)["buses"]
+            named = serve_simulators(stack, prof, opts.hardware)
     except DeltoctlError as exc:
         results.append(check("targets", prof.name, False, exc.message, None, USAGE))
         return {}
