@@ -16,6 +16,7 @@ to every axis that was enabled — one RPDO frame each where the controlword is 
 from __future__ import annotations
 
 import contextlib
+import struct
 import threading
 import time
 from typing import Any
@@ -177,7 +178,7 @@ class CanopenDriver(Driver):
             self.stats["errors"] += 1
             raise DeviceError(f"{axis.joint} (node {axis.id}) did not answer a write of "
                               f"{index:#06x}:{sub:02x} ({exc})") from None
-        except (KeyError, TypeError, ValueError, OverflowError, __import__("struct").error):
+        except (KeyError, TypeError, ValueError, OverflowError, struct.error):
             raise InvalidInput(f"{value!r} does not fit {index:#06x}:{sub:02x} of "
                                f"{axis.joint}'s EDS") from None
 
