@@ -52,6 +52,17 @@ def ready_to_jog(system: System, joints: Sequence[str]) -> None:
         m.driver.check_motion(names)
 
 
+def present_positions(system: System, joints: Sequence[str]) -> dict[str, float]:
+    """Where each joint is now (one read); a joint whose position is unknown (its servo does
+    not answer) refuses the move that would start from it."""
+    values = system.read()
+    unknown = [j for j in joints if values.get(f"{j}/position") is None]
+    if unknown:
+        raise DeviceError(f"the position of {', '.join(unknown)} is not known: nothing moved",
+                          hint="check that the joint answers (deltoctl detect)")
+    return {j: values[f"{j}/position"] for j in joints}
+
+
 def move(system: System, targets: Mapping[str, float], velocity: float | None = None,
          progress: Progress | None = None, *, jog: bool = True) -> dict[str, Any]:
     """Move joints to ``targets``, the blocks on several links at once, and stop every block

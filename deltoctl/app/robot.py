@@ -56,7 +56,8 @@ def open_robot(profile: str | Path | Profile,
                targets: Mapping[str, str] | Sequence[str] | str | None = None, *,
                sim: bool | Mapping[str, Any] = False, hardware: Sequence[str] = (),
                allow_model_mismatch: bool = False, probe: bool = False,
-               notice: Callable[[str], None] | None = None) -> Iterator[Robot]:
+               notice: Callable[[str], None] | None = None,
+               served_by: str | None = None) -> Iterator[Robot]:
     """The robot of ``profile`` (a catalog name, a file, or a loaded Profile), configured and
     active, its blocks left safe and released on the way out.
 
@@ -65,8 +66,9 @@ def open_robot(profile: str | Path | Profile,
     transport (a mapping: with those faults of ``deltoctl sim serve``, e.g.
     ``{"missing": ("head_y",)}``); ``hardware``: only these blocks; ``probe``: a bus where
     nothing answers is still opened (detect); ``notice``: told first when a block runs on its
-    simulator because its profile asks for mock hardware."""
-    from deltoctl.core.system import System, mock_blocks
+    simulator because its profile asks for mock hardware; ``served_by``: the targets are
+    simulators another process serves (``deltoctl agent --sim``), said so on every block."""
+    from deltoctl.core.system import System, mock_blocks, select_blocks
 
     prof = load(profile)
     with contextlib.ExitStack() as stack:
@@ -80,6 +82,9 @@ def open_robot(profile: str | Path | Profile,
             for name, why in simulated.items():
                 if why != "--sim" and notice is not None:
                     notice(f"{name}: simulated ({why}): no hardware is driven")
+        if served_by:
+            simulated = {hw.name: simulated.get(hw.name, served_by)
+                         for hw in select_blocks(prof, hardware)}
         with System(prof, urls, hardware, probe=probe, allow_model_mismatch=allow_model_mismatch,
                     simulated=simulated) as system:
             yield Robot(system)
@@ -247,12 +252,12 @@ class Robot:
 
     def jog_targets(self, deltas: Mapping[str, float]) -> dict[str, float]:
         """Each joint's target ``delta`` from where it is now."""
-        from deltoctl.app.motion import moving_joints, ready_to_jog
+        from deltoctl.app.motion import moving_joints, present_positions, ready_to_jog
 
         moving_joints(self.profile, list(deltas))
         ready_to_jog(self.system, list(deltas))
-        values = self.system.read()
-        return {j: values[f"{j}/position"] + d for j, d in deltas.items()}
+        present = present_positions(self.system, list(deltas))
+        return {j: present[j] + d for j, d in deltas.items()}
 
     def jog(self, deltas: Mapping[str, float], velocity: float | None = None,
             progress: Callable[[float], None] | None = None) -> dict[str, Any]:

@@ -42,10 +42,7 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
 
     with open_app_robot(profile or opts.load_profile(), opts.target, sim=opts.sim,
                         hardware=opts.hardware, allow_model_mismatch=allow_model_mismatch,
-                        probe=probe, notice=info) as robot:
-        if SERVED_SIMULATED:
-            for m in robot.blocks:
-                m.simulated = m.simulated or SERVED_SIMULATED
+                        probe=probe, notice=info, served_by=SERVED_SIMULATED) as robot:
         yield robot
 
 

@@ -213,10 +213,12 @@ def _pairs(joint: str, delta: str | None, more: list[str] | None,
 def _targets(system: Any, pairs: list[tuple[str, str | None]],
              to: str | None) -> tuple[dict[str, float], list[str]]:
     """Each joint's target (its DELTA from where it is now, or --to), and the moves said."""
-    values = system.read()
+    from deltoctl.app.motion import present_positions
+
+    present = present_positions(system, [name for name, _ in pairs])
     targets, moves = {}, []
     for name, step in pairs:
-        start = values[f"{name}/position"]
+        start = present[name]
         target = _quantity(to, "--to") if to is not None else \
             start + _quantity(step or "", "DELTA")
         if not math.isfinite(target):

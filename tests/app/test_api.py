@@ -136,3 +136,11 @@ def test_a_recorded_jog_replays_through_the_library(tmp_path):
         report = robot.replay(path, tolerance=0.1)
     assert report["commands"] > 10 and report["on"] == "simulator"
     assert report["joints"]["rj_dg_2_2"]["max"] < 0.1 and not report["exceeded"]
+
+
+def test_a_jog_from_an_unknown_position_is_refused_before_anything_moves():
+    from deltoctl.errors import DeviceError
+
+    with deltoctl.open_robot("mh5", sim={"missing": ("head_y",)}) as robot, \
+            pytest.raises(DeviceError, match="position of head_y is not known"):
+        robot.jog({"head_y": 0.05})
