@@ -7,7 +7,7 @@ import json
 import pytest
 import yaml
 
-from tests.conftest import mh5_targets, sim_i2c_bus
+from tests.conftest import eventually, mh5_targets, sim_i2c_bus
 
 
 def targets_of(buses: dict[str, str]) -> list[str]:
@@ -194,7 +194,8 @@ def test_eeprom_with_torque_on_is_refused_and_leaves_the_servo_unchanged(cli, mh
     edited = save(tmp_path, doc)
     assert cli("-p", "mh5", *targets, "torque", "on", "head_y", "--yes").exit_code == 0
     servo = mh5_buses["upper_body"].bus.servos[52]
-    assert servo.get("Torque Enable") == 1
+    # a sync write has no reply: the emulator's thread applies it a moment later
+    assert eventually(lambda: servo.get("Torque Enable") == 1)
     refused = cli("-p", "mh5", *targets, "config", "restore", edited, "--yes", "--json")
     assert refused.exit_code == 5, refused.stderr
     error = json.loads(refused.stderr)["error"]
