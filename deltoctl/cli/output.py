@@ -174,33 +174,11 @@ def advancing(bar: Progress | None, label: str) -> Callable[[float], None] | Non
 
 
 def table(title: str | None, columns: Sequence[str], rows: Sequence[Sequence[Any]]) -> None:
-    cells = [["" if c is None else str(c) for c in row] for row in rows]
+    """A table of a verb's result on stdout (deltoctl.render.table)."""
+    from deltoctl.render.table import cells, plain_lines, print_rich
+
+    text = cells(rows)
     if stdout_is_terminal():
-        from rich.console import Console
-        from rich.table import Table
-
-        t = Table(title=title, header_style="bold")
-        for column in columns:  # too narrow a terminal wraps a value, never cuts it
-            t.add_column(column, overflow="fold")
-        for row in cells:
-            t.add_row(*row)
-        console = Console()
-        if _natural_width(console, t) > console.width:  # no room for the borders
-            from rich import box
-
-            t.box, t.pad_edge, t.show_edge = box.SIMPLE_HEAD, False, False
-        console.print(t)
-        return
-    widths = [max([len(c)] + [len(r[i]) for r in cells]) for i, c in enumerate(columns)]
-    if title:
-        typer.echo(title)
-    typer.echo("  ".join(c.upper().ljust(w) for c, w in zip(columns, widths)).rstrip())
-    for row in cells:
-        typer.echo("  ".join(v.ljust(w) for v, w in zip(row, widths)).rstrip())
-
-
-def _natural_width(console: Any, renderable: Any) -> int:
-    """The width ``renderable`` takes with all the room it wants."""
-    from rich.measure import Measurement
-
-    return Measurement.get(console, console.options.update_width(1 << 16), renderable).maximum
+        print_rich(title, columns, text)
+    else:
+        typer.echo("\n".join(plain_lines(title, columns, text)))
