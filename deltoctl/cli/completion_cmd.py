@@ -43,15 +43,25 @@ def register(app: typer.Typer) -> None:
 
 def write_manpages(out: Path | None) -> None:
     """Every manual page into ``out``, one line each said on stderr."""
-    from deltoctl.cli.manpages import pages
     from deltoctl.cli.output import info
     from deltoctl.errors import InvalidInput
 
     if out is None or not out.is_dir():
         raise InvalidInput("completion man needs --out DIR, an existing directory")
-    for name, text in pages().items():
+    for name, text in manual_pages().items():
         try:
             (out / name).write_text(text, encoding="utf-8")
         except OSError as exc:
             raise InvalidInput(f"cannot write {out / name}: {exc.strerror}") from None
         info(f"wrote {out / name}")
+
+
+def manual_pages() -> dict[str, str]:
+    """deltoctl's manual pages, rendered from its command tree: file name → roff text."""
+    from typer.main import get_command
+
+    from deltoctl.cli.help_cmd import EXIT_CODES
+    from deltoctl.cli.main import app
+    from deltoctl.render.manpages import pages
+
+    return pages(get_command(app), EXIT_CODES)

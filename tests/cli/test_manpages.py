@@ -11,7 +11,7 @@ import subprocess
 import pytest
 
 from deltoctl import verbs
-from deltoctl.cli.manpages import pages
+from deltoctl.cli.completion_cmd import manual_pages as pages
 from tests.conftest import REPO
 
 SHIPPED = REPO / "completions"

@@ -1,7 +1,8 @@
-"""Manual pages made from the CLI itself: ``deltoctl.1`` (the global options, the verbs, the
-exit codes) and ``deltoctl-VERB.1`` per verb (its synopsis, description, options and
+"""Manual pages rendered from the CLI's command tree: ``deltoctl.1`` (the global options, the
+verbs, the exit codes) and ``deltoctl-VERB.1`` per verb (its synopsis, description, options and
 sub-commands, the verb table's examples). ``deltoctl completion man --out DIR`` writes them;
-the package ships them beside the completion scripts.
+the package ships them beside the completion scripts. The tree comes in built (click's
+commands, read through their attributes): nothing here parses a command line.
 """
 
 from __future__ import annotations
@@ -14,21 +15,19 @@ from deltoctl import verbs
 SECTION = "1"
 
 
-def pages() -> dict[str, str]:
-    """file name → roff text, for deltoctl and each verb."""
-    from typer._click import Context
-    from typer.main import get_command
-
-    from deltoctl.cli.help_cmd import EXIT_CODES
-    from deltoctl.cli.main import app
-
-    root = get_command(app)
-    ctx = Context(root, info_name="deltoctl")
+def pages(root: Any, exit_codes: tuple[tuple[int, str], ...]) -> dict[str, str]:
+    """file name → roff text, for deltoctl (``root``: its click group) and each verb."""
+    ctx = _context(root, "deltoctl")
     commands = {name: root.get_command(ctx, name) for name in root.list_commands(ctx)}
-    out = {f"deltoctl.{SECTION}": _root_page(root, ctx, commands, EXIT_CODES)}
+    out = {f"deltoctl.{SECTION}": _root_page(root, ctx, commands, exit_codes)}
     for name, command in commands.items():
-        out[f"deltoctl-{name}.{SECTION}"] = _verb_page(name, command, ctx, EXIT_CODES)
+        out[f"deltoctl-{name}.{SECTION}"] = _verb_page(name, command, ctx, exit_codes)
     return out
+
+
+def _context(command: Any, name: str, parent: Any = None) -> Any:
+    """A context of ``command`` to render its usage and metavars with (its class's own)."""
+    return command.context_class(command, info_name=name, parent=parent)
 
 
 def _root_page(root: Any, ctx: Any, commands: dict[str, Any],
@@ -49,9 +48,7 @@ def _root_page(root: Any, ctx: Any, commands: dict[str, Any],
 
 def _verb_page(name: str, command: Any, parent: Any,
                exit_codes: tuple[tuple[int, str], ...]) -> str:
-    from typer._click import Context
-
-    ctx = Context(command, info_name=name, parent=parent)
+    ctx = _context(command, name, parent)
     lines = _header(f"deltoctl-{name}", _first_line(command.help))
     lines += [".SH SYNOPSIS", *_synopsis(f"deltoctl {name}", command, ctx)]
     lines += [".SH DESCRIPTION", _text(command.help or "")]
@@ -62,7 +59,7 @@ def _verb_page(name: str, command: Any, parent: Any,
     if subs:
         lines += [".SH COMMANDS"]
         for sub_name, sub in subs.items():
-            sub_ctx = Context(sub, info_name=sub_name, parent=ctx)
+            sub_ctx = _context(sub, sub_name, ctx)
             lines += [".SS " + _escape(f"{name} {sub_name}"), *_synopsis(
                 f"deltoctl {name} {sub_name}", sub, sub_ctx), ".PP", _text(sub.help or "")]
             options = _options(sub, sub_ctx)
