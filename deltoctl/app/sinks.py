@@ -1,8 +1,10 @@
-"""Cycle sinks every front end shares: the lost-link policy of a stream or a recording."""
+"""Cycle sinks every front end shares: the lost-link policy of a stream or a recording, and a
+stream's NDJSON frames (with its tactile grids)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 from deltoctl.core.runner import Sink
 from deltoctl.errors import Unreachable
@@ -36,3 +38,47 @@ class LinkWatch(Sink):
             raise Unreachable(f"the link to {', '.join(down)} was lost and did not come back")
         for name, n in self.losses.items():
             self.system.notes.append(f"{name}: the link was lost {n} time(s) and came back")
+
+
+def stream_grids(names: list[str]) -> dict[str, list[list[str]]]:
+    """The tactile grids among streamed interfaces: each part whose streamed interfaces are
+    all ``cell_<row>_<col>`` of a full grid → its interface names, row by row."""
+    from deltoctl.record.cdr import grid_cells
+
+    parts: dict[str, list[str]] = {}
+    for name in names:
+        part, _, interface = name.rpartition("/")
+        parts.setdefault(part, []).append(interface)
+    grids = {}
+    for part, interfaces in parts.items():
+        grid = grid_cells(interfaces) if interfaces[0].startswith("cell_") else None
+        if grid is not None:
+            rows, cols, cells = grid
+            grids[part] = [[f"{part}/{c}" for c in cells[r * cols:(r + 1) * cols]]
+                           for r in range(rows)]
+    return grids
+
+
+def _cell(value: float | None) -> float | int | None:
+    """A cell as JSON: an integer reading as an integer."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
+class LinesSink(Sink):
+    """NDJSON frames, each given to ``write``: ``{"t": ns, "values": {...}}``, and with
+    tactile sensors ``"grids": {sensor: [[cell, ...], ...]}``, each grid as its rows (row 0
+    first)."""
+
+    def __init__(self, names: list[str], write: Callable[[dict[str, Any]], None]) -> None:
+        self.names = names
+        self.write = write
+        self.samples = 0
+        self.grids = stream_grids(names)
+
+    def frame(self, t_ns: int, values: dict[str, float]) -> None:
+        self.samples += 1
+        line: dict[str, Any] = {"t": t_ns, "values": {n: values.get(n) for n in self.names}}
+        if self.grids:
+            line["grids"] = {part: [[_cell(values.get(n)) for n in row] for row in rows]
+                             for part, rows in self.grids.items()}
+        self.write(line)

@@ -11,6 +11,10 @@ from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import (
     AllowMismatch,
     DurationOpt,
+    FoxgloveHostOpt,
+    FoxgloveOpt,
+    FoxgloveOriginOpt,
+    FoxglovePortOpt,
     RateOpt,
     finish,
     open_robot,
@@ -30,20 +34,6 @@ def _status(output: Path, cycles: int, link: float | None) -> str:
 
 ForceOpt = Annotated[bool, typer.Option(
     "--force", help="Overwrite the file when it exists (without: exit 2).")]
-FoxgloveOpt = Annotated[bool, typer.Option(
-    "--foxglove", help="Serve the live values to Foxglove too (WebSocket, the topics and "
-                       "messages of a recording); needs pip install 'deltoctl\\[foxglove]'.")]
-FoxglovePortOpt = Annotated[int, typer.Option(
-    "--foxglove-port", metavar="PORT", help="The Foxglove WebSocket port (0: any free one).")]
-FoxgloveHostOpt = Annotated[str, typer.Option(
-    "--foxglove-host", metavar="ADDRESS",
-    help="The address to serve Foxglove on; another than loopback serves the robot's data to "
-         "other machines.")]
-FoxgloveOriginOpt = Annotated[list[str] | None, typer.Option(
-    "--foxglove-origin", metavar="ORIGIN",
-    help="Also let in browser pages of this origin (repeatable, e.g. http://localhost:8080 for "
-         "a self-hosted Foxglove); by default only Foxglove's own (https://app.foxglove.dev, "
-         "the desktop app) and clients that send no Origin.")]
 OutputArg = Annotated[Path, typer.Argument(
     help="The .mcap file to write; {time} in its name becomes the start time (UTC, "
          "20261125T211400Z), {serial} each block's device serial, or its target's "
@@ -64,10 +54,10 @@ def foxglove_live(enabled: bool, host: str, port: int,
     if not enabled:
         yield None
         return
-    from deltoctl.record.foxglove_live import FoxgloveLive, is_local
+    from deltoctl.record.foxglove_live import FoxgloveLive
 
     with FoxgloveLive(host, port, origins=tuple(origins or ())) as live:
-        if not is_local(host):
+        if not live.local:
             warn(f"--foxglove-host {host}: the robot's data is served beyond this machine, to "
                  f"anyone who reaches port {port or 'chosen'} there")
         yield live
@@ -80,15 +70,16 @@ def foxglove_live(enabled: bool, host: str, port: int,
              "(a web page that is not Foxglove; --foxglove-origin lets one in)")
 
 
-def start_foxglove(live: Any, profile: Any, extra_states: tuple[str, ...],
-                   gpio_type: str = "group-values") -> None:
-    """The server, with the robot's topics; where it is said on stderr."""
-    live.begin(profile, extra_states, gpio_type)
+def start_foxglove(live: Any, system: Any, gpio_type: str = "group-values") -> list[Any]:
+    """With --foxglove (``live``), the server started with the topics of the blocks ``system``
+    drives, where it is said on stderr, and the live view as the loop's sink; else no sink."""
+    if live is None:
+        return []
+    from deltoctl.app.recording import driven_profile
+
+    live.begin(driven_profile(system), tuple(system.extra_states()), gpio_type)
     info(f"Foxglove: connect to {live.url} (Open connection → Foxglove WebSocket)")
-
-
-def foxglove_result(live: Any) -> dict[str, Any]:
-    return {"url": live.url, "cycles_sent": live.sent, "cycles_dropped": live.dropped}
+    return [live]
 
 
 def record(
@@ -107,7 +98,7 @@ def record(
     """Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
     valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back, 1 when
     the file could not be written to the end (disk full, file too large, removed)."""
-    from deltoctl.app.recording import check_record, driven_profile, planned_output
+    from deltoctl.app.recording import check_record, planned_output
     from deltoctl.app.recording import record as record_robot
     from deltoctl.core.runner import interrupted_by_signals
 
@@ -123,11 +114,7 @@ def record(
         with interrupted_by_signals(), \
                 foxglove_live(foxglove, foxglove_host, foxglove_port, foxglove_origin) as live, \
                 open_robot(opts, allow_model_mismatch) as robot:
-            sinks = []
-            if live is not None:
-                start_foxglove(live, driven_profile(robot.system),
-                               tuple(robot.system.extra_states()), gpio_type)
-                sinks.append(live)
+            sinks = start_foxglove(live, robot.system, gpio_type)
             result, links = record_robot(robot.system, output, rate, duration, gpio_type,
                                          sinks, show, force)
             output = Path(result["output"])
@@ -135,7 +122,7 @@ def record(
         if bar is not None:
             bar.stop()
     if live is not None:
-        result["foxglove"] = foxglove_result(live)
+        result["foxglove"] = live.summary()
     _show(opts, result, output)
     links.finish()
     finish(robot.system)  # exit 3 on warnings (a servo that never answered, a link lost)

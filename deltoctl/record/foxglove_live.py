@@ -158,6 +158,16 @@ class FoxgloveLive(Sink):
     def __enter__(self) -> FoxgloveLive:
         return self
 
+    @property
+    def local(self) -> bool:
+        """Served to this machine only (a loopback address)."""
+        return is_local(self.host)
+
+    def summary(self) -> dict[str, Any]:
+        """What the live view did, for a verb's JSON: its address, the cycles sent and those
+        dropped (it fell behind)."""
+        return {"url": self.url, "cycles_sent": self.sent, "cycles_dropped": self.dropped}
+
     def __exit__(self, *exc: object) -> None:
         self.stop()
 

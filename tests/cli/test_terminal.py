@@ -183,7 +183,7 @@ def test_piped_tables_are_never_cut(cli):
 def test_the_live_table_fits_80_columns(cli):
     from rich.console import Console
 
-    from deltoctl.cli.device_cmd import live_tables
+    from deltoctl.render.stream import live_tables
 
     sample = json.loads(cli("--sim", "-p", "dg-5f-right", "stream", "-d", "0.05")
                         .stdout.splitlines()[-1])["values"]

@@ -83,7 +83,7 @@ def test_stream_selects_interfaces(cli):
 def test_the_live_table_has_a_row_per_part(cli):
     from rich.console import Console
 
-    from deltoctl.cli.device_cmd import live_tables
+    from deltoctl.render.stream import live_tables
 
     result = cli("--sim", "-p", "dg-5f-right", "stream", "-d", "0.05")
     sample = json.loads(result.stdout.splitlines()[-1])["values"]

@@ -201,7 +201,7 @@ def test_stream_grids_follow_a_pushing_finger_over_tcp(cli):
 def test_the_live_view_draws_each_grid_as_a_heat_map(cli):
     from rich.console import Console
 
-    from deltoctl.cli.device_cmd import live_tables
+    from deltoctl.render.stream import live_tables
 
     firmware = _s15()
     firmware.duty[1] = 600
