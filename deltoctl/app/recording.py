@@ -78,6 +78,19 @@ def refuse_existing(path: Path, force: bool) -> None:
                            "pass --force to overwrite it, or put {time} in the name")
 
 
+def identified_output(template: Path, identities: Mapping[str, Mapping[str, Any]],
+                      force: bool = False) -> Path:
+    """A remote record's file once the robot's blocks are identified (``identities``: block →
+    its identity, with its ``target``): ``{serial}`` filled as a local record fills it; refused
+    when it exists (without ``force``)."""
+    path = template
+    if SERIAL in path.name:
+        path = output_path(path, [block_serial(block, ident.get("target"), ident)
+                                  for block, ident in identities.items()])
+    refuse_existing(path, force)
+    return path
+
+
 def create_output(path: Path, force: bool = False) -> None:
     """The file a recording goes to, created empty; one that exists (without ``force``) or
     cannot be written is invalid input."""

@@ -3,27 +3,22 @@ another computer (``deltoctl --robot ROBOT VERB …``, ``deltoctl fleet …``)."
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 import sys
-from collections.abc import Iterator
-from typing import TYPE_CHECKING, Annotated
+from typing import Annotated
 
 import typer
 
 from deltoctl.cli.context import Options, options
 from deltoctl.errors import InvalidInput
 
-if TYPE_CHECKING:
-    from deltoctl.fleet.agent import Agent
-
 # the agent's verb processes: argv[1] the profile, then SIMULATED when --sim serves the robot
 # (the zygote's socket comes last)
-SPARE = ("import sys; from deltoctl.cli.agent_cmd import spare; "
-         "spare(sys.argv[1], 'simulated' in sys.argv[2:])")
-ZYGOTE = ("import sys; from deltoctl.cli.agent_cmd import zygote; "
-          "zygote(sys.argv[1], int(sys.argv[-1]), 'simulated' in sys.argv[2:-1])")
+SPARE = ("import sys; from deltoctl.cli.agent_cmd import verb_process; "
+         "verb_process(sys.argv[1], 'simulated' in sys.argv[2:])")
+ZYGOTE = ("import sys; from deltoctl.cli.agent_cmd import verb_process; "
+          "verb_process(sys.argv[1], 'simulated' in sys.argv[2:-1], int(sys.argv[-1]))")
 SIMULATED = "simulated"
 
 
@@ -38,14 +33,6 @@ def _links(opts: Options, spec: str) -> list[str]:
     links += [f"--package-path={k}={v}" for k, v in opts.package_paths.items()]
     links += [f"--hardware={h}" for h in opts.hardware]
     return links + (["--xacro"] if opts.xacro else [])
-
-
-def _default_name() -> str:
-    import re
-    import socket
-
-    name = re.sub(r"[^A-Za-z0-9_.-]", "-", socket.gethostname().split(".")[0])
-    return name.strip("-.")[:63] or "robot"
 
 
 NameOpt = Annotated[str | None, typer.Option(
@@ -85,152 +72,55 @@ def agent(
     Motion and outputs are served only to authenticated callers: when every link of the
     agent is mutual TLS (see the README, Remote robots)."""
     from deltoctl.cli.fleet_cmd import agent_checks
-    from deltoctl.fleet import check_robot
-    from deltoctl.fleet import config as zconfig
+    from deltoctl.fleet import check_robot, host
     from deltoctl.fleet.agent import Agent
     from deltoctl.profile.exporter import to_yaml
 
     opts = options(ctx)
     if opts.robot:
         raise InvalidInput("the agent serves this computer's robot: drop --robot")
-    robot = check_robot(name or _default_name())
+    robot = check_robot(name or host.default_name())
     if not (math.isfinite(deadline) and 0.1 <= deadline <= 10):
         raise InvalidInput(f"--deadline must be 0.1 to 10 seconds, got {deadline:g}")
-    workdir = _workdir(workdir, robot)
+    workdir = host.workdir(workdir, robot)
     profile = opts.load_profile()  # a bad profile stops here, with its file:line
-    own_files = _profile_files(opts)
+    own_files = host.profile_files(opts.profile, opts.xacro)
     spec = opts.profile or profile.name
     if os.path.exists(spec):
         spec = os.path.abspath(spec)
-    config_path = zconfig.config_file(opts.zenoh_config)
-    config = zconfig.load(config_path, "agent", listen, connect)
-    own_files += [*([config_path] if config_path else []), *zconfig.tls_files(config)]
-    motion, why_not = _motion_rule(config, allow_unauthenticated_motion)
-    with _served_links(opts, spec) as links:
+    config, config_files = host.zenoh_config(opts.zenoh_config, listen, connect)
+    motion, why_not = host.motion_rule(config, allow_unauthenticated_motion)
+    with host.served_links(_links(opts, spec), opts.sim) as links:
         marks = [SIMULATED] if opts.sim else []
         children = ([sys.executable, "-c", ZYGOTE, spec, *marks],
                     [sys.executable, "-c", SPARE, spec, *marks])
-        node = Agent(robot, spec, profile.name, links, children, config, motion, why_not,
-                     deadline, workdir, simulated=opts.sim,
-                     profile_yaml=to_yaml(profile), own_files=own_files, check=agent_checks)
-        _serve(node, f"robot {robot}: serving {profile.name} on Zenoh "
-                     f"({zconfig.describe(config)}); motion "
-                     f"{'allowed' if motion else 'refused: ' + why_not}")
+        host.serve(Agent(robot, spec, profile.name, links, children, config, motion, why_not,
+                         deadline, workdir, simulated=opts.sim, profile_yaml=to_yaml(profile),
+                         own_files=own_files + config_files, check=agent_checks))
 
 
-def _workdir(given: str | None, robot: str) -> str:
-    """Where remote verbs run: --workdir (which must exist), or the agent's own."""
-    if given is None:
-        return os.path.abspath(_own_workdir(robot))
-    if not os.path.isdir(given):
-        raise InvalidInput(f"--workdir {given}: no such directory")
-    return os.path.abspath(given)
+# -- the agent's warm verb processes (deltoctl/fleet/host.py): deltoctl's own command line ---
+
+# what every verb imports, loaded once by a warm process
+VERB_MODULES = ("deltoctl.cli.main", "deltoctl.cli.device_cmd", "deltoctl.cli.motion_cmd",
+                "deltoctl.cli.output", "deltoctl.profile.catalog", "deltoctl.core.system",
+                "deltoctl.core.runner")
 
 
-@contextlib.contextmanager
-def _served_links(opts: Options, spec: str) -> Iterator[list[str]]:
-    """The global options that point a verb at the robot; with --sim, at the simulator
-    started here (stopped on the way out)."""
-    from deltoctl.fleet.agent import start_simulator, stop_process
+def verb_process(spec: str, simulated: bool, zygote_socket: int | None = None) -> None:
+    """The agent's warm verb process, its zygote given the socket, else a spare: it runs each
+    command line as ``deltoctl`` does; with ``simulated`` (``agent --sim``), every block the
+    verbs open is marked simulated."""
+    from deltoctl.fleet import host
 
-    links = _links(opts, spec)
-    if not opts.sim:
-        yield links
-        return
-    simulator, served = start_simulator(
-        [sys.executable, "-m", "deltoctl", *links, "sim", "serve", "--json"],
-        env={k: v for k, v in os.environ.items() if not k.startswith("DELTOCTL_")})
-    try:
-        links = [a for a in links if not a.startswith("--target=")]
-        yield links + [f"--target={bus}={url}" for bus, url in served["buses"].items()]
-    finally:
-        stop_process(simulator)
+    host.warm_process(spec, VERB_MODULES, _served_simulated if simulated else None, _run,
+                      zygote_socket)
 
 
-def _serve(node: Agent, serving: str) -> None:
-    """Serve until a signal stops the agent; ``serving`` is said once it is up."""
-    from deltoctl.fleet.agent import log, signals_stop
+def _served_simulated() -> None:
+    from deltoctl.cli import device_cmd
 
-    signals_stop(node.stop)
-    try:
-        node.start()
-        log(serving)
-        node.serve()
-        log(f"robot {node.robot}: stopping")
-    finally:
-        node.close()
-
-
-def _own_workdir(robot: str) -> str:
-    """The agent's own directory for remote verbs: $XDG_STATE_HOME/deltoctl/agent/ROBOT
-    (~/.local/state/… by default), made if need be; none of the agent's files is there."""
-    state = os.environ.get("XDG_STATE_HOME", "")
-    if not os.path.isabs(state):
-        state = os.path.join(os.path.expanduser("~"), ".local", "state")
-    path = os.path.join(state, "deltoctl", "agent", robot)
-    try:
-        os.makedirs(path, mode=0o700, exist_ok=True)
-    except OSError as exc:
-        raise InvalidInput(f"cannot make the agent's directory {path}: "
-                           f"{exc.strerror or exc}", "pass --workdir DIR") from None
-    return path
-
-
-def _profile_files(opts: Options) -> list[str]:
-    """The files the robot's profile was read from: the profile, and what xacro included."""
-    from deltoctl.profile.catalog import resolve, runs_xacro
-
-    path = resolve(opts.profile) if opts.profile else None
-    if path is None:
-        return []
-    files = [str(path)]
-    if runs_xacro(path, opts.xacro):
-        from deltoctl.profile.xacro_runner import included_files
-
-        files += included_files()
-    return files
-
-
-def _motion_rule(config: object, allow_unauthenticated: bool) -> tuple[bool, str]:
-    """(motion allowed, why not): only over mutual TLS, or on a loopback-only lab bench
-    with --allow-unauthenticated-motion."""
-    from deltoctl.fleet import config as zconfig
-
-    if zconfig.mutual_tls(config):
-        return True, ""
-    if allow_unauthenticated:
-        if not zconfig.loopback_only(config):
-            raise InvalidInput("--allow-unauthenticated-motion takes loopback endpoints only "
-                               f"(tcp/127.0.0.1:PORT); this agent is {zconfig.describe(config)}",
-                               "configure mutual TLS to allow motion over a network")
-        return True, ""
-    return False, ("motion and outputs need an authenticated caller, and this agent's Zenoh "
-                   "links are not all mutual TLS")
-
-
-def _warm(spec: str, simulated: bool = False) -> None:
-    """What every verb imports, and the robot's profile and drivers: loaded once. With
-    ``simulated`` (``agent --sim``), every block the verbs open is marked simulated."""
-    import contextlib
-    import importlib
-
-    for module in ("deltoctl.cli.main", "deltoctl.cli.device_cmd", "deltoctl.cli.motion_cmd",
-                   "deltoctl.cli.output", "deltoctl.profile.catalog", "deltoctl.core.system",
-                   "deltoctl.core.runner"):
-        importlib.import_module(module)
-    if simulated:
-        from deltoctl.cli import device_cmd
-
-        device_cmd.SERVED_SIMULATED = "deltoctl agent --sim"
-    with contextlib.suppress(Exception):  # only a head start: the verb reports any problem
-        from deltoctl import registry
-        from deltoctl.profile.catalog import load_profile
-
-        prof = load_profile(spec)
-        for hw in prof.hardware:
-            family = registry.of_block(prof.family_of(hw), hw.plugin)
-            if family is not None:
-                family.driver_class()
+    device_cmd.SERVED_SIMULATED = "deltoctl agent --sim"
 
 
 def _run(argv: list[str]) -> int:
@@ -247,35 +137,3 @@ def _run(argv: list[str]) -> int:
         return 130
     return 0
 
-
-def zygote(spec: str, sock_fd: int, simulated: bool = False) -> None:
-    """The agent's warm process: forks one child per verb (deltoctl/fleet/forks.py)."""
-    from deltoctl.fleet.forks import serve
-
-    _warm(spec, simulated)
-    serve(sock_fd, _run)
-
-
-def spare(spec: str = "", simulated: bool = False) -> None:
-    """A deltoctl process started ahead by the agent (when it has no zygote): warm, it waits
-    for its command line (one JSON list) on stdin, then runs it as ``deltoctl`` would."""
-    import json
-    import signal
-    import threading
-    import time
-
-    _warm(spec, simulated)
-    parent = os.getppid()
-    line = sys.stdin.readline()
-    if not line:
-        return
-
-    def orphaned() -> None:  # the agent is gone: stop as on Ctrl-C (motion stops)
-        while os.getppid() == parent:
-            time.sleep(0.05)
-        os.kill(os.getpid(), signal.SIGINT)
-
-    threading.Thread(target=orphaned, daemon=True).start()
-    null = os.open(os.devnull, os.O_RDONLY)
-    os.dup2(null, 0)
-    sys.exit(_run(json.loads(line)))

@@ -15,7 +15,6 @@ app = typer.Typer(help="The robots whose agents answer over Zenoh, and verbs on 
                   no_args_is_help=True)
 
 FORWARDED = {"json": "--json", "yes": "--yes", "quiet": "--quiet"}
-AGENT_RECORD_MAX = 3600.0  # s: the longest record an agent writes in its own directory
 
 
 def register(root: typer.Typer) -> None:
@@ -24,32 +23,17 @@ def register(root: typer.Typer) -> None:
 
 # -- --robot ---------------------------------------------------------------------------------
 
-def strip_remote(argv: list[str]) -> list[str]:
-    """The command line without ``--robot R`` and ``--zenoh-config FILE``."""
-    out: list[str] = []
-    skip = False
-    for arg in argv:
-        if skip:
-            skip = False
-        elif arg in ("--robot", "--zenoh-config"):
-            skip = True
-        elif not arg.startswith(("--robot=", "--zenoh-config=")):
-            out.append(arg)
-    return out
+def _asked(opts: Options, what: str) -> bool:
+    """Whether motion was confirmed on this terminal (``WHAT. Move?``); False without asking
+    with --yes (the command line carries it) or without a terminal (the robot refuses, exit 5,
+    as a local run would); a no refuses it here."""
+    if opts.yes or not sys.stdin.isatty():
+        return False
+    if not typer.confirm(f"{what}. Move?", default=False, err=True):
+        from deltoctl.errors import Refused
 
-
-def _confirmed(opts: Options, verb: str, what: str) -> list[str]:
-    """``["--yes"]`` when motion is confirmed here (``--yes``, or yes on a terminal); else
-    nothing, and the robot refuses (exit 5) as a local run would."""
-    from deltoctl.fleet import MOTION
-
-    if opts.yes or verb not in MOTION or not sys.stdin.isatty():
-        return []
-    if typer.confirm(f"{what}. Move?", default=False, err=True):
-        return ["--yes"]
-    from deltoctl.errors import Refused
-
-    raise Refused("not confirmed; nothing moved")
+        raise Refused("not confirmed; nothing moved")
+    return True
 
 
 def _write_out(data: bytes) -> None:
@@ -72,9 +56,9 @@ def forward(ctx: typer.Context) -> NoReturn:
     """Run the command line on ``--robot``'s agent: its stdout, stderr (errors naming the
     robot) and exit code, as if run there."""
     from deltoctl.cli.main import ARGV
-    from deltoctl.fleet import check_robot
+    from deltoctl.fleet import MOTION, check_robot
     from deltoctl.fleet.client import ErrorLines, RemoteCall, caller_session
-    from deltoctl.fleet.run import verb_of
+    from deltoctl.fleet.run import strip_remote, verb_of
 
     opts = options(ctx)
     robot = check_robot(opts.robot or "")
@@ -83,9 +67,9 @@ def forward(ctx: typer.Context) -> NoReturn:
     try:
         verb = verb_of(_record_file_dropped(argv), robot)
         if verb == "record" and not {"--help", "-h"} & set(argv):
-            code = _remote_record(opts, robot, argv, errors.feed)
-            raise typer.Exit(code)
-        argv = _confirmed(opts, verb, f"robot {robot}: {' '.join(argv)}") + argv
+            raise typer.Exit(_remote_record(opts, robot, argv, errors.feed))
+        if verb in MOTION and _asked(opts, f"robot {robot}: {' '.join(argv)}"):
+            argv = ["--yes", *argv]
         with caller_session(opts.zenoh_config, f"robot {robot}") as session:
             code = RemoteCall(session, robot, argv, _write_out, errors.feed).run()
     except DeltoctlError as exc:  # this side failed (nothing answers): the robot named too
@@ -104,25 +88,16 @@ def forward(ctx: typer.Context) -> NoReturn:
 
 # -- --robot R record: the file on this computer -----------------------------------------------
 
-def _verb_args(argv: list[str]) -> list[str]:
-    """The arguments after the verb (global options come first, hoisted)."""
-    from deltoctl.cmdline import needs_value
-
-    i = 0
-    while i < len(argv) and argv[i].startswith("-"):
-        i += 2 if needs_value(argv[i]) else 1
-    return argv[i + 1:]
-
-
 def _record_file_dropped(argv: list[str]) -> list[str]:
     """The command line as the agent judges it: a remote record's FILE is written on this
     computer and never sent, so the agent's path rule (files in its directory only) does not
     judge it. Any other command line as it is."""
     from deltoctl.cli.main import command_path
     from deltoctl.cmdline import hoist_global_options
+    from deltoctl.fleet.run import verb_args
 
     hoisted = hoist_global_options(argv)
-    args = _verb_args(hoisted)
+    args = verb_args(hoisted)
     try:
         if command_path(hoisted) != ("record",) or {"--help", "-h"} & set(args):
             return argv
@@ -134,15 +109,20 @@ def _record_file_dropped(argv: list[str]) -> list[str]:
     return hoisted[:len(hoisted) - len(args)] + args[:at] + args[at + 1:]
 
 
-def _positional(args: list[str]) -> int | None:
-    """Where record's FILE argument stands among its arguments."""
+def _record_command() -> Any:
+    """``deltoctl record``'s click command: its options, as the CLI parses them."""
     from typer.main import get_command
 
     from deltoctl.cli import record_cmd
 
     holder = typer.Typer()
     record_cmd.register(holder)
-    takes_value = {o for p in get_command(holder).params if getattr(p, "opts", None)
+    return get_command(holder)
+
+
+def _positional(args: list[str]) -> int | None:
+    """Where record's FILE argument stands among its arguments."""
+    takes_value = {o for p in _record_command().params if getattr(p, "opts", None)
                    and p.param_type_name == "option" and not p.is_flag for o in p.opts}
     i = 0
     while i < len(args):
@@ -155,44 +135,15 @@ def _positional(args: list[str]) -> int | None:
     return None
 
 
-def _output_name(template: Any, identities: dict[str, dict[str, Any]], force: bool) -> Any:
-    """A remote record's file: ``{serial}`` from the robot's blocks, as a local record fills
-    it; refused when it exists (without --force)."""
-    from deltoctl.app.recording import SERIAL, block_serial, output_path, refuse_existing
-
-    path = template
-    if SERIAL in path.name:
-        path = output_path(path, [block_serial(block, ident.get("target"), ident)
-                                  for block, ident in identities.items()])
-    refuse_existing(path, force)
-    return path
-
-
-def _record_params(args: list[str], robot: str) -> dict[str, Any]:
-    """The record's own options, checked here; its file's directory must be there."""
-    params = record_options(args)
-    from pathlib import Path
-
-    from deltoctl.app.recording import planned_output
-
-    params["output"] = planned_output(Path(params["output"]), params["force"])
-    return params
-
-
 def record_options(args: list[str]) -> dict[str, Any]:
     """The record's own options, parsed as ``deltoctl record`` parses them, and checked as
     it checks them; those that make no sense remotely refused."""
-    from typer.main import get_command
-
-    from deltoctl.cli import record_cmd
-    from deltoctl.cli.device_cmd import check_loop
+    from deltoctl.app.robot import check_loop
     from deltoctl.cli.main import click_exceptions
     from deltoctl.record.ros2_msgs import GPIO_TYPES
 
-    holder = typer.Typer()
-    record_cmd.register(holder)
     try:
-        params = get_command(holder).make_context("record", list(args)).params
+        params = _record_command().make_context("record", list(args)).params
     except click_exceptions.ClickException as exc:
         raise InvalidInput(f"record: {exc.format_message()}") from None
     check_loop(params["rate"], params["duration"])
@@ -203,89 +154,56 @@ def record_options(args: list[str]) -> dict[str, Any]:
 
 
 def agent_checks(verb: str, argv: list[str]) -> None:
-    """What the agent checks in a remote command line with the CLI's own parse: a record it
-    runs (``fleet run record``, its file in the agent's directory) has a duration of at most
-    AGENT_RECORD_MAX, so that no caller fills the robot's computer's disk."""
+    """What the agent checks in a remote command line with the CLI's own parse: the duration
+    of a record it runs (deltoctl.fleet.host.check_record_duration)."""
     from deltoctl.cmdline import hoist_global_options
+    from deltoctl.fleet.host import check_record_duration
+    from deltoctl.fleet.run import verb_args
 
-    args = _verb_args(hoist_global_options(argv))
-    if verb != "record" or {"--help", "-h"} & set(args):
-        return
-    duration = record_options(args)["duration"]
-    if duration is None or duration > AGENT_RECORD_MAX:
-        raise InvalidInput(f"a record written on the robot's computer needs --duration of at "
-                           f"most {AGENT_RECORD_MAX:g} s"
-                           + ("" if duration is None else f", got {duration:g}"),
-                           "or write the file on this computer: deltoctl --robot ROBOT record "
-                           "FILE (Ctrl-C ends it)")
+    args = verb_args(hoist_global_options(argv))
+    if verb == "record" and not {"--help", "-h"} & set(args):
+        check_record_duration(record_options(args)["duration"])
 
 
-def _remote_record(opts: Options, robot: str, argv: list[str],
-                   err: Any) -> int:
+def _remote_record(opts: Options, robot: str, argv: list[str], err: Any) -> int:
     """``--robot R record FILE``: the robot streams its cycles, FILE is written here (with the
     robot's profile, identity and cycle times). The exit code of the stream on the robot
     (4 when its link was down at the end, 3 when lost and back), 3 when cycles it ran did not
     arrive, 4 when the robot was lost (the file finished), 130 when interrupted before the
     stream started."""
+    from pathlib import Path
+
+    from deltoctl.app.recording import identified_output, planned_output
     from deltoctl.cli.output import emit_json, info, warn
-    from deltoctl.errors import WARNINGS
-    from deltoctl.fleet.client import caller_session
-    from deltoctl.fleet.remote_record import RemoteRecord, cancelled_by_signals
+    from deltoctl.fleet.remote_record import record_remote
+    from deltoctl.fleet.run import verb_args
+    from deltoctl.render.fleet import not_received_text, recorded_text
 
-    params = _record_params(_verb_args(argv), robot)
-    failure: DeltoctlError | None = None
-    with caller_session(opts.zenoh_config, f"robot {robot}") as session:
-        rec = RemoteRecord(session, robot, params["output"], params["rate"],
-                           params["duration"], [f"--hardware={h}" for h in opts.hardware],
-                           params["gpio_type"], params["allow_model_mismatch"], err,
-                           opened=lambda: info(f"recording {rec.output} from robot {robot} "
-                                               "(its cycle times; Ctrl-C ends it)"),
-                           name=lambda template, identities: _output_name(
-                               template, identities, params["force"]))
-        with cancelled_by_signals(rec.cancel):
-            try:
-                code = rec.run()
-            except DeltoctlError as exc:
-                failure, code = exc, exc.exit_code
-    from deltoctl.errors import Unreachable
-
-    if rec.result and (failure is None or isinstance(failure, Unreachable)):
-        loop = rec.result["loop"]
+    params = record_options(verb_args(argv))
+    output = planned_output(Path(params["output"]), params["force"])
+    done = record_remote(
+        opts.zenoh_config, robot, output, params["rate"], params["duration"],
+        [f"--hardware={h}" for h in opts.hardware], params["gpio_type"],
+        params["allow_model_mismatch"], err,
+        opened=lambda path: info(f"recording {path} from robot {robot} "
+                                 "(its cycle times; Ctrl-C ends it)"),
+        name=lambda template, identities: identified_output(template, identities,
+                                                            params["force"]))
+    if done.result:
         if opts.json:
-            emit_json(rec.result)
+            emit_json(done.result)
         else:
-            info(f"wrote {params['output']}: {sum(rec.result['messages'].values())} messages "
-                 f"on {len(rec.result['messages'])} topics, {loop['cycles']} cycles of robot "
-                 f"{robot} at {loop['real_rate']} Hz (its cycle times)")
-        if rec.result["link_losses"]:
+            info(recorded_text(robot, output, done.result))
+        if done.result["link_losses"]:
             info("the gaps are marked on /diagnostics")
-        if loop["cycles_not_received"]:
-            warn(f"robot {robot}: {loop['cycles_not_received']} of its {loop['robot_cycles']} "
-                 "cycles did not arrive (the gaps are marked on /diagnostics)")
-            code = code or WARNINGS
-    if failure is not None:
-        raise failure
-    return code
+        if done.not_received:
+            warn(not_received_text(robot, done.result))
+    if done.failure is not None:
+        raise done.failure
+    return done.code
 
 
 # -- fleet list ------------------------------------------------------------------------------
-
-def _identity_text(identity: dict[str, Any]) -> str:
-    """Each block as its family shows its identity (``Family.identity_fields``: model,
-    firmware, parts …); a family not installed here, or one declaring none, by its name."""
-    from deltoctl import registry
-
-    if "error" in identity:
-        return f"identify failed: {identity['error']}"
-    parts = []
-    for block, fields in identity.items():
-        family = registry.get(str(fields.get("family")))
-        shown = [template.format(fields[key]).split(" (0x")[0]  # a model's number: too long
-                 for key, template in (family.identity_fields if family else ())
-                 if fields.get(key) not in (None, "")]
-        parts.append(f"{block}: {' '.join(shown) or fields.get('family')}")
-    return "; ".join(parts)
-
 
 @app.command("list")
 def list_cmd(
@@ -296,44 +214,24 @@ def list_cmd(
     """The robots whose agents answer (their liveliness tokens), with profile, identity and
     state."""
     from deltoctl.cli.output import emit_json, info, table
-    from deltoctl.fleet.client import agents, caller_session, infos
+    from deltoctl.fleet.client import caller_session
+    from deltoctl.fleet.run import robots_found
+    from deltoctl.render.fleet import list_rows
 
     opts = options(ctx)
     if not 0 < wait <= 60:
         raise InvalidInput(f"--wait must be 0 to 60 seconds, got {wait:g}")
     with caller_session(opts.zenoh_config, "fleet") as session:
-        found = agents(session, wait=wait)
-        details = infos(session, wait=wait) if found else {}
-    robots = [{"robot": name, "profile": profile, **{
-        k: v for k, v in details.get(name, {"state": "unknown"}).items() if k != "robot"}}
-        for name, profile in sorted(found.items())]
+        robots = robots_found(session, wait)
     if opts.json:
         emit_json(robots)
     elif robots:
-        table(None, ["robot", "profile", "identity", "state", "motion"],
-              [[r["robot"], r["profile"], _identity_text(r.get("identity", {})), r["state"],
-                r.get("motion", "?")] for r in robots])
+        table(None, ["robot", "profile", "identity", "state", "motion"], list_rows(robots))
     if not robots:
         info("no robot found: no agent answers on this Zenoh network")
 
 
 # -- fleet run -------------------------------------------------------------------------------
-
-def _globals(opts: Options) -> list[str]:
-    return [flag for name, flag in FORWARDED.items() if getattr(opts, name)] + \
-        [f"--hardware={h}" for h in opts.hardware]
-
-
-def _live(jobs: list[Any]) -> Any:
-    from rich.table import Table
-
-    t = Table(title="fleet run", title_justify="left")
-    for column in ("robot", "profile", "now", "lines", "seconds"):
-        t.add_column(column)
-    for j in jobs:
-        t.add_row(j.robot, j.profile, j.state, f"{j.done}/{len(j.lines)}", f"{j.seconds():.1f}")
-    return t
-
 
 @app.command("run", context_settings={"ignore_unknown_options": True,
                                       "allow_interspersed_args": False})
@@ -350,35 +248,30 @@ def run_cmd(
 ) -> None:
     """Run one verb (or a script's verbs) on many robots in parallel: a live table while they
     run, one report at the end; the exit code is the worst of the robots'."""
-    import os
-
     from deltoctl.cli.main import VERBS
     from deltoctl.cli.output import emit_json, info, table
-    from deltoctl.cmdline import hoist_global_options
-    from deltoctl.fleet import MOTION
     from deltoctl.fleet.client import agents, caller_session
-    from deltoctl.fleet.run import choose, script_lines, start, verb_of, worst
+    from deltoctl.fleet.run import choose, command_lines, confirmed, start, verb_of, wait_for, worst
+    from deltoctl.render.fleet import live_run, run_rows
 
     opts = options(ctx)
-    skipped: list[str] = []
-    one_verb = not (command[0] not in VERBS and os.path.isfile(command[0]) and len(command) == 1)
-    if one_verb:  # checked once the robots are known, to name them
-        lines = [hoist_global_options(list(command))]
-    else:
-        lines, skipped = script_lines(command[0])
-    lines = [_globals(opts) + ln for ln in lines]
+    lines, skipped, one_verb = command_lines(command, VERBS)
+    forwarded = [flag for name, flag in FORWARDED.items() if getattr(opts, name)]
+    lines = [forwarded + [f"--hardware={h}" for h in opts.hardware] + ln for ln in lines]
     for note in skipped:
         info(f"skipped {note}")
     with caller_session(opts.zenoh_config, "fleet") as session:
         chosen = choose(agents(session, wait=wait), robots)
-        if one_verb:
+        if one_verb:  # checked once the robots are known, to name them
             verb_of(lines[0], ", ".join(sorted(chosen)))
-        lines = _confirm_motion(opts, chosen, lines, MOTION)
+        lines = confirmed(lines, lambda: _asked(
+            opts, f"motion on {len(chosen)} robots ({', '.join(sorted(chosen))})"))
         report = len(lines) == 1 and verb_of(lines[0]) == "report"
         if report and "--json" not in lines[0]:  # each robot's JSON, gathered below
             lines = [[*lines[0], "--json"]]
         jobs, threads = start(session, chosen, lines)
-        _watch(jobs, threads, opts)
+        with live_run(jobs, not (opts.json or opts.quiet) and sys.stderr.isatty()) as tick:
+            wait_for(jobs, threads, tick)  # Ctrl-C interrupts every robot
     code = worst([j.code for j in jobs])
     if report:
         from deltoctl.cli.report_cmd import fleet_summary
@@ -388,49 +281,6 @@ def run_cmd(
         emit_json({"command": lines[0] if len(lines) == 1 else lines, "skipped": skipped,
                    "exit_code": code, "robots": [j.report() for j in jobs]})
     else:
-        table(None, ["robot", "profile", "exit", "seconds", "lines", "result"],
-              [[j.robot, j.profile, j.code, f"{j.seconds():.2f}", f"{j.done}/{len(j.lines)}",
-                "ok" if j.code == 0 else j.last_error()] for j in jobs])
+        table(None, ["robot", "profile", "exit", "seconds", "lines", "result"], run_rows(jobs))
     raise typer.Exit(code)
 
-
-def _confirm_motion(opts: Options, chosen: dict[str, str], lines: list[list[str]],
-                    motion: Any) -> list[list[str]]:
-    """Motion on many robots is confirmed here, once (--yes, or yes on a terminal); each
-    moving line then carries --yes."""
-    from deltoctl.fleet.run import verb_of
-
-    if not any(verb_of(ln) in motion for ln in lines) or opts.yes or not sys.stdin.isatty():
-        return lines
-    names = ", ".join(sorted(chosen))
-    if not typer.confirm(f"motion on {len(chosen)} robots ({names}). Move?", default=False,
-                         err=True):
-        from deltoctl.errors import Refused
-
-        raise Refused("not confirmed; nothing moved")
-    return [["--yes", *ln] if verb_of(ln) in motion else ln for ln in lines]
-
-
-def _watch(jobs: list[Any], threads: list[Any], opts: Options) -> None:
-    """Wait for every robot, with a live table on a terminal; Ctrl-C interrupts them all."""
-    live = None
-    if not (opts.json or opts.quiet) and sys.stderr.isatty():
-        from rich.console import Console
-        from rich.live import Live
-
-        live = Live(_live(jobs), console=Console(stderr=True), auto_refresh=False)
-        live.start()
-    try:
-        while any(t.is_alive() for t in threads):
-            try:
-                for t in threads:
-                    t.join(0.1)
-                    if live is not None:
-                        live.update(_live(jobs), refresh=True)
-            except KeyboardInterrupt:
-                for j in jobs:
-                    if j.call is not None:
-                        j.call.cancel()
-    finally:
-        if live is not None:
-            live.stop()

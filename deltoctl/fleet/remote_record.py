@@ -23,7 +23,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Unreachable
+from deltoctl.errors import WARNINGS, DeltoctlError, DeviceError, InvalidInput, Unreachable
 from deltoctl.fleet import key
 from deltoctl.fleet.agent import PROFILE_YAML
 from deltoctl.fleet.client import FOUND_WAIT, RemoteCall
@@ -329,3 +329,50 @@ def cancelled_by_signals(cancel: Callable[[], None]) -> Iterator[None]:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+@dataclasses.dataclass
+class Recorded:
+    """How a remote record ended. ``code``: the stream's exit code on the robot (4 when its
+    link was down at the end, 3 when lost and back), 3 when cycles it ran did not arrive, 130
+    when interrupted before the stream started; ``result``: the report a local ``record
+    --json`` prints, once the file is finished (empty when none is to be shown); ``failure``:
+    the error that stopped the record (a lost robot: Unreachable, its file finished)."""
+
+    code: int
+    result: dict[str, Any]
+    failure: DeltoctlError | None = None
+
+    @property
+    def not_received(self) -> int:
+        """The cycles the robot ran that did not arrive here (their gaps are marked on
+        /diagnostics)."""
+        return int(self.result["loop"]["cycles_not_received"]) if self.result else 0
+
+
+def record_remote(zenoh_config: str | None, robot: str, output: Path, rate: float,
+                  duration: float | None, options: list[str], gpio_type: str,
+                  allow_model_mismatch: bool, err: Callable[[bytes], None],
+                  opened: Callable[[Path], None],
+                  name: Callable[[Path, dict[str, dict[str, Any]]], Path]) -> Recorded:
+    """``deltoctl --robot ROBOT record FILE``: the robot's stream recorded to ``output`` on
+    this computer (see RemoteRecord), over a caller's session of ``zenoh_config``; Ctrl-C,
+    SIGTERM and SIGHUP end it and the file is finished. ``opened`` is told the file once it
+    is created."""
+    from deltoctl.fleet.client import caller_session
+
+    failure: DeltoctlError | None = None
+    with caller_session(zenoh_config, f"robot {robot}") as session:
+        rec = RemoteRecord(session, robot, output, rate, duration, options, gpio_type,
+                           allow_model_mismatch, err, opened=lambda: opened(rec.output),
+                           name=name)
+        with cancelled_by_signals(rec.cancel):
+            try:
+                code = rec.run()
+            except DeltoctlError as exc:
+                failure, code = exc, exc.exit_code
+    shown = rec.result and (failure is None or isinstance(failure, Unreachable))
+    done = Recorded(code, rec.result if shown else {}, failure)
+    if done.not_received:
+        done.code = done.code or WARNINGS
+    return done

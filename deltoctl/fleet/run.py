@@ -1,4 +1,5 @@
-"""A fleet run: one verb (or a bring-up script's verbs) on many robots at once, each robot's
+"""The fleet from the caller's side: the robots found, the command line a robot's agent runs,
+and a fleet run: one verb (or a bring-up script's verbs) on many robots at once, each robot's
 command lines one after the other, the fleet's outcome the worst of its robots'."""
 
 from __future__ import annotations
@@ -8,9 +9,11 @@ import fnmatch
 import json
 import threading
 import time
+from collections.abc import Callable, Collection
 from typing import Any
 
 from deltoctl.errors import DeltoctlError, InvalidInput, Unreachable
+from deltoctl.fleet import MOTION
 
 # exit codes from best to worst: the fleet's code is the worst of its robots'
 SEVERITY = (0, 3, 1, 4, 2, 5, 130)
@@ -32,6 +35,66 @@ def verb_of(argv: list[str], robot: str = "") -> str:
         return check_argv(argv)
     except InvalidInput as exc:
         raise InvalidInput(f"robot {robot}: {exc.message}", exc.hint) from None
+
+
+def strip_remote(argv: list[str]) -> list[str]:
+    """The command line without ``--robot R`` and ``--zenoh-config FILE``: what the robot's
+    agent runs."""
+    out: list[str] = []
+    skip = False
+    for arg in argv:
+        if skip:
+            skip = False
+        elif arg in ("--robot", "--zenoh-config"):
+            skip = True
+        elif not arg.startswith(("--robot=", "--zenoh-config=")):
+            out.append(arg)
+    return out
+
+
+def verb_args(argv: list[str]) -> list[str]:
+    """The arguments after the verb (global options come first, hoisted)."""
+    from deltoctl.cmdline import needs_value
+
+    i = 0
+    while i < len(argv) and argv[i].startswith("-"):
+        i += 2 if needs_value(argv[i]) else 1
+    return argv[i + 1:]
+
+
+def command_lines(command: list[str],
+                  verbs: Collection[str]) -> tuple[list[list[str]], list[str], bool]:
+    """What a fleet run sends each robot: the deltoctl lines of a bring-up script when
+    ``command`` is only a file's name, none of ``verbs``, with the script's lines skipped;
+    else one verb's command line, its global options hoisted; and whether it is one verb."""
+    import os
+
+    from deltoctl.cmdline import hoist_global_options
+
+    if not (command[0] not in verbs and os.path.isfile(command[0]) and len(command) == 1):
+        return [hoist_global_options(list(command))], [], True
+    lines, skipped = script_lines(command[0])
+    return lines, skipped, False
+
+
+def robots_found(session: Any, wait: float) -> list[dict[str, Any]]:
+    """The robots whose agents answer within ``wait`` seconds, by name: each one's profile and
+    what its agent says of it (identity, state, motion; its state "unknown" without answer)."""
+    from deltoctl.fleet.client import agents, infos
+
+    found = agents(session, wait=wait)
+    details = infos(session, wait=wait) if found else {}
+    return [{"robot": name, "profile": profile, **{
+        k: v for k, v in details.get(name, {"state": "unknown"}).items() if k != "robot"}}
+        for name, profile in sorted(found.items())]
+
+
+def confirmed(lines: list[list[str]], ask: Callable[[], bool]) -> list[list[str]]:
+    """The command lines, each that moves with --yes once ``ask`` confirmed motion (asked
+    once for the fleet, only when a line moves)."""
+    if any(verb_of(ln) in MOTION for ln in lines) and ask():
+        return [["--yes", *ln] if verb_of(ln) in MOTION else ln for ln in lines]
+    return lines
 
 
 def choose(found: dict[str, str], pattern: str) -> dict[str, str]:
@@ -119,6 +182,23 @@ def start(session: Any, chosen: dict[str, str],
     for t in threads:
         t.start()
     return jobs, threads
+
+
+def wait_for(jobs: list[Job], threads: list[threading.Thread],
+             tick: Callable[[], None] | None = None) -> None:
+    """Wait for every robot's job, ``tick`` called as it goes (ten times a second or so: a
+    live view); Ctrl-C (KeyboardInterrupt) interrupts every robot's verb, and the wait goes on
+    until each has ended."""
+    while any(t.is_alive() for t in threads):
+        try:
+            for t in threads:
+                t.join(0.1)
+                if tick is not None:
+                    tick()
+        except KeyboardInterrupt:
+            for j in jobs:
+                if j.call is not None:
+                    j.call.cancel()
 
 
 def _script_line(words: list[str], where: str, skipped: list[str]) -> list[str] | None:

@@ -139,12 +139,12 @@ def test_the_toy_package_serves_passes_doctor_and_restores_with_its_permission(
 
 
 def test_the_toy_identity_is_shown_by_its_declared_fields(cli, toy):
-    from deltoctl.cli.fleet_cmd import _identity_text
+    from deltoctl.render.fleet import identity_text
 
     blocks = _document(cli("-p", toy, "--sim", "--json", "identify"))["blocks"]
     identity = {b["name"]: {"family": b["family"], **b["identity"]} for b in blocks}
-    assert _identity_text(identity) == ("toy_left: toy 1.0 (2 pendulums); "
-                                        "toy_right: toy 1.0 (1 pendulums)")
+    assert identity_text(identity) == ("toy_left: toy 1.0 (2 pendulums); "
+                                       "toy_right: toy 1.0 (1 pendulums)")
 
 
 def test_a_url_of_no_known_transport_is_one_error_naming_the_known_ones(cli, toy):
@@ -211,7 +211,7 @@ def test_open_robot_refuses_an_option_no_family_of_the_profile_declares():
 # -- nothing outside a family names it ---------------------------------------------------------
 
 NEUTRAL = ["deltoctl/cli/sim_cmd.py", "deltoctl/cli/doctor_cmd.py", "deltoctl/app/config.py",
-           "deltoctl/cli/fleet_cmd.py"]
+           "deltoctl/cli/fleet_cmd.py", "deltoctl/render/fleet.py"]
 
 
 def _named(text: str) -> list[str]:
