@@ -4,6 +4,7 @@ and report what happened. Confirmation is the caller's."""
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -61,6 +62,44 @@ def present_positions(system: System, joints: Sequence[str]) -> dict[str, float]
         raise DeviceError(f"the position of {', '.join(unknown)} is not known: nothing moved",
                           hint="check that the joint answers (deltoctl detect)")
     return {j: values[f"{j}/position"] for j in joints}
+
+
+def jog_pairs(profile: Profile, joint: str, delta: str | None, more: Sequence[str] | None,
+              to: str | None) -> list[tuple[str, str | None]]:
+    """(joint, its DELTA) of each joint a jog moves — one joint by DELTA or to POS, and more
+    JOINT DELTA pairs (not with POS) — each a joint of ``profile`` that can move, once."""
+    if (delta is None) == (to is None):
+        raise InvalidInput("give either DELTA or --to POS")
+    pairs = [(joint, delta)]
+    if more:
+        if to is not None or len(more) % 2:
+            raise InvalidInput("more joints come as JOINT DELTA pairs (and not with --to)")
+        pairs += list(zip(more[0::2], more[1::2]))
+    moving_joints(profile, [name for name, _ in pairs])
+    return pairs
+
+
+def jog_targets(system: System, steps: Sequence[tuple[str, str | float | None]],
+                to: str | float | None = None) -> tuple[dict[str, float], list[str]]:
+    """Each joint's target — its step (``5deg``, ``0.1``) from where it is now, or ``to`` —
+    once every block holding one can move (homed first …); and each move described, for
+    the confirmation."""
+    from deltoctl.units import quantity
+
+    names = [name for name, _ in steps]
+    ready_to_jog(system, names)
+    present = present_positions(system, names)
+    targets, moves = {}, []
+    for name, step in steps:
+        start = present[name]
+        target = quantity(to, "--to") if to is not None else \
+            start + quantity("" if step is None else step, "DELTA")
+        if not math.isfinite(target):
+            raise InvalidInput(f"the target of {name} must be finite")
+        targets[name] = target
+        moves.append(f"{name} ({system.member(name).name}) from {start:.4f} to "
+                     f"{target:.4f} ({math.degrees(target - start):+.1f}°)")
+    return targets, moves
 
 
 def move(system: System, targets: Mapping[str, float], velocity: float | None = None,

@@ -555,6 +555,13 @@ class ReplayPlan:
     notes: list[str]
     blocks: list[str]
 
+    def describe(self, path: Path, targets: Sequence[str]) -> str:
+        """The replay on a device, as its confirmation says it."""
+        rec = self.recorded
+        return (f"move {', '.join(rec.joints)} to the recorded start pose, then replay "
+                f"{len(rec.times)} commands ({rec.seconds:.2f} s) of {path.name} on "
+                f"{', '.join(self.blocks)} at {', '.join(targets)}")
+
 
 def plan_replay(path: Path, named: Profile | None, device: bool,
                 hardware: Sequence[str] = ()) -> ReplayPlan:
@@ -595,6 +602,20 @@ def check_device_targets(profile: Profile, blocks: Sequence[str],
         raise InvalidInput(f"replay --device: name the device of {', '.join(missing)} with "
                            f"-t {missing[0]}=URL (or rehearse with --sim); a replay never "
                            "takes a device from the recording or from a profile's bus URLs")
+
+
+def where_to_replay(plan: ReplayPlan, device: bool, hardware: Sequence[str],
+                    targets: Sequence[str], sim: bool) -> tuple[list[str], bool]:
+    """What the robot of a replay opens with: the blocks (those the recording commands,
+    unless ``hardware`` names them) and whether on their simulators (always, unless
+    ``device``); on a device, only the one ``targets`` names (or ``sim``'s)."""
+    if targets and not device:
+        raise InvalidInput("-t/--target names a device: add --device to replay on it "
+                           "(replay runs on the simulators unless told otherwise)")
+    blocks = list(hardware) or plan.blocks
+    if device and not sim:
+        check_device_targets(plan.profile, blocks, targets)
+    return blocks, sim or not device
 
 
 def _home_simulated(system: System, joints: list[str],
@@ -649,9 +670,10 @@ def run_replay(system: System, recorded: Recorded, max_deviation: float,
 
 
 def replay_report(path: Path, system: System, recorded: Recorded, result: ReplayResult,
-                  tolerance: float | None, on_device: bool) -> dict[str, Any]:
+                  tolerance: float | None, on_device: bool, max_deviation: float,
+                  stopped: Deviated | None = None) -> dict[str, Any]:
     """Per joint, RMS and max of replayed against recorded position; ``exceeded``: the
-    joints beyond ``tolerance``."""
+    joints beyond ``tolerance``; ``stopped``: why the replay was stopped, or None."""
     joints = {j: {"block": d.block, "samples": d.samples, "rms": round(d.rms, 6),
                   "max": round(d.largest, 6)} for j, d in result.joints.items()}
     exceeded = [j for j, d in result.joints.items()
@@ -662,4 +684,5 @@ def replay_report(path: Path, system: System, recorded: Recorded, result: Replay
         "commands": result.rows, "recorded_seconds": round(recorded.seconds, 3),
         "seconds": round(result.seconds, 3), "late_max_ms": round(result.late_max_ms, 3),
         "joints": joints, "tolerance": tolerance, "exceeded": exceeded,
+        "max_deviation": max_deviation, "stopped": stopped.message if stopped else None,
     }

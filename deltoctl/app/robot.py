@@ -109,6 +109,46 @@ def block_entry(m: Member, **data: Any) -> dict[str, Any]:
             "simulated": m.simulated is not None, "state": m.lifecycle.state, **data}
 
 
+# groups that gather other groups (MH5's torque_control)
+NESTED = {"arms": ("left_arm", "right_arm"), "legs": ("left_leg", "right_leg")}
+
+
+def target_names(profile: Profile) -> list[str]:
+    """What may name joints of ``profile`` (``select_joints``): its joint groups (their
+    ``group`` param, and arms/legs), all, and each joint."""
+    joints = list(profile.joints())
+    groups = {str(j.params["group"]) for j in joints if j.params.get("group")}
+    groups |= {name for name, halves in NESTED.items() if set(halves) <= groups}
+    return [*sorted(groups), "all", *(j.name for j in joints)]
+
+
+def select_joints(profile: Profile, target: str, capability: str) -> list[str]:
+    """The joints of the blocks that offer ``capability`` named by a joint, a group (the
+    joints' ``group`` param, and arms/legs) or ``all``."""
+    from deltoctl import registry
+
+    def offers(hw: Any) -> bool:
+        family = registry.of_block(profile.family_of(hw), hw.plugin)
+        return family is not None and capability in family.capabilities
+
+    joints = [j for hw in profile.hardware if offers(hw) for j in hw.joints]
+    if not joints:
+        raise InvalidInput(f"{profile.name} has no joints with {capability}")
+    if target == "all":
+        return [j.name for j in joints]
+    groups = set(NESTED.get(target, (target,)))
+    chosen = [j.name for j in joints if j.name == target or j.params.get("group") in groups]
+    if not chosen:
+        from deltoctl.suggest import did_you_mean
+
+        known = sorted({j.params.get("group", "") for j in joints} | set(NESTED) - {""})
+        near = did_you_mean(target, [*known, "all", *(j.name for j in joints)])
+        listed = f" (groups: {', '.join(known)}, all)"
+        raise InvalidInput(f"{target!r} is neither a joint nor a group of {profile.name}"
+                           + (near or listed))
+    return chosen
+
+
 def _cannot(system: System, capability: str, what: str) -> None:
     unable = [m.name for m in system if not m.can(capability)]
     if unable:
@@ -250,16 +290,15 @@ class Robot:
         hardware = [m.name for m in self.system]
         return home(self.system, plan_home(self.profile, hardware, joints), force, velocity)
 
-    def jog_targets(self, deltas: Mapping[str, float]) -> dict[str, float]:
-        """Each joint's target ``delta`` from where it is now."""
-        from deltoctl.app.motion import moving_joints, present_positions, ready_to_jog
+    def jog_targets(self, deltas: Mapping[str, float | str]) -> dict[str, float]:
+        """Each joint's target ``delta`` (a number, or a quantity such as ``5deg``) from
+        where it is now."""
+        from deltoctl.app.motion import jog_targets, moving_joints
 
         moving_joints(self.profile, list(deltas))
-        ready_to_jog(self.system, list(deltas))
-        present = present_positions(self.system, list(deltas))
-        return {j: present[j] + d for j, d in deltas.items()}
+        return jog_targets(self.system, list(deltas.items()))[0]
 
-    def jog(self, deltas: Mapping[str, float], velocity: float | None = None,
+    def jog(self, deltas: Mapping[str, float | str], velocity: float | None = None,
             progress: Callable[[float], None] | None = None) -> dict[str, Any]:
         """Move joints by ``deltas`` from where they are (``max_jog_step`` bounds each)."""
         return self.move(self.jog_targets(deltas), velocity, progress)
@@ -291,18 +330,23 @@ class Robot:
             raise DeviceError(f"{item} reads back {after} after writing {value}")
         return after
 
-    def _per_block(self, joints: Sequence[str], capability: str) -> dict[Any, list[str]]:
+    def _per_block(self, joints: Sequence[str] | str,
+                   capability: str) -> dict[Any, list[str]]:
+        if isinstance(joints, str):
+            joints = select_joints(self.profile, joints, capability)
         groups = {m.driver: [j.name for j in m.hw.joints if j.name in joints]
                   for m in self.system.able(capability)}
         return {driver: js for driver, js in groups.items() if js}
 
-    def torque(self, joints: Sequence[str], on: bool) -> list[str]:
-        """Switch the joints' torque; returns those done."""
+    def torque(self, joints: Sequence[str] | str, on: bool) -> list[str]:
+        """Switch the joints' torque (``joints``: their names, or a joint, a group such as
+        ``left_arm`` or ``all``); returns those done."""
         return [j for driver, js in self._per_block(joints, "torque").items()
                 for j in driver.set_torque(js, on)]
 
-    def reboot(self, joints: Sequence[str]) -> list[str]:
-        """Reboot the joints' servos; returns those that acknowledged."""
+    def reboot(self, joints: Sequence[str] | str) -> list[str]:
+        """Reboot the joints' servos (their names, or a joint, a group or ``all``); returns
+        those that acknowledged."""
         return [j for driver, js in self._per_block(joints, "reboot").items()
                 for j in driver.reboot(js)]
 
@@ -399,7 +443,7 @@ class Robot:
         if stopped is not None:
             raise stopped
         return replay_report(path, self.system, plan.recorded, result, tolerance,
-                             not simulated)
+                             not simulated, max_deviation)
 
 
 def check_loop(rate: float, duration: float | None) -> None:

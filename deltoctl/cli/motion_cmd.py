@@ -2,7 +2,6 @@
 outside limits or without confirmation; duty 0 on the way out, Ctrl-C included."""
 
 import contextlib
-import math
 import sys
 from pathlib import Path
 from typing import Annotated, Any
@@ -12,8 +11,8 @@ import typer
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import advancing, emit_json, info, progress, say
-from deltoctl.errors import InvalidInput, Refused
-from deltoctl.units import parse_quantity
+from deltoctl.errors import Refused
+from deltoctl.units import positive
 
 VelocityOpt = Annotated[str | None, typer.Option(
     "--velocity", help="Setpoint speed, e.g. 0.5 or 20deg (per second).")]
@@ -34,51 +33,22 @@ def confirm_motion(opts: Options, what: str) -> None:
         raise Refused("not confirmed; nothing moved")
 
 
-def _quantity(text: str, what: str) -> float:
-    try:
-        value = parse_quantity(text)
-    except ValueError as exc:
-        raise InvalidInput(f"{what}: {exc}") from None
-    if not math.isfinite(value):
-        raise InvalidInput(f"{what} must be a finite number, got {text!r}")
-    return value
-
-
-def _speed(velocity: str | None) -> float | None:
-    speed = _quantity(velocity, "--velocity") if velocity else None
-    if speed is not None and speed <= 0:
-        raise InvalidInput("--velocity must be positive")
-    return speed
-
-
-def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
+def complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
     from deltoctl.cli.profile_cmd import complete_part
 
     return complete_part(ctx, incomplete)
 
 
-def _move(opts: Options, system: Any, targets: dict[str, float], velocity: float | None,
-          label: str, jog: bool = True) -> dict[str, Any]:
-    """The app's move with a progress bar, and its outcome said."""
-    from deltoctl.app.motion import move
-
-    bar = progress(opts)
-    try:
-        report = move(system, targets, velocity, advancing(bar, label), jog=jog)
-    finally:
-        if bar is not None:
-            bar.stop()
-    if not opts.json:
-        say(f"{label}: {'settled' if report['settled'] else 'did not settle'} in "
-            f"{report['seconds']:.2f} s")
-    return report
+def _said(label: str, report: dict[str, Any]) -> None:
+    say(f"{label}: {'settled' if report['settled'] else 'did not settle'} in "
+        f"{report['seconds']:.2f} s")
 
 
 def home(
     ctx: typer.Context,
     velocity: VelocityOpt = None,
     joint: Annotated[list[str] | None, typer.Option(
-        "--joint", "-j", autocompletion=_complete_joint,
+        "--joint", "-j", autocompletion=complete_joint,
         help="Home only this joint (repeatable; default: all).")] = None,
     force: Annotated[bool, typer.Option(
         help="Home again joints that are homed already (homing joints only).")] = False,
@@ -94,7 +64,7 @@ def home(
     opts = options(ctx)
     profile = opts.load_profile()
     plan = plan_home(profile, opts.hardware, joint or [])
-    speed = _speed(velocity)
+    speed = positive(velocity, "--velocity")
     confirm_motion(opts, plan.describe())
     bars = _Bars(opts, plan.routine)
     with open_robot(opts, allow_model_mismatch, profile) as robot:
@@ -102,11 +72,10 @@ def home(
             report = home(robot.system, plan, force, speed, bars.move, bars.show)
         finally:
             bars.stop()
-    if plan.targets and not opts.json:
-        say(f"home: {'settled' if report['settled'] else 'did not settle'} in "
-            f"{report['seconds']:.2f} s")
     if opts.json:
         emit_json(report)
+    elif plan.targets:
+        _said("home", report)
     if plan.targets:
         fail_unsettled(report)
     finish(robot.system)
@@ -156,7 +125,7 @@ JogForceOpt = Annotated[bool, typer.Option(
 
 def jog(
     ctx: typer.Context,
-    joint: Annotated[str, typer.Argument(autocompletion=_complete_joint,
+    joint: Annotated[str, typer.Argument(autocompletion=complete_joint,
                                          help="The joint to move.")],
     delta: Annotated[str | None, typer.Argument(
         help="Relative move, e.g. 0.1, -5deg.")] = None,
@@ -171,14 +140,13 @@ def jog(
 ) -> None:
     """Move one joint by DELTA (or --to POS), within its limits and the profile's jog step;
     more JOINT DELTA pairs move at the same time (blocks on several links at once)."""
-    from deltoctl.app.motion import fail_unsettled, moving_joints, ready_to_jog
+    from deltoctl.app.motion import fail_unsettled, jog_pairs, jog_targets
     from deltoctl.app.recording import new_output, planned_output
 
     opts = options(ctx)
     profile = opts.load_profile()
-    pairs = _pairs(joint, delta, more, to)
-    moving_joints(profile, [name for name, _ in pairs])
-    speed = _speed(velocity)
+    pairs = jog_pairs(profile, joint, delta, more, to)
+    speed = positive(velocity, "--velocity")
 
     # a file that cannot be written, or exists, is refused (exit 2) before anything opens
     record = planned_output(record, force) if record else None
@@ -186,8 +154,7 @@ def jog(
             new_output(record, robot.system, force) if record else \
             contextlib.nullcontext() as record:
         system = robot.system
-        ready_to_jog(system, [name for name, _ in pairs])  # e.g. not homed: before asking
-        targets, moves = _targets(system, pairs, to)
+        targets, moves = jog_targets(system, pairs, to)  # e.g. not homed: before asking
         system.check_move(targets, speed)  # the System's envelope, before anyone is asked
         confirm_motion(opts, "jog " + "; ".join(moves))
         report = _jog(opts, system, targets, speed, record)
@@ -197,47 +164,28 @@ def jog(
     finish(robot.system)
 
 
-def _pairs(joint: str, delta: str | None, more: list[str] | None,
-           to: str | None) -> list[tuple[str, str | None]]:
-    """(joint, its DELTA) of each joint the command line moves."""
-    if (delta is None) == (to is None):
-        raise InvalidInput("give either DELTA or --to POS")
-    pairs = [(joint, delta)]
-    if more:
-        if to is not None or len(more) % 2:
-            raise InvalidInput("more joints come as JOINT DELTA pairs (and not with --to)")
-        pairs += list(zip(more[0::2], more[1::2]))
-    return pairs
-
-
-def _targets(system: Any, pairs: list[tuple[str, str | None]],
-             to: str | None) -> tuple[dict[str, float], list[str]]:
-    """Each joint's target (its DELTA from where it is now, or --to), and the moves said."""
-    from deltoctl.app.motion import present_positions
-
-    present = present_positions(system, [name for name, _ in pairs])
-    targets, moves = {}, []
-    for name, step in pairs:
-        start = present[name]
-        target = _quantity(to, "--to") if to is not None else \
-            start + _quantity(step or "", "DELTA")
-        if not math.isfinite(target):
-            raise InvalidInput(f"the target of {name} must be finite")
-        targets[name] = target
-        moves.append(f"{name} ({system.member(name).name}) from {start:.4f} to "
-                     f"{target:.4f} ({math.degrees(target - start):+.1f}°)")
-    return targets, moves
-
-
 def _jog(opts: Options, system: Any, targets: dict[str, float], speed: float | None,
          record: Path | None) -> dict[str, Any]:
-    """The move, recorded to ``record`` when given; its report."""
+    """The move with a progress bar, recorded to ``record`` when given; its outcome said."""
+    from deltoctl.app.motion import move
     from deltoctl.app.recording import recorded_moves
 
     label = f"jog {', '.join(targets)}"
+
+    def moving() -> dict[str, Any]:
+        bar = progress(opts)
+        try:
+            report = move(system, targets, speed, advancing(bar, label))
+        finally:
+            if bar is not None:
+                bar.stop()
+        if not opts.json:
+            _said(label, report)
+        return report
+
     if record is None:
-        return _move(opts, system, targets, speed, label)
-    report = recorded_moves(system, record, lambda: _move(opts, system, targets, speed, label))
+        return moving()
+    report = recorded_moves(system, record, moving)
     if not opts.json:
         info(f"wrote {record}: {report['recording']['cycles']} cycles of states and commands")
     return report

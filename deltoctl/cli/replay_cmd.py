@@ -18,7 +18,7 @@ import typer
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import advancing, emit_json, info, progress, say, table, warn
-from deltoctl.errors import WARNINGS, InvalidInput
+from deltoctl.errors import WARNINGS
 
 if TYPE_CHECKING:
     from deltoctl.app.replay import Deviated, ReplayPlan, ReplayResult
@@ -29,41 +29,6 @@ MAX_DEVIATION = 0.2  # rad or m: a replayed joint further than this from its rec
 
 def register(app: typer.Typer) -> None:
     app.command("replay")(replay)
-
-
-def _tolerance(text: str | None, option: str = "--tolerance") -> float | None:
-    if text is None:
-        return None
-    import math
-
-    from deltoctl.units import parse_quantity
-
-    try:
-        value = parse_quantity(text)
-    except ValueError as exc:
-        raise InvalidInput(f"{option}: {exc}") from None
-    if not math.isfinite(value) or value < 0:
-        raise InvalidInput(f"{option} must be a finite number ≥ 0, got {text!r}")
-    return value
-
-
-def _where(opts: Options, device: bool, profile: Any, blocks: list[str]) -> Options:
-    """The options the robot opens with: only the blocks the recording commands, on the
-    simulators unless --device; on a device, only the one -t names (or --sim's)."""
-    import copy
-
-    from deltoctl.app.replay import check_device_targets
-
-    if opts.target and not device:
-        raise InvalidInput("-t/--target names a device: add --device to replay on it "
-                           "(replay runs on the simulators unless told otherwise)")
-    run = copy.copy(opts)
-    run.hardware = opts.hardware or blocks
-    if not device:
-        run.sim = True
-    elif not opts.sim:
-        check_device_targets(profile, run.hardware, opts.target)
-    return run
 
 
 RecordingArg = Annotated[Path, typer.Argument(
@@ -101,30 +66,30 @@ def replay(
     a terminal): then on the device -t names, under the limits of -p PROFILE or of the
     catalog's profile of the recorded name; a recorded profile looser than that is refused
     (exit 5)."""
-    from deltoctl.app.replay import plan_replay, replay_report
+    import copy
+
+    from deltoctl.app.replay import plan_replay, replay_report, where_to_replay
     from deltoctl.cli.motion_cmd import confirm_motion
+    from deltoctl.units import nonnegative
 
     opts = options(ctx)
-    limit = _tolerance(tolerance)
-    deviation = _tolerance(max_deviation, "--max-deviation")
+    limit = nonnegative(tolerance, "--tolerance")
+    deviation = nonnegative(max_deviation, "--max-deviation")
     deviation = MAX_DEVIATION if deviation is None else deviation
     named = opts.load_profile() if opts.profile else None
     plan = plan_replay(recording, named, device, opts.hardware)
-    recorded = plan.recorded
-    run_opts = _where(opts, device, plan.profile, plan.blocks)
+    run_opts = copy.copy(opts)  # only the blocks it commands, on the simulators unless --device
+    run_opts.hardware, run_opts.sim = where_to_replay(plan, device, opts.hardware, opts.target,
+                                                      opts.sim)
     for note in plan.notes:
         warn(note)
     on_device = device and not opts.sim
     if on_device:
-        confirm_motion(opts, f"move {', '.join(recorded.joints)} to the recorded start pose, "
-                             f"then replay {len(recorded.times)} commands "
-                             f"({recorded.seconds:.2f} s) of {recording.name} on "
-                             f"{', '.join(plan.blocks)} at {', '.join(opts.target)}")
+        confirm_motion(opts, plan.describe(recording, opts.target))
     robot, result, stopped = _run(opts, run_opts, allow_model_mismatch, plan, recording,
                                   deviation)
-    report = replay_report(recording, robot.system, recorded, result, limit, on_device)
-    report["max_deviation"] = deviation
-    report["stopped"] = stopped.message if stopped else None
+    report = replay_report(recording, robot.system, plan.recorded, result, limit, on_device,
+                           deviation, stopped)
     if stopped is not None:
         if opts.json:
             emit_json(report)  # the replay until it was stopped
@@ -133,10 +98,8 @@ def replay(
     if report["exceeded"]:
         warn(f"{', '.join(report['exceeded'])}: replayed more than {limit:g} from the "
              "recording")
-        finish(robot.system)
-        raise typer.Exit(WARNINGS)
     finish(robot.system)
-    if plan.notes:  # shown before the replay
+    if report["exceeded"] or plan.notes:  # the notes: shown before the replay
         raise typer.Exit(WARNINGS)
 
 

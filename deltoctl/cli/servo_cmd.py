@@ -7,25 +7,18 @@ import typer
 
 from deltoctl.cli.context import options
 from deltoctl.cli.device_cmd import finish, open_robot
+from deltoctl.cli.motion_cmd import complete_joint, confirm_motion
 from deltoctl.cli.output import emit_json, say, table
 from deltoctl.errors import DeviceError, InvalidInput
-
-# groups that gather other groups (MH5's torque_control)
-NESTED = {"arms": ("left_arm", "right_arm"), "legs": ("left_leg", "right_leg")}
 
 
 def _complete_target(ctx: typer.Context, incomplete: str) -> list[str]:
     """The profile's joint groups (their ``group`` param, and arms/legs), all, and joints."""
+    from deltoctl.app.robot import target_names
     from deltoctl.cli.profile_cmd import _completion_profile
 
     prof = _completion_profile(ctx)
-    if prof is None:
-        return []
-    joints = list(prof.joints())
-    groups = {str(j.params["group"]) for j in joints if j.params.get("group")}
-    groups |= {name for name, halves in NESTED.items() if set(halves) <= groups}
-    names = [*sorted(groups), "all", *(j.name for j in joints)]
-    return [n for n in names if n.startswith(incomplete)]
+    return [n for n in target_names(prof) if n.startswith(incomplete)] if prof else []
 
 
 def _complete_state(incomplete: str) -> list[str]:
@@ -44,33 +37,6 @@ TargetArg = Annotated[str, typer.Argument(
          "or all.")]
 
 
-def select_joints(profile: Any, target: str, capability: str) -> list[str]:
-    """The joints of the blocks that offer ``capability`` named by a joint, a group (the
-    joints' ``group`` param, and arms/legs) or ``all``."""
-    from deltoctl import registry
-
-    def offers(hw: Any) -> bool:
-        family = registry.of_block(profile.family_of(hw), hw.plugin)
-        return family is not None and capability in family.capabilities
-
-    joints = [j for hw in profile.hardware if offers(hw) for j in hw.joints]
-    if not joints:
-        raise InvalidInput(f"{profile.name} has no joints with {capability}")
-    if target == "all":
-        return [j.name for j in joints]
-    groups = set(NESTED.get(target, (target,)))
-    chosen = [j.name for j in joints if j.name == target or j.params.get("group") in groups]
-    if not chosen:
-        from deltoctl.suggest import did_you_mean
-
-        known = sorted({j.params.get("group", "") for j in joints} | set(NESTED) - {""})
-        near = did_you_mean(target, [*known, "all", *(j.name for j in joints)])
-        groups = f" (groups: {', '.join(known)}, all)"
-        raise InvalidInput(f"{target!r} is neither a joint nor a group of {profile.name}"
-                           + (near or groups))
-    return chosen
-
-
 def register(root: typer.Typer) -> None:
     root.command("torque")(torque)
     root.command("reboot")(reboot)
@@ -81,14 +47,8 @@ def register(root: typer.Typer) -> None:
     root.add_typer(registers, name="register")
 
 
-def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
-    from deltoctl.cli.profile_cmd import complete_part
-
-    return complete_part(ctx, incomplete)
-
-
 JointArg = Annotated[str, typer.Argument(help="The servo's joint.",
-                                         autocompletion=_complete_joint)]
+                                         autocompletion=complete_joint)]
 
 
 def register_get(
@@ -119,8 +79,6 @@ def register_set(
     value: Annotated[int, typer.Argument(help="The raw value.")],
 ) -> None:
     """Write one control table item and read it back (asks first: a write can move)."""
-    from deltoctl.cli.motion_cmd import confirm_motion
-
     opts = options(ctx)
     confirm_motion(opts, f"write {item} = {value} to {joint}")
     with open_robot(opts) as robot:
@@ -135,8 +93,7 @@ def torque(
     target: TargetArg = "all",
 ) -> None:
     """Switch servo torque on or off for a joint or a group."""
-    from deltoctl.cli.motion_cmd import confirm_motion
-
+    from deltoctl.app.robot import select_joints
     opts = options(ctx)
     if state not in ("on", "off"):
         raise InvalidInput(f"state must be on or off, got {state!r}")
@@ -152,6 +109,8 @@ def torque(
 
 def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
     """Reboot servos (clears a shutdown after a hardware error; torque comes back off)."""
+    from deltoctl.app.robot import select_joints
+
     opts = options(ctx)
     profile = opts.load_profile()
     joints = select_joints(profile, target, "reboot")

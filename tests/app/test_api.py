@@ -144,3 +144,13 @@ def test_a_jog_from_an_unknown_position_is_refused_before_anything_moves():
     with deltoctl.open_robot("mh5", sim={"missing": ("head_y",)}) as robot, \
             pytest.raises(DeviceError, match="position of head_y is not known"):
         robot.jog({"head_y": 0.05})
+
+
+def test_servo_verbs_take_a_group_and_jogs_a_quantity():
+    with deltoctl.open_robot("mh5", sim=True) as robot:
+        assert robot.torque("head", False) == ["head_p", "head_y"]
+        start = robot.read()["head_y/position"]
+        assert robot.jog_targets({"head_y": "2deg"})["head_y"] == pytest.approx(
+            start + 0.0349066, abs=1e-6)
+        with pytest.raises(InvalidInput, match="neither a joint nor a group"):
+            robot.reboot("hed")
