@@ -223,3 +223,19 @@ def verify_ft(system: System, tare: dict[str, Any], mass: float | None = None,
         checks.append(check(f"{sensor}.known_mass", f"the weight of {mass:g} kg", change, "N",
                             weight - margin, weight + margin))
     return checks
+
+
+def fail_ft(result: dict[str, Any]) -> None:
+    """A tare that left a residual over tolerance, or a failed check beyond the residuals,
+    failed (``DeviceError``, exit 1)."""
+    bad = [s for r in result["blocks"] for s, v in r["sensors"].items() if not v["pass"]]
+    if bad:
+        raise DeviceError(f"residual over tolerance after the tare on: {', '.join(bad)}",
+                          hint="check the firmware (OFFSET needs v2.3 or later) and that "
+                               "nothing touches the fingertips")
+    failed = [c["id"] for c in result.get("checks", []) if c["verdict"] == "fail"
+              and not c["id"].endswith(("residual_force", "residual_torque"))]
+    if failed:
+        raise DeviceError(f"F/T checks failed: {', '.join(failed)}",
+                          hint="a known mass read wrong is a scale or mounting fault; drift "
+                               "wants the sensor warmed up")

@@ -374,6 +374,15 @@ def permission(text: str) -> str:
     return "-".join(text.strip().lower().replace("_", " ").split())
 
 
+def permission_names() -> list[str]:
+    """What --allow may name: every permission, then every family's safety settings."""
+    from deltoctl import registry
+
+    declared = {rule[2] for f in registry.families().values()
+                for rule in f.config_rule_table().values() if rule[2]}
+    return [*registry.permissions(), *sorted(declared)]
+
+
 def plan(rows: list[dict[str, Any]], live: dict[str, dict[str, Any]],
          allow: frozenset[str], rules: dict[str, dict[str, Rule]] | None = None) -> None:
     """Each differing item's fate: write, or why not (read-only, skipped, refused). A safety
@@ -486,6 +495,31 @@ def snapshot(system: System) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]
     return document(system.profile.name, live, taken), live
 
 
+def write_snapshot(doc: dict[str, Any], live: dict[str, dict[str, Any]],
+                   output: str | None = None) -> Path:
+    """Write a snapshot document to ``output`` (a directory: the default name in it;
+    nothing: the default name here); returns the file written."""
+    from datetime import datetime, timezone
+
+    path = Path(output or ".")
+    if output is None or path.is_dir():
+        stamp = datetime.fromisoformat(doc["taken"]).astimezone(timezone.utc)
+        path = path / default_name(doc["profile"], live, stamp.strftime("%Y%m%dT%H%M%SZ"))
+    try:
+        path.write_text(dump_yaml(doc), encoding="utf-8")
+    except OSError as exc:
+        raise InvalidInput(f"cannot write {path}: {exc.strerror}") from None
+    return path
+
+
+def snapshot_profile(snap: Snapshot, named: str | None) -> str | None:
+    """The catalog profile a snapshot is compared with or restored under when none is
+    ``named`` (-p) and the snapshot names one; None: the named (or default) profile."""
+    if named or not snap.profile:
+        return None
+    return profile_of(snap)
+
+
 def profile_of(snap: Snapshot) -> str:
     """The catalog profile a snapshot names — never a path from a file that may come from
     anywhere."""
@@ -535,3 +569,27 @@ def plan_restore(system: System, snap: Snapshot,
     check_ranges(snap, rows, rules, live)
     plan(rows, live, allow, rules)
     return rows, notes
+
+
+def status_counts(rows: list[dict[str, Any]]) -> dict[str, int]:
+    """How many items a restore has of each status, in the order they first come."""
+    counts: dict[str, int] = {}
+    for row in rows:
+        counts[row["status"]] = counts.get(row["status"], 0) + 1
+    return counts
+
+
+def restore_outcome(rows: list[dict[str, Any]]) -> str | None:
+    """A restore's worst outcome: some item refused (``Refused``, exit 5) or not verified
+    (``DeviceError``, exit 1) is raised; items that differ still are a warning, returned."""
+    statuses = {r["status"] for r in rows}
+    bad = [f"{r['block']}/{r['part']}/{r['item']}" for r in rows if r["status"] == "failed"]
+    if "refused" in statuses:
+        raise Refused("some items were refused (see the table)")
+    if bad:
+        raise DeviceError(f"not verified: {', '.join(bad)}")
+    left = [r for r in rows if r["status"] in ("read-only", "skipped")]
+    if left:
+        return (f"{len(left)} item(s) differ still: read-only, or not restored unasked (see "
+                "the table)")
+    return None

@@ -191,3 +191,13 @@ def calibrate_imu(system: System, samples: int = 100, ask: Ask | None = None,
         entry["pass"] = not failed(checks)
         blocks.append(entry)
     return {"pass": all(b["pass"] for b in blocks), "blocks": blocks}
+
+
+def fail_imu(result: dict[str, Any]) -> None:
+    """An IMU check that failed fails the calibration (``DeviceError``, exit 1), naming
+    it."""
+    bad = [c["id"] for b in result["blocks"] for c in b["checks"] if c["verdict"] == "fail"]
+    if bad:
+        raise DeviceError(f"IMU checks failed: {', '.join(bad)}",
+                          hint="a failed self-test is a faulty part; a failed rest check "
+                               "wants the IMU still")

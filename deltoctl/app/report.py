@@ -50,6 +50,20 @@ class Plan:
     link_seconds: float = 1.0
 
 
+def report_paths(output: Path | None, profile: str) -> tuple[Path, Path, Path]:
+    """The HTML, its JSON twin and the recording: beside each other, named from ``output``
+    or from the profile and the time."""
+    if output is None:
+        stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+        output = Path(f"report-{profile}-{stamp}.html")
+    if output.suffix.lower() not in (".html", ".htm"):
+        raise InvalidInput(f"-o {output}: the report is an .html file (its JSON twin goes "
+                           "beside it)")
+    if not output.parent.is_dir():
+        raise InvalidInput(f"-o {output}: {output.parent} is not a directory")
+    return output, output.with_suffix(".json"), output.with_suffix(".mcap")
+
+
 def check_plan(plan: Plan) -> None:
     if plan.record_seconds is not None and not (
             math.isfinite(plan.record_seconds) and 0 < plan.record_seconds <= 3600):
@@ -445,3 +459,30 @@ def fleet_report(runs: list[dict[str, Any]]) -> dict[str, Any]:
            "time": _now(), "robots": robots}
     doc["report_sha256"] = report_hash(doc)
     return doc
+
+
+def _write(html: Path, text: str, doc: dict[str, Any]) -> Path:
+    html.write_text(text, encoding="utf-8")
+    twin = html.with_suffix(".json")
+    twin.write_text(json.dumps(doc, indent=2, default=str) + "\n", encoding="utf-8")
+    return twin
+
+
+def write_report(doc: dict[str, Any], html: Path) -> Path:
+    """Write a report as ``html`` and its JSON twin beside it; returns the twin."""
+    return _write(html, render_html(doc), doc)
+
+
+def write_fleet_report(runs: list[dict[str, Any]]) -> tuple[dict[str, Any], Path]:
+    """Every robot's report (``fleet run report``'s runs, each report taken out of the
+    JSON envelope it may come in) in one fleet report, written as
+    fleet-report-<time>.html here and its JSON twin; the document and the HTML file."""
+    for run in runs:
+        out = run.get("output")
+        if isinstance(out, dict) and out.get("verb") == "report" and "result" in out:
+            run["output"] = out["result"]
+    doc = fleet_report(runs)
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    html = Path(f"fleet-report-{stamp}.html")
+    _write(html, render_fleet_html(doc), doc)
+    return doc, html

@@ -9,7 +9,6 @@ import typer
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import emit_json, info, table
-from deltoctl.errors import DeviceError
 
 app = typer.Typer(help="Calibration routines that write a report.", no_args_is_help=True)
 
@@ -44,7 +43,7 @@ def calibrate_ft(
     the residual over N samples; exit 1 when over tolerance. One report per block, saved as
     calibration-<model>-<address>-<time>.json. --verify reports each check (id, value,
     limit, verdict); --watch S the drift over S seconds; --mass KG a known mass's weight."""
-    from deltoctl.app.calibrate import check_tare, check_verify, verify_ft
+    from deltoctl.app.calibrate import check_tare, check_verify, fail_ft, verify_ft
 
     opts = options(ctx)
     check_tare(samples, force_tolerance, torque_tolerance, output_dir)
@@ -53,16 +52,21 @@ def calibrate_ft(
     with open_robot(opts, allow_model_mismatch) as robot:
         result = robot.calibrate_ft(samples, force_tolerance, torque_tolerance, output_dir)
         if verify:
-            result["checks"] = verify_ft(
-                robot.system, result, mass, sensor, watch,
-                lambda text: typer.echo(f"{text} …", err=True), timeout, samples)
+            result["checks"] = verify_ft(robot.system, result, mass, sensor, watch, _ask,
+                                         timeout, samples)
     _show_ft(opts, result, verify)
-    _fail_ft(result)
+    fail_ft(result)
     finish(robot.system)
 
 
+def _ask(text: str) -> None:
+    """What the operator is to do now, on stderr."""
+    typer.echo(f"{text} …", err=True)
+
+
 def _show_ft(opts: Options, result: dict[str, Any], verify: bool) -> None:
-    reports = result["blocks"]
+    from deltoctl.render.checks import check_rows, residual_rows
+
     if opts.json:
         emit_json(result)
         return
@@ -70,37 +74,9 @@ def _show_ft(opts: Options, result: dict[str, Any], verify: bool) -> None:
         table(None, ["check", "value", "unit", "limit", "verdict"], check_rows(result["checks"]))
     else:
         table(None, ["block", "sensor", "residual force N", "residual torque N·m", "pass"],
-              [[r["block"], s, v["residual_force_n"], v["residual_torque_nm"],
-                "yes" if v["pass"] else "NO"]
-               for r in reports for s, v in r["sensors"].items()])
-    for r in reports:
+              residual_rows(result["blocks"]))
+    for r in result["blocks"]:
         info(f"report: {r['report_file']}")
-
-
-def _fail_ft(result: dict[str, Any]) -> None:
-    """A residual over tolerance, or a failed check (beyond the residuals), is exit 1."""
-    bad = [s for r in result["blocks"] for s, v in r["sensors"].items() if not v["pass"]]
-    if bad:
-        raise DeviceError(f"residual over tolerance after the tare on: {', '.join(bad)}",
-                          hint="check the firmware (OFFSET needs v2.3 or later) and that "
-                               "nothing touches the fingertips")
-    failed = [c["id"] for c in result.get("checks", []) if c["verdict"] == "fail"
-              and not c["id"].endswith(("residual_force", "residual_torque"))]
-    if failed:
-        raise DeviceError(f"F/T checks failed: {', '.join(failed)}",
-                          hint="a known mass read wrong is a scale or mounting fault; drift "
-                               "wants the sensor warmed up")
-
-
-def check_rows(checks: list[dict[str, Any]], *first: str) -> list[list[Any]]:
-    """One table row per check: its id, value, unit, limit and verdict."""
-    def limit(c: dict[str, Any]) -> str:
-        low, high = c["limit"]["min"], c["limit"]["max"]
-        return ("" if low is None and high is None else f"≤ {high:g}" if low is None
-                else f"≥ {low:g}" if high is None else f"{low:g} … {high:g}")
-
-    return [[*first, c["id"], c["value"], c["unit"], limit(c),
-             c["verdict"].upper() if c["verdict"] == "fail" else c["verdict"]] for c in checks]
 
 
 @app.command("imu")
@@ -123,13 +99,13 @@ def calibrate_imu(
     calibration-<chip>-<address>-<time>.json — name it in the sensor's `calibration` param
     and stream and record apply it. Exit 1 when a check fails."""
     from deltoctl.app.imu_calibration import calibrate_imu as run
-    from deltoctl.app.imu_calibration import check_options
+    from deltoctl.app.imu_calibration import check_options, fail_imu
+    from deltoctl.render.checks import check_rows
 
     opts = options(ctx)
     check_options(samples, timeout, output_dir)
     with open_robot(opts, allow_model_mismatch) as robot:
-        result = run(robot.system, samples, (lambda text: typer.echo(f"{text} …", err=True))
-                     if tumble else None, timeout, output_dir)
+        result = run(robot.system, samples, _ask if tumble else None, timeout, output_dir)
     blocks = result["blocks"]
     if opts.json:
         emit_json(result)
@@ -140,11 +116,7 @@ def calibrate_imu(
             if "calibration_file" in b:
                 info(f"calibration: {b['calibration_file']} (name it in {b['sensor']}'s "
                      "calibration param)")
-    bad = [c["id"] for b in blocks for c in b["checks"] if c["verdict"] == "fail"]
-    if bad:
-        raise DeviceError(f"IMU checks failed: {', '.join(bad)}",
-                          hint="a failed self-test is a faulty part; a failed rest check "
-                               "wants the IMU still")
+    fail_imu(result)
     finish(robot.system)
 
 

@@ -11,7 +11,7 @@ import typer
 
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.output import emit_json, info, say, table, warn
-from deltoctl.errors import WARNINGS, DeviceError, InvalidInput, Refused
+from deltoctl.errors import WARNINGS
 
 if TYPE_CHECKING:
     from deltoctl.app.config import Snapshot
@@ -39,29 +39,16 @@ def snapshot(
     """Read every configurable value of every block (--hardware narrows) into one YAML file:
     the whole control table of each servo, the Bioscara joints' parameters, the gripper's
     firmware and sensors, the IMU's registers. --json prints the document."""
-    from datetime import datetime, timezone
-
     from deltoctl.app import config
     from deltoctl.cli.device_cmd import finish, open_robot
 
     opts = options(ctx)
     with open_robot(opts) as robot:
         doc, live = config.snapshot(robot.system)
-    text = config.dump_yaml(doc)
-    if output == "-":
-        if not opts.json:
-            typer.echo(text, nl=False)
-    else:
-        path = Path(output or ".")
-        if output is None or path.is_dir():
-            stamp = datetime.fromisoformat(doc["taken"]).astimezone(timezone.utc)
-            path = path / config.default_name(doc["profile"], live,
-                                              stamp.strftime("%Y%m%dT%H%M%SZ"))
-        try:
-            path.write_text(text, encoding="utf-8")
-        except OSError as exc:
-            raise InvalidInput(f"cannot write {path}: {exc.strerror}") from None
-        info(f"snapshot: {path}")
+    if output != "-":
+        info(f"snapshot: {config.write_snapshot(doc, live, output)}")
+    elif not opts.json:
+        typer.echo(config.dump_yaml(doc), nl=False)
     if opts.json:
         emit_json(doc)
     elif output != "-":
@@ -73,12 +60,11 @@ def snapshot(
 
 def _profile(opts: Options, snap: Snapshot) -> Any:
     """The profile named by -p, else the catalog profile the snapshot names."""
-    from deltoctl.app.config import profile_of
+    from deltoctl.app.config import snapshot_profile
 
-    if opts.profile or not snap.profile:
-        return opts.load_profile()
-    name = profile_of(snap)
-    info(f"profile {name} (from the snapshot)")
+    name = snapshot_profile(snap, opts.profile)
+    if name:
+        info(f"profile {name} (from the snapshot)")
     return opts.load_profile(name)
 
 
@@ -123,11 +109,9 @@ def diff(
 
 def _report(opts: Options, snapshot_file: Path, rows: list[dict[str, Any]],
             notes: list[str]) -> None:
-    from deltoctl.app.config import show
+    from deltoctl.app.config import show, status_counts
 
-    counts: dict[str, int] = {}
-    for row in rows:
-        counts[row["status"]] = counts.get(row["status"], 0) + 1
+    counts = status_counts(rows)
     if opts.json:
         emit_json({"snapshot": str(snapshot_file), "items": rows, "summary": counts,
                    "warnings": notes})
@@ -143,11 +127,9 @@ def _report(opts: Options, snapshot_file: Path, rows: list[dict[str, Any]],
 
 
 def _complete_allow(incomplete: str) -> list[str]:
-    from deltoctl import registry
+    from deltoctl.app.config import permission_names
 
-    declared = {rule[2] for f in registry.families().values()
-                for rule in f.config_rule_table().values() if rule[2]}
-    return [n for n in (*registry.permissions(), *sorted(declared)) if n.startswith(incomplete)]
+    return [n for n in permission_names() if n.startswith(incomplete)]
 
 
 def restore(
@@ -186,20 +168,8 @@ def restore(
             config.write_changes(robot.system, rows, permitted)
         notes = robot.warnings() + notes
     _report(opts, snapshot_file, rows, notes)
-    _exit(rows, notes)
-
-
-def _exit(rows: list[dict[str, Any]], notes: list[str]) -> None:
-    """The worst outcome's exit code: refused 5, failed 1, not all restored 3."""
-    statuses = {r["status"] for r in rows}
-    bad = [f"{r['block']}/{r['part']}/{r['item']}" for r in rows if r["status"] == "failed"]
-    if "refused" in statuses:
-        raise Refused("some items were refused (see the table)")
-    if bad:
-        raise DeviceError(f"not verified: {', '.join(bad)}")
-    left = [r for r in rows if r["status"] in ("read-only", "skipped")]
+    left = config.restore_outcome(rows)  # refused 5, failed 1, not all restored 3
     if left:
-        warn(f"{len(left)} item(s) differ still: read-only, or not restored unasked (see the "
-             "table)")
+        warn(left)
     if left or notes:
         raise typer.Exit(WARNINGS)

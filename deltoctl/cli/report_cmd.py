@@ -1,7 +1,6 @@
 """``deltoctl report``: the commissioning report — the acceptance sequence on a robot, one
 self-contained HTML file and its JSON twin."""
 
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -10,27 +9,11 @@ import typer
 from deltoctl.cli.context import options
 from deltoctl.cli.device_cmd import AllowMismatch, open_robot
 from deltoctl.cli.output import emit_json, info, say, table, warn
-from deltoctl.errors import DeviceError, InvalidInput
-
-WARNINGS = 3
+from deltoctl.errors import WARNINGS, DeviceError
 
 
 def register(root: typer.Typer) -> None:
     root.command("report")(report)
-
-
-def _paths(output: Path | None, profile: str) -> tuple[Path, Path, Path]:
-    """The HTML, its JSON twin and the recording: beside each other, named from -o or from
-    the profile and the time."""
-    if output is None:
-        stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-        output = Path(f"report-{profile}-{stamp}.html")
-    if output.suffix.lower() not in (".html", ".htm"):
-        raise InvalidInput(f"-o {output}: the report is an .html file (its JSON twin goes "
-                           "beside it)")
-    if not output.parent.is_dir():
-        raise InvalidInput(f"-o {output}: {output.parent} is not a directory")
-    return output, output.with_suffix(".json"), output.with_suffix(".mcap")
 
 
 def report(
@@ -55,20 +38,17 @@ def report(
     report's hash. With --yes, motion checks where the profile allows motion: returns home
     and each joint to its soft limits and back. Limits come from the profile's `report:`
     section. Exit 0 when every check passes, 1 when one fails (named), 3 with warnings."""
-    from deltoctl.app.report import Plan, check_plan, render_html, run_report
-    from deltoctl.cli.calibrate_cmd import check_rows
+    from deltoctl.app.report import Plan, check_plan, report_paths, run_report, write_report
+    from deltoctl.render.checks import check_rows
 
     opts = options(ctx)
     profile = opts.load_profile()
-    html, twin, mcap = _paths(output, profile.name)
+    html, twin, mcap = report_paths(output, profile.name)
     plan = Plan(golden, record, mcap if record is not None else None, operator, opts.yes)
     check_plan(plan)
     with open_robot(opts, allow_model_mismatch, profile) as robot:
         doc = run_report(robot, plan)
-    import json
-
-    html.write_text(render_html(doc), encoding="utf-8")
-    twin.write_text(json.dumps(doc, indent=2, default=str) + "\n", encoding="utf-8")
+    write_report(doc, html)
     if opts.json:
         emit_json(doc)
     else:
@@ -87,20 +67,9 @@ def fleet_summary(runs: list[dict[str, Any]], as_json: bool, code: int) -> None:
     """``fleet run report``: every robot's report gathered in one fleet report (a table per
     robot, the worst first), fleet-report-<time>.html and its JSON twin; exits with the
     fleet's worst code."""
-    import json
+    from deltoctl.app.report import write_fleet_report
 
-    from deltoctl.app.report import fleet_report, render_fleet_html
-
-    for run in runs:  # each robot's report, out of the JSON envelope a verb's may come in
-        out = run.get("output")
-        if isinstance(out, dict) and out.get("verb") == "report" and "result" in out:
-            run["output"] = out["result"]
-    doc = fleet_report(runs)
-    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-    html = Path(f"fleet-report-{stamp}.html")
-    html.write_text(render_fleet_html(doc), encoding="utf-8")
-    html.with_suffix(".json").write_text(json.dumps(doc, indent=2, default=str) + "\n",
-                                         encoding="utf-8")
+    doc, html = write_fleet_report(runs)
     if as_json:
         emit_json(doc)
     else:
