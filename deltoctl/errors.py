@@ -1,4 +1,5 @@
-"""Errors that carry their exit code (the table is in README.md)."""
+"""The exit codes and their meanings (README: Exit codes; ``deltoctl help exit-codes``), and the
+errors that carry their exit code."""
 
 from __future__ import annotations
 
@@ -8,6 +9,17 @@ USAGE = 2
 WARNINGS = 3
 UNREACHABLE = 4
 REFUSED = 5
+INTERRUPTED = 130
+
+EXIT_CODES = (
+    (OK, "ok"),
+    (FAILED, "the device or the operation failed"),
+    (USAGE, "usage error or invalid input (bad profile, argument or file)"),
+    (WARNINGS, "finished with warnings (reconnects, data gaps, a model mismatch you allowed)"),
+    (UNREACHABLE, "device unreachable"),
+    (REFUSED, "refused for safety (limit, not homed, no confirmation)"),
+    (INTERRUPTED, "interrupted (Ctrl-C)"),
+)
 
 
 class DeltoctlError(Exception):

@@ -1,13 +1,15 @@
 """``deltoctl bench loop|dynamixel|i2c``: options, then the figures of deltoctl/benchmarks/
 for people (or as JSON)."""
 
-from typing import Annotated
+from collections.abc import Callable
+from typing import Annotated, Any
 
 import typer
 
 from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, say
 from deltoctl.errors import InvalidInput
+from deltoctl.render.bench import dynamixel_lines, i2c_lines, loop_lines
 
 app = typer.Typer(help="Benchmarks that ship with deltoctl.", no_args_is_help=True)
 
@@ -44,10 +46,7 @@ def bench_loop(
         raise InvalidInput("--hands-per-process takes 1 to 16")
     prof = opts.load_profile(opts.profile or "dg-5f-right")
     results = measure(prof, rate, duration, unpaced, counts, foxglove, hands_per_process)
-    if opts.json:
-        emit_json(results)
-        return
-    _say_loop(results, counts, rate)
+    _report(opts.json, results, loop_lines, counts, rate)
 
 
 def _loop_options(rate: float, duration: float, unpaced: float, hands: str) -> tuple[int, ...]:
@@ -66,56 +65,6 @@ def _loop_options(rate: float, duration: float, unpaced: float, hands: str) -> t
     return counts
 
 
-def _say_loop(results: dict, counts: tuple[int, ...], rate: float) -> None:
-    import os
-
-    per = results["hands_per_process"]
-    say(f"bench loop: {results['profile']}, {', '.join(map(str, counts))} hand(s), served by "
-        + ("one sim serve process" if per is None else f"sim serve, {per} to a process")
-        + f" ({os.cpu_count()} CPUs)")
-    idle = results["idle_loop"]
-    say(f"  baseline: an idle {rate:g} Hz loop here reaches {100 * idle['achieved_fraction']:.2f}"
-        f" %, lateness p99 {idle['lateness_p99_ms']:.3f} ms, misses {idle['deadline_misses']}"
-        + _steal(idle))
-    for n, run in results["hands"].items():
-        for name in ("paced", "paced_foxglove", "unpaced"):
-            if name in run:
-                _say_run(n, "+foxglove" if name == "paced_foxglove" else name, run[name])
-            calls = run.get("syscalls") if name == "paced" else None
-            if calls:
-                by_call = ", ".join(f"{k} {v:g}" for k, v in calls["by_call"].items())
-                say(f"      system calls of the loop thread per paced cycle (strace): "
-                    f"{calls['per_cycle']:g} ({by_call})")
-    say("  goals: " + ", ".join(f"{k}={'yes' if v else 'NO'}"
-                                for k, v in results["goals"].items()))
-
-
-def _steal(r: dict) -> str:
-    return f", CPU steal {r['cpu_steal_percent']} %" if r["cpu_steal_percent"] is not None else ""
-
-
-def _say_run(n: str, label: str, r: dict) -> None:
-    """One run's rate, lateness and jitter; its cost per cycle by stage and by process."""
-    say(f"  {n} hand(s) {label:9} requested {r['requested_rate']:g} Hz, real "
-        f"{r['real_rate']:.1f} Hz"
-        + (f" ({100 * r['achieved_fraction']:.2f} %)" if r["achieved_fraction"] else "")
-        + f", lateness p50 {r['lateness_p50_ms']:.3f} ms p99 {r['lateness_p99_ms']:.3f} ms, "
-        f"period jitter p99 {r['period_jitter_p99_ms']:.3f} ms, misses {r['deadline_misses']}, "
-        f"errors {r['errors']}" + _steal(r))
-    stages = ", ".join(f"{k} {v:.1f}" for k, v in r["stage_us_per_cycle"].items())
-    say(f"      µs per cycle: {stages}; CPU {r['cpu_us_per_cycle']:.1f} in the loop, "
-        f"{r['recorder_process_cpu_us_per_cycle']:.1f} in the recorder process")
-    say(f"      the loop thread: CPU {r['loop_thread_cpu_us_per_cycle']:.1f} µs per cycle, "
-        f"{r['loop_cpu_us_per_hand_cycle']:.1f} per hand; "
-        f"{r['loop_wakeups_per_cycle']:g} wake-ups per cycle")
-    if "foxglove" in r:
-        f = r["foxglove"]
-        say(f"      Foxglove: {f['cycles_sent']} cycles sent, {f['cycles_dropped']} "
-            f"dropped; the client got {f['client_messages']} messages, /joint_states "
-            f"at {f['client_joint_states_per_s']:.1f} Hz (its process: "
-            f"{f['client_cpu_percent']} % of a CPU)")
-
-
 @app.command("dynamixel")
 def bench_dynamixel(
     ctx: typer.Context,
@@ -129,40 +78,9 @@ def bench_dynamixel(
     at 1 and 2 Mbps, deltoctl's rate against the wire's limit."""
     from deltoctl.benchmarks.dynamixel import measure
 
-    opts = options(ctx)
     if not 1 <= servos <= 252 or duration <= 0:
         raise InvalidInput("--servos must be 1-252 and --duration positive")
-    results = measure(servos, duration)
-    paced = results["paced"]
-    if opts.json:
-        emit_json(results)
-        return
-    say(f"sync read 126/10 of {servos} servos, emulator in another process:")
-    say(f"  deltoctl       {results['deltoctl_hz']:8.1f} cycles/s "
-         f"({results['deltoctl_errors']} errors)")
-    if "dynamixel_sdk_hz" in results:
-        say(f"  dynamixel-sdk  {results['dynamixel_sdk_hz']:8.1f} cycles/s "
-             f"({results['dynamixel_sdk_errors']} errors)   ratio {results['ratio']:.2f}")
-    for baud, p in paced.items():
-        say(f"  paced at {int(baud) // 1000} kbps: {p['deltoctl_hz']:.1f} cycles/s of a "
-             f"{p['wire_limit_hz']:.1f} wire limit = {100 * p['fraction']:.1f} % "
-             f"({p['errors']} errors)")
-    two = results["two_buses"]
-    say(f"  two buses ({' + '.join(map(str, two['servos']))} servos) paced at "
-        f"{two['baud'] // 1000} kbps, one System cycle: {two['both_ms']:.3f} ms = "
-        f"{two['both_over_slower_wire']:.3f} × the slower bus's wire time "
-        f"({max(two['wire_ms'].values()):.3f} ms); one after the other: "
-        f"{two['in_series_ms']:.3f} ms = {two['in_series_over_slower_wire']:.3f} ×")
-    mixed = results["mixed_bus"]
-    say(f"  mixed bus (5 × XM430 + 2 × XL330) at 1 kHz, paced at {mixed['baud'] // 1000} kbps: "
-        + ", ".join(f"{k.replace('_', ' ')} {v['mean_ms']:.3f} ms" for k, v in
-                    mixed["reads"].items())
-        + f"; Sync Read = {mixed['sync_read_over_wire']:.3f} × its wire time "
-          f"({mixed['wire_ms']['sync_read']:.3f} ms)")
-    if "ratio_to_sdk" in mixed:
-        say(f"  flat out: deltoctl {mixed['deltoctl_flat_out_hz']:.1f} reads/s, dynamixel-sdk "
-            f"GroupBulkRead {mixed['dynamixel_sdk_bulk_read_hz']:.1f}: ratio "
-            f"{mixed['ratio_to_sdk']:.2f}")
+    _report(options(ctx).json, measure(servos, duration), dynamixel_lines, servos)
 
 
 @app.command("i2c")
@@ -178,20 +96,18 @@ def bench_i2c(
     the I2C wire time; beside it, the same transactions written straight against smbus2."""
     from deltoctl.benchmarks.i2c import measure
 
-    opts = options(ctx)
     if cycles < 1 or clock <= 0:
         raise InvalidInput("--cycles and --clock must be positive")
-    results = measure(cycles, clock)
-    if opts.json:
+    _report(options(ctx).json, measure(cycles, clock), i2c_lines, cycles, clock)
+
+
+def _report(as_json: bool, results: dict, lines: Callable[..., list[str]], *args: Any) -> None:
+    """A benchmark's results as JSON, or their lines for people (deltoctl.render.bench)."""
+    if as_json:
         emit_json(results)
         return
-    say(f"read cycle of {results['joints']} Bioscara joints ({results['transactions_per_cycle']} "
-         f"transactions), {cycles} cycles, I2C wire time at {clock / 1000:g} kHz:")
-    say(f"  wire time          {results['wire_us']:8.2f} µs per transaction")
-    say(f"  deltoctl           {results['deltoctl_us']:8.2f} µs "
-         f"({results['overhead_pct_of_wire']} % of the wire time; goal ≤ 25 %)")
-    say(f"  smbus2 by hand     {results['smbus2_loop_us']:8.2f} µs")
-    say(f"  emulator (apart)   {results['emulator_us']:8.2f} µs")
+    for line in lines(results, *args):
+        say(line)
 
 
 def register(root: typer.Typer) -> None:

@@ -6,6 +6,8 @@ from typing import Annotated
 
 import typer
 
+from deltoctl.errors import EXIT_CODES, InvalidInput
+
 SHELLS = ("bash", "zsh", "fish")
 SCRIPT_FILES = {"bash": "deltoctl.bash", "zsh": "_deltoctl", "fish": "deltoctl.fish"}
 
@@ -30,8 +32,6 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Print the completion script for a shell (see README: Shell completion), or write
         the manual pages (deltoctl.1, deltoctl-VERB.1) to a directory."""
-        from deltoctl.errors import InvalidInput
-
         if shell == "man":
             write_manpages(out)
             return
@@ -44,7 +44,6 @@ def register(app: typer.Typer) -> None:
 def write_manpages(out: Path | None) -> None:
     """Every manual page into ``out``, one line each said on stderr."""
     from deltoctl.cli.output import info
-    from deltoctl.errors import InvalidInput
 
     if out is None or not out.is_dir():
         raise InvalidInput("completion man needs --out DIR, an existing directory")
@@ -60,7 +59,6 @@ def manual_pages() -> dict[str, str]:
     """deltoctl's manual pages, rendered from its command tree: file name → roff text."""
     from typer.main import get_command
 
-    from deltoctl.cli.help_cmd import EXIT_CODES
     from deltoctl.cli.main import app
     from deltoctl.render.manpages import pages
 

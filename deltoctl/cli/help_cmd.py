@@ -1,29 +1,15 @@
-"""``deltoctl help [exit-codes | VERB …]``: the help of deltoctl or of a verb, and the table of
-exit codes (README: Exit codes); and what every verb's help shows besides its own options: the
-global options, an example and the exit codes.
+"""``deltoctl help [exit-codes | schema VERB | VERB …]``; and what every verb's help shows
+besides its own options: the global options, an example and the exit codes. Loaded only when
+help is shown or a command line is completed: a verb that just runs pays nothing for it."""
 
-Loaded only when help is shown or a command line is completed: a verb that just runs pays
-nothing for it.
-"""
-
-from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
 from deltoctl import verbs
+from deltoctl.cli.context import options
 from deltoctl.cli.main import EXIT_LINE, TEACH, VERBS
-
-EXIT_CODES = (
-    (0, "ok"),
-    (1, "the device or the operation failed"),
-    (2, "usage error or invalid input (bad profile, argument or file)"),
-    (3, "finished with warnings (reconnects, data gaps, a model mismatch you allowed)"),
-    (4, "device unreachable"),
-    (5, "refused for safety (limit, not homed, no confirmation)"),
-    (130, "interrupted (Ctrl-C)"),
-)
-
+from deltoctl.errors import EXIT_CODES, InvalidInput
 
 # one example per verb, shown in its help (command path without "deltoctl")
 EXAMPLES = verbs.examples()
@@ -87,14 +73,11 @@ def register(holder: typer.Typer) -> None:
     holder.command("help")(help_cmd)
 
 
-def _complete_topic(incomplete: str) -> list[str]:
-    return [t for t in ("exit-codes", "schema", *VERBS) if t.startswith(incomplete)]
-
-
 def help_cmd(
     ctx: typer.Context,
     topic: Annotated[list[str] | None, typer.Argument(
-        metavar="[exit-codes | schema VERB... | VERB...]", autocompletion=_complete_topic,
+        metavar="[exit-codes | schema VERB... | VERB...]", autocompletion=lambda incomplete: [
+            t for t in ("exit-codes", "schema", *VERBS) if t.startswith(incomplete)],
         help="exit-codes, schema VERB (its --json document's JSON Schema), or a verb (e.g. "
              "register get).")] = None,
 ) -> None:
@@ -102,9 +85,16 @@ def help_cmd(
     --json document."""
     words = list(topic or [])
     if words == ["exit-codes"]:
-        _exit_codes(ctx)
+        from deltoctl.cli.output import emit_json, table
+
+        if options(ctx).json:
+            emit_json([{"code": c, "meaning": m} for c, m in EXIT_CODES])
+        else:
+            table(None, ["code", "meaning"], EXIT_CODES)
         return
     if words[:1] == ["schema"]:
+        from deltoctl.schemas_lookup import schema_text
+
         typer.echo(schema_text(" ".join(words[1:])), nl=False)
         return
     command, cctx = ctx.find_root().command, ctx.find_root()
@@ -112,7 +102,6 @@ def help_cmd(
     for word in words:
         sub = command.get_command(cctx, word) if hasattr(command, "get_command") else None
         if sub is None:
-            from deltoctl.errors import InvalidInput
             from deltoctl.suggest import did_you_mean
 
             names = [*getattr(command, "list_commands", lambda _: [])(cctx), "exit-codes"]
@@ -122,35 +111,3 @@ def help_cmd(
     text = command.get_help(cctx)  # rich prints it itself and returns ""
     if text:
         typer.echo(text)
-
-
-SCHEMAS = Path(__file__).resolve().parent.parent / "schemas"  # shipped in the package
-
-
-def schema_file(verb: str) -> Path:
-    """The JSON Schema of a verb's --json document (``gpio get`` → gpio-get.json; a
-    stream's frames: ``stream-frame``; an error: ``error``)."""
-    return SCHEMAS / f"{'-'.join(verb.split())}.json"
-
-
-def schema_text(verb: str) -> str:
-    from deltoctl.errors import InvalidInput
-    from deltoctl.suggest import did_you_mean
-
-    path = schema_file(verb)
-    if not verb or not path.is_file():
-        names = sorted(p.stem.replace("-", " ") for p in SCHEMAS.glob("*.json"))
-        raise InvalidInput(f"no schema for {verb!r}" + did_you_mean(verb, names)
-                           if verb else "help schema VERB: which verb's schema?",
-                           f"one of: {', '.join(names)}")
-    return path.read_text(encoding="utf-8")
-
-
-def _exit_codes(ctx: typer.Context) -> None:
-    from deltoctl.cli.context import options
-    from deltoctl.cli.output import emit_json, table
-
-    if options(ctx).json:
-        emit_json([{"code": c, "meaning": m} for c, m in EXIT_CODES])
-    else:
-        table(None, ["code", "meaning"], EXIT_CODES)

@@ -6,77 +6,34 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from deltoctl.cli.context import options
+from deltoctl.cli.main import _complete_profile
 from deltoctl.cli.output import emit_json, info, say, table
-from deltoctl.errors import WARNINGS, DeltoctlError, InvalidInput
+from deltoctl.errors import DeltoctlError, InvalidInput
 
 if TYPE_CHECKING:
+    from collections.abc import Callable, Iterable
+
     from deltoctl.profile.model import Profile
 
 app = typer.Typer(help="Browse, check and convert device profiles.", no_args_is_help=True)
 
 ProfileArg = Annotated[str | None, typer.Argument(
     metavar="[PROFILE]", help="Catalog name or file; default: the --profile option.",
-    autocompletion=lambda incomplete: _complete_profile(incomplete))]
-
-
-def _summary(profile: Any) -> dict[str, Any]:
-    return {
-        "name": profile.name,
-        "family": profile.family or ",".join(
-            sorted({profile.family_of(h) or "?" for h in profile.hardware})),
-        "model": profile.model,
-        "status": profile.status,
-        "description": profile.description,
-        **profile.counts(),
-        "source": profile.source,
-    }
+    autocompletion=_complete_profile)]
 
 
 @app.command("list")
 def list_profiles(ctx: typer.Context) -> None:
     """List the built-in profile catalog."""
     from deltoctl.profile.catalog import catalog_summaries
+    from deltoctl.profile.summary import summary
+    from deltoctl.render.profile import catalog_table
 
-    summaries = catalog_summaries(_summary)
+    summaries = catalog_summaries(summary)
     if options(ctx).json:
         emit_json(summaries)
         return
-    table(None, ["name", "family", "model", "joints", "sensors", "gpios", "status"],
-          [[s["name"], s["family"], s["model"], s["joints"], s["sensors"], s["gpios"],
-            s["status"]] for s in summaries])
-
-
-def _range_text(lower: float | None, upper: float | None) -> str:
-    low = "-inf" if lower is None else f"{lower:.4g}"
-    high = "inf" if upper is None else f"{upper:.4g}"
-    return f"[{low}, {high}]"
-
-
-def _limits_text(joint: Any) -> str:
-    """The hard position limits, and the soft ones (a <safety_controller>) beside them."""
-    lim, soft = joint.limits, joint.soft_limits
-    parts = []
-    if lim is not None and (lim.lower is not None or lim.upper is not None):
-        unit = "m" if joint.joint_type == "prismatic" else "rad"
-        parts.append(f"{_range_text(lim.lower, lim.upper)} {unit}")
-    if soft is not None:
-        parts.append(f"soft {_range_text(soft.lower, soft.upper)}")
-    return ", ".join(parts)
-
-
-def _soft_limits_data(prof: Any) -> dict[str, dict[str, Any]]:
-    """{block: {joint: soft limits}} for the joints that have them."""
-    data: dict[str, dict[str, Any]] = {}
-    for hw in prof.hardware:
-        for joint in hw.joints:
-            if joint.soft_limits is not None:
-                data.setdefault(hw.name, {})[joint.name] = dict(vars(joint.soft_limits))
-    return data
-
-
-def _warn(prof: Any) -> None:
-    for warning in prof.warnings:
-        info(f"warning: {warning}")
+    table(None, *catalog_table(summaries))
 
 
 def _completion_profile(ctx: typer.Context) -> "Profile | None":
@@ -97,127 +54,58 @@ def _completion_profile(ctx: typer.Context) -> "Profile | None":
         return None
 
 
-def complete_part(ctx: typer.Context, incomplete: str) -> list[str]:
-    """Joint, sensor and GPIO names of the profile given on the command line."""
-    prof = _completion_profile(ctx)
-    if prof is None:
-        return []
-    return [c.name for _, c in prof.components() if c.name.startswith(incomplete)]
+def _completer(names: "Callable[[Profile], Iterable[str]]") -> Any:
+    """A completion of the names ``names`` finds in the profile on the command line."""
+    def complete(ctx: typer.Context, incomplete: str) -> list[str]:
+        prof = _completion_profile(ctx)
+        return [] if prof is None else [n for n in names(prof) if n.startswith(incomplete)]
+
+    return complete
 
 
-def complete_blocks(ctx: typer.Context, incomplete: str) -> list[str]:
-    """The names of the profile's <ros2_control> blocks (for --hardware)."""
-    prof = _completion_profile(ctx)
-    if prof is None:
-        return []
-    return [hw.name for hw in prof.hardware if hw.name.startswith(incomplete)]
-
-
-def complete_joints(ctx: typer.Context, incomplete: str) -> list[str]:
-    """The profile's joint names only."""
-    prof = _completion_profile(ctx)
-    if prof is None:
-        return []
-    return [j.name for j in prof.joints() if j.name.startswith(incomplete)]
+# joint, sensor and GPIO names; the <ros2_control> blocks' (for --hardware); joints only
+complete_part = _completer(lambda prof: [c.name for _, c in prof.components()])
+complete_blocks = _completer(lambda prof: [hw.name for hw in prof.hardware])
+complete_joints = _completer(lambda prof: [j.name for j in prof.joints()])
 
 
 def complete_register_items(ctx: typer.Context, incomplete: str) -> list[str]:
     """Register item names of the profile's families that have registers (return_delay_time)."""
     from deltoctl import registry
 
-    prof = _completion_profile(ctx)
-    if prof is None:
-        return []
-    families = {registry.of_block(prof.family_of(hw), hw.plugin) for hw in prof.hardware}
-    names = [n for f in families if f is not None for n in f.register_names()]
-    return [n for n in dict.fromkeys(names) if n.startswith(incomplete.lower())]
+    def names(prof: "Profile") -> "Iterable[str]":
+        families = {registry.of_block(prof.family_of(hw), hw.plugin) for hw in prof.hardware}
+        return dict.fromkeys(n for f in families if f is not None for n in f.register_names())
 
-
-def _complete_profile(incomplete: str) -> list[str]:
-    from deltoctl.profile.catalog import catalog_names
-
-    return [n for n in catalog_names() if n.startswith(incomplete)]
+    return _completer(names)(ctx, incomplete.lower())
 
 
 @app.command("show")
 def show(
     ctx: typer.Context,
-    profile: Annotated[str | None, typer.Argument(
-        metavar="[PROFILE]", autocompletion=_complete_profile,
-        help="Catalog name or file; default: the --profile option.")] = None,
+    profile: ProfileArg = None,
     part: Annotated[str | None, typer.Argument(
         autocompletion=complete_part, help="Show only this joint, sensor or GPIO.")] = None,
 ) -> None:
     """Show a profile: hardware blocks, parts, interfaces and limits."""
-    from deltoctl.profile.exporter import profile_data
+    from deltoctl.profile import summary
+    from deltoctl.profile.catalog import catalog_names
+    from deltoctl.render import profile as render
 
     opts = options(ctx)
-    if part is None and profile is not None and opts.profile and not _looks_like_profile(profile):
+    if part is None and profile is not None and opts.profile \
+            and profile not in catalog_names() and not Path(profile).exists():
         profile, part = None, profile  # `-p dg-5f-right profile show rj_dg_1_1`
     prof = opts.load_profile(profile)
-    _warn(prof)
-    if part is not None:
-        _show_part(prof, part, opts.json)
-        return
+    for warning in prof.warnings:
+        info(f"warning: {warning}")
+    comp = None if part is None else summary.part(prof, part)
     if opts.json:
-        emit_json({**_summary(prof), "state_interfaces": prof.state_interfaces(),
-                   "command_interfaces": prof.command_interfaces(),
-                   "profile": profile_data(prof), "soft_limits": _soft_limits_data(prof),
-                   "warnings": [str(w) for w in prof.warnings]})
+        emit_json(summary.show_data(prof) if comp is None else summary.part_data(comp))
         return
-    say(f"{prof.name}: {prof.description}" + (" (discontinued)"
-                                                  if prof.status == "discontinued" else ""))
-    for bus, url in prof.buses.items():
-        say(f"  bus {bus}: {url}")
-    from deltoctl.profile.validate import part_address
-
-    rows = []
-    for hw, comp in prof.components():
-        address = part_address(prof, hw, comp)
-        rows.append([
-            hw.name, comp.kind, comp.name,
-            "" if address is None else str(address),
-            ", ".join(i.name for i in comp.command_interfaces),
-            ", ".join(i.name for i in comp.state_interfaces),
-            _limits_text(comp) if comp.kind == "joint" else "",
-        ])
-    table(None, ["block", "kind", "name", "address", "commands", "states", "limits"], rows)
-
-
-def _looks_like_profile(spec: str) -> bool:
-    from deltoctl.profile.catalog import catalog_names
-
-    return spec in catalog_names() or Path(spec).exists()
-
-
-def _show_part(prof: Any, name: str, as_json: bool) -> None:
-    from deltoctl.profile.exporter import component_data
-
-    comp = prof.component(name)
-    if comp is None:
-        from deltoctl.suggest import did_you_mean
-
-        names = [c.name for _, c in prof.components()]
-        raise InvalidInput(f"{prof.name} has no joint, sensor or GPIO named {name!r}"
-                           + did_you_mean(name, names))
-    data = {"kind": comp.kind, **component_data(comp)}
-    soft = comp.soft_limits if comp.kind == "joint" else None
-    if soft is not None:
-        data["soft_limits"] = dict(vars(soft))
-    if as_json:
-        emit_json(data)
-        return
-    hard = comp.limits
-    hard_text = "" if hard is None else _range_text(hard.lower, hard.upper)
-    say(f"{comp.kind} {comp.name}" + (f"  limits {hard_text}" if hard_text else ""))
-    if soft is not None:
-        say(f"  soft limits {_range_text(soft.lower, soft.upper)} "
-            f"(k_position {soft.k_position:g}, k_velocity {soft.k_velocity:g})")
-    rows = [["command", i.name, i.min, i.max, i.initial_value, i.data_type]
-            for i in comp.command_interfaces]
-    rows += [["state", i.name, i.min, i.max, i.initial_value, i.data_type]
-             for i in comp.state_interfaces]
-    table(None, ["direction", "interface", "min", "max", "initial", "type"], rows)
+    for line in render.heading(prof) if comp is None else render.part_heading(comp):
+        say(line)
+    table(None, *(render.parts_table(prof) if comp is None else render.interfaces_table(comp)))
 
 
 @app.command("validate")
@@ -231,78 +119,54 @@ def validate_cmd(
 ) -> None:
     """Check profiles against ros2_control's rules and deltoctl's own (exit 2 if any fails,
     3 if any has warnings)."""
-    from deltoctl.profile.validate import validate
+    from deltoctl.profile.summary import validation
 
     opts = options(ctx)
     specs = list(profiles or []) or ([opts.profile] if opts.profile else [])
     if not specs:
         raise InvalidInput("no profile given: name one, or pass --profile")
-    results = []
-    failed: DeltoctlError | None = None
-    warned = False
+    checked = []
     for spec in specs:
-        try:
-            prof = opts.load_profile(spec)
-            if strict:
-                validate(prof, strict=True)
-            notes = [str(w) for w in prof.warnings]
-            warned = warned or bool(notes)
-            results.append({"profile": spec, "ok": True, **prof.counts(), "warnings": notes})
-            if not opts.json:
-                c = prof.counts()
-                say(f"ok: {spec} ({c['joints']} joints, {c['sensors']} sensors, "
-                    f"{c['gpios']} gpios)")
-                for note in notes:
-                    info(f"warning: {note}")
-        except DeltoctlError as exc:
-            results.append({"profile": spec, "ok": False, "error": exc.message})
-            failed = failed or exc
-            if not opts.json:
-                info(f"invalid: {exc.message}")
+        result, code = validation(spec, opts.load_profile, strict)
+        checked.append((result, code))
+        if opts.json:
+            continue
+        if not result["ok"]:
+            info(f"invalid: {result['error']}")
+            continue
+        say(f"ok: {spec} ({result['joints']} joints, {result['sensors']} sensors, "
+            f"{result['gpios']} gpios)")
+        for note in result["warnings"]:
+            info(f"warning: {note}")
     if opts.json:
-        emit_json(results)
-    if failed:
-        raise typer.Exit(failed.exit_code)
-    if warned:
-        raise typer.Exit(WARNINGS)
-
-
-def _write(text: str, output: Path | None) -> None:
-    if output is None:
-        typer.echo(text, nl=False)
-        return
-    try:
-        output.write_text(text, encoding="utf-8")
-    except OSError as exc:
-        raise InvalidInput(f"cannot write {output}: {exc.strerror}") from None
-    info(f"wrote {output}")
+        emit_json([result for result, _ in checked])
+    failed = [code for result, code in checked if not result["ok"]]
+    code = failed[0] if failed else max(code for _, code in checked)
+    if code:
+        raise typer.Exit(code)
 
 
 def _written(ctx: typer.Context, prof: Any, fmt: str, text: str, output: Path | None) -> None:
     """The converted profile: to the file or stdout; with --json, one document saying what was
     written (the text itself in ``content`` when no file was named)."""
-    if not options(ctx).json:
-        _write(text, output)
-        return
+    as_json = options(ctx).json
     if output is not None:
-        _write(text, output)
-    c = prof.counts()
-    emit_json({"profile": prof.name, "source": prof.source, "format": fmt,
-               "output": None if output is None else str(output.resolve()),
-               "bytes": len(text.encode("utf-8")),
-               "blocks": [hw.name for hw in prof.hardware],
-               "joints": c["joints"], "sensors": c["sensors"], "gpios": c["gpios"],
-               "warnings": [str(w) for w in prof.warnings],
-               **({"content": text} if output is None else {})})
+        try:
+            output.write_text(text, encoding="utf-8")
+        except OSError as exc:
+            raise InvalidInput(f"cannot write {output}: {exc.strerror}") from None
+        info(f"wrote {output}")
+    elif not as_json:
+        typer.echo(text, nl=False)
+    if as_json:
+        from deltoctl.profile.summary import written
+
+        emit_json(written(prof, fmt, text, output))
 
 
 OutputOpt = Annotated[Path | None, typer.Option(
     "--output", "-o", help="Write to this file instead of stdout.")]
 FORMATS = ("urdf", "xacro", "yaml")
-
-
-def _complete_format(incomplete: str) -> list[str]:
-    return [f for f in FORMATS if f.startswith(incomplete)]
 
 
 @app.command("import")
@@ -324,7 +188,8 @@ def export_cmd(
     ctx: typer.Context,
     profile: ProfileArg = None,
     fmt: Annotated[str, typer.Option(
-        "--format", "-f", autocompletion=_complete_format, help="urdf (a loadable URDF), "
+        "--format", "-f", autocompletion=lambda incomplete: [
+            f for f in FORMATS if f.startswith(incomplete)], help="urdf (a loadable URDF), "
         "xacro (a macro of the <ros2_control> blocks) or yaml.")] = "urdf",
     output: OutputOpt = None,
 ) -> None:

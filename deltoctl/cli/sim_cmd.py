@@ -1,23 +1,18 @@
 """``deltoctl sim serve PROFILE``: a simulated device in its own process."""
 
-import contextlib
 import inspect
 from typing import TYPE_CHECKING, Annotated, Any, cast
 
 import typer
 
 from deltoctl.cli.context import options
+from deltoctl.cli.main import _complete_profile
+from deltoctl.cli.output import say
 
 if TYPE_CHECKING:
     from deltoctl.registry import SimOption
 
 app = typer.Typer(help="Simulated devices that speak the real protocol.", no_args_is_help=True)
-
-
-def _complete_profile(incomplete: str) -> list[str]:
-    from deltoctl.cli.profile_cmd import _complete_profile as names
-
-    return names(incomplete)
 
 
 def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
@@ -27,37 +22,28 @@ def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
     return complete_joints(ctx, incomplete)
 
 
-def serve(ctx: typer.Context, profile: str | None, host: str, port: int,
-          **given: Any) -> None:
+def serve(
+    ctx: typer.Context,
+    profile: Annotated[str | None, typer.Argument(
+        metavar="[PROFILE]", autocompletion=_complete_profile,
+        help="Catalog name or file; default: --profile.")] = None,
+    *,
+    host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="Port to listen on (0: any free one).")] = 0,
+    **given: Any,
+) -> None:
     """Serve every block's simulated device until Ctrl-C or SIGTERM, printing one target per
     bus (BUS=URL, ready for --target).
 
     Each family's emulator serves its blocks behind a real link, with the faults and settings
     the family declares (below). --hardware serves some blocks only; --json prints one line."""
-    import gc
-    import json
-    import signal
-    import sys
-    import threading
-
-    from deltoctl.sim.serve import ServeOptions, serve_profile
+    from deltoctl.sim.serve import ServeOptions, serve_until_stopped
 
     opts = options(ctx)
     prof = opts.load_profile(profile)
     faults = {name: value for name, value in given.items() if value not in (None, False, [])}
-    serve_options = ServeOptions(host=host, port=port, **faults)
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    gc.disable()  # a served device answers within microseconds; no collector pauses
-    with contextlib.ExitStack() as stack:
-        info = serve_profile(stack, prof, serve_options, opts.hardware)
-        if opts.json:
-            typer.echo(json.dumps(info))
-        else:
-            typer.echo("\n".join(f"--target {bus}={url}" for bus, url in info["buses"].items()))
-        sys.stdout.flush()
-        with contextlib.suppress(KeyboardInterrupt):
-            stop.wait()
+    serve_until_stopped(prof, ServeOptions(host=host, port=port, **faults), opts.hardware,
+                        opts.json, say)
 
 
 def _parameter(option: "SimOption") -> inspect.Parameter:
@@ -86,20 +72,8 @@ def _command() -> Any:
     from deltoctl import registry
     from deltoctl.cmdline import GLOBAL_OPTIONS
 
-    fixed = [
-        inspect.Parameter("ctx", inspect.Parameter.POSITIONAL_OR_KEYWORD,
-                          annotation=typer.Context),
-        inspect.Parameter("profile", inspect.Parameter.POSITIONAL_OR_KEYWORD, default=None,
-                          annotation=Annotated[str | None, typer.Argument(
-                              metavar="[PROFILE]", autocompletion=_complete_profile,
-                              help="Catalog name or file; default: --profile.")]),
-        inspect.Parameter("host", inspect.Parameter.KEYWORD_ONLY, default="127.0.0.1",
-                          annotation=Annotated[str, typer.Option(
-                              help="Address to listen on.")]),
-        inspect.Parameter("port", inspect.Parameter.KEYWORD_ONLY, default=0,
-                          annotation=Annotated[int, typer.Option(
-                              help="Port to listen on (0: any free one).")]),
-    ]
+    fixed = [p for p in inspect.signature(serve).parameters.values()
+             if p.kind != inspect.Parameter.VAR_KEYWORD]  # ctx, PROFILE, --host, --port
     declared = [_parameter(o) for o in registry.sim_options().values()
                 if o.flag not in GLOBAL_OPTIONS]
 

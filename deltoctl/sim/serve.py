@@ -6,6 +6,7 @@ transport and returns each bus's target URL, which the System opens like hardwar
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from deltoctl import registry
@@ -93,6 +94,29 @@ def serve_profile(stack: contextlib.ExitStack, prof: Profile, options: ServeOpti
     if len(buses) == 1:
         result["endpoint"] = next(iter(buses.values()))
     return result
+
+
+def serve_until_stopped(prof: Profile, options: ServeOptions, hardware: Sequence[str],
+                        as_json: bool, announce: Callable[[str], None]) -> None:
+    """Serve the profile's simulated devices until Ctrl-C or SIGTERM (``deltoctl sim serve``).
+    Once they are up, ``announce`` is told the targets, a ``--target BUS=URL`` line each (with
+    ``as_json``: serve_profile's result on one line)."""
+    import gc
+    import json
+    import signal
+    import threading
+
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    gc.disable()  # a served device answers within microseconds; no collector pauses
+    with contextlib.ExitStack() as stack:
+        info = serve_profile(stack, prof, options, list(hardware))
+        if as_json:
+            announce(json.dumps(info))
+        else:
+            announce("\n".join(f"--target {bus}={url}" for bus, url in info["buses"].items()))
+        with contextlib.suppress(KeyboardInterrupt):
+            stop.wait()
 
 
 def _checked(prof: Profile, blocks: list[Hardware], options: ServeOptions,

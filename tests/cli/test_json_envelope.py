@@ -8,8 +8,8 @@ import json
 
 import pytest
 
-from deltoctl.cli.help_cmd import SCHEMAS, schema_file
 from deltoctl.profile.catalog import catalog_names
+from deltoctl.schemas_lookup import SCHEMAS, schema_file
 
 jsonschema = pytest.importorskip("jsonschema")
 
