@@ -1,4 +1,5 @@
-"""Numbers with units, as technicians type them: ``5deg``, ``-0.1``, ``12mm``."""
+"""Numbers with units, as technicians type them (``5deg``, ``-0.1``, ``12mm``), and times as
+people read them."""
 
 from __future__ import annotations
 
@@ -67,3 +68,13 @@ def format_number(value: float) -> str:
     if isinstance(value, int) or whole:
         return str(int(value))
     return repr(float(value))
+
+
+def utc_time(t_ns: int | None) -> str:
+    """A time of a recording as people read it: ISO 8601, UTC, to the millisecond."""
+    if t_ns is None:
+        return "-"
+    from datetime import datetime, timezone
+
+    stamp = datetime.fromtimestamp(t_ns / 1e9, timezone.utc)
+    return stamp.isoformat(timespec="milliseconds").replace("+00:00", "Z")

@@ -123,7 +123,7 @@ def terminal_plot(plot: Plot, title: str, colour: bool = True) -> str:
 
 def png_plot(plot: Plot, title: str, out: Path) -> None:
     """The plot as a figure in ``out`` (PNG, SVG or PDF, by its name)."""
-    from deltoctl.render.recording import utc_time
+    from deltoctl.units import utc_time
 
     matplotlib = need("matplotlib")
     matplotlib.use("Agg")

@@ -113,13 +113,18 @@ def block_entry(m: Member, **data: Any) -> dict[str, Any]:
 NESTED = {"arms": ("left_arm", "right_arm"), "legs": ("left_leg", "right_leg")}
 
 
-def target_names(profile: Profile) -> list[str]:
-    """What may name joints of ``profile`` (``select_joints``): its joint groups (their
-    ``group`` param, and arms/legs), all, and each joint."""
-    joints = list(profile.joints())
+def _groups(joints: Sequence[Any]) -> list[str]:
+    """The joints' groups (their ``group`` param), and arms/legs where both halves are."""
     groups = {str(j.params["group"]) for j in joints if j.params.get("group")}
     groups |= {name for name, halves in NESTED.items() if set(halves) <= groups}
-    return [*sorted(groups), "all", *(j.name for j in joints)]
+    return sorted(groups)
+
+
+def target_names(profile: Profile) -> list[str]:
+    """What may name joints of ``profile`` (``select_joints``): its joint groups, all, and
+    each joint."""
+    joints = list(profile.joints())
+    return [*_groups(joints), "all", *(j.name for j in joints)]
 
 
 def select_joints(profile: Profile, target: str, capability: str) -> list[str]:
@@ -141,9 +146,9 @@ def select_joints(profile: Profile, target: str, capability: str) -> list[str]:
     if not chosen:
         from deltoctl.suggest import did_you_mean
 
-        known = sorted({j.params.get("group", "") for j in joints} | set(NESTED) - {""})
+        known = _groups(joints)
         near = did_you_mean(target, [*known, "all", *(j.name for j in joints)])
-        listed = f" (groups: {', '.join(known)}, all)"
+        listed = f" (groups: {', '.join([*known, 'all'])})"
         raise InvalidInput(f"{target!r} is neither a joint nor a group of {profile.name}"
                            + (near or listed))
     return chosen

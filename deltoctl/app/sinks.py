@@ -40,25 +40,6 @@ class LinkWatch(Sink):
             self.system.notes.append(f"{name}: the link was lost {n} time(s) and came back")
 
 
-def stream_grids(names: list[str]) -> dict[str, list[list[str]]]:
-    """The tactile grids among streamed interfaces: each part whose streamed interfaces are
-    all ``cell_<row>_<col>`` of a full grid → its interface names, row by row."""
-    from deltoctl.record.cdr import grid_cells
-
-    parts: dict[str, list[str]] = {}
-    for name in names:
-        part, _, interface = name.rpartition("/")
-        parts.setdefault(part, []).append(interface)
-    grids = {}
-    for part, interfaces in parts.items():
-        grid = grid_cells(interfaces) if interfaces[0].startswith("cell_") else None
-        if grid is not None:
-            rows, cols, cells = grid
-            grids[part] = [[f"{part}/{c}" for c in cells[r * cols:(r + 1) * cols]]
-                           for r in range(rows)]
-    return grids
-
-
 def _cell(value: float | None) -> float | int | None:
     """A cell as JSON: an integer reading as an integer."""
     return int(value) if isinstance(value, float) and value.is_integer() else value
@@ -73,6 +54,8 @@ class LinesSink(Sink):
         self.names = names
         self.write = write
         self.samples = 0
+        from deltoctl.record.cdr import stream_grids
+
         self.grids = stream_grids(names)
 
     def frame(self, t_ns: int, values: dict[str, float]) -> None:

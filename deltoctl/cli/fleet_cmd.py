@@ -193,7 +193,7 @@ def _remote_record(opts: Options, robot: str, argv: list[str], err: Any) -> int:
         if opts.json:
             emit_json(done.result)
         else:
-            info(recorded_text(robot, output, done.result))
+            info(recorded_text(robot, done.result))
         if done.result["link_losses"]:
             info("the gaps are marked on /diagnostics")
         if done.not_received:

@@ -177,7 +177,7 @@ def _version(ctx: typer.Context, value: bool) -> None:
         raise typer.Exit()
 
 
-def _complete_profile(incomplete: str) -> list[str]:
+def complete_profile(incomplete: str) -> list[str]:
     from deltoctl.profile.catalog import catalog_names
 
     return [n for n in catalog_names() if n.startswith(incomplete)]
@@ -191,7 +191,7 @@ def _complete_hardware(ctx: typer.Context, incomplete: str) -> list[str]:
 
 # the global options (root's), each declared once here
 ProfileOpt = Annotated[str | None, typer.Option(
-    "--profile", "-p", envvar="DELTOCTL_PROFILE", autocompletion=_complete_profile,
+    "--profile", "-p", envvar="DELTOCTL_PROFILE", autocompletion=complete_profile,
     help="Device profile: a catalog name or a YAML/URDF/xacro file.")]
 TargetOpt = Annotated[list[str] | None, typer.Option(
     "--target", "-t", envvar="DELTOCTL_TARGET", metavar="[BUS=]URL",

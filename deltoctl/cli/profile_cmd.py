@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from deltoctl.cli.context import options
-from deltoctl.cli.main import _complete_profile
+from deltoctl.cli.main import complete_profile
 from deltoctl.cli.output import emit_json, info, say, table
 from deltoctl.errors import DeltoctlError, InvalidInput
 
@@ -19,7 +19,7 @@ app = typer.Typer(help="Browse, check and convert device profiles.", no_args_is_
 
 ProfileArg = Annotated[str | None, typer.Argument(
     metavar="[PROFILE]", help="Catalog name or file; default: the --profile option.",
-    autocompletion=_complete_profile)]
+    autocompletion=complete_profile)]
 
 
 @app.command("list")

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Annotated, Any, cast
 import typer
 
 from deltoctl.cli.context import options
-from deltoctl.cli.main import _complete_profile
+from deltoctl.cli.main import complete_profile
 from deltoctl.cli.output import say
 
 if TYPE_CHECKING:
@@ -25,7 +25,7 @@ def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
 def serve(
     ctx: typer.Context,
     profile: Annotated[str | None, typer.Argument(
-        metavar="[PROFILE]", autocompletion=_complete_profile,
+        metavar="[PROFILE]", autocompletion=complete_profile,
         help="Catalog name or file; default: --profile.")] = None,
     *,
     host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",

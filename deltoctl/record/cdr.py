@@ -39,6 +39,23 @@ def grid_cells(interfaces: list[str]) -> tuple[int, int, list[str]] | None:
     return rows, cols, [cells[r, c] for r in range(rows) for c in range(cols)]
 
 
+def stream_grids(names: list[str]) -> dict[str, list[list[str]]]:
+    """The tactile grids among streamed interfaces: each part whose streamed interfaces are
+    all ``cell_<row>_<col>`` of a full grid → its interface names, row by row."""
+    parts: dict[str, list[str]] = {}
+    for name in names:
+        part, _, interface = name.rpartition("/")
+        parts.setdefault(part, []).append(interface)
+    grids = {}
+    for part, interfaces in parts.items():
+        grid = grid_cells(interfaces) if interfaces[0].startswith("cell_") else None
+        if grid is not None:
+            rows, cols, cells = grid
+            grids[part] = [[f"{part}/{c}" for c in cells[r * cols:(r + 1) * cols]]
+                           for r in range(rows)]
+    return grids
+
+
 class _IntFields(struct.Struct):
     """A layout some of whose values are integers filled from floats: each is rounded and
     saturated to its type's range (NaN, a missing value, gives 0)."""

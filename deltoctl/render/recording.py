@@ -3,18 +3,10 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
 from typing import Any
 
 from deltoctl.render.identity import Table
-
-
-def utc_time(t_ns: int | None) -> str:
-    """A time of a recording as people read it: ISO 8601, UTC, to the millisecond."""
-    if t_ns is None:
-        return "-"
-    stamp = datetime.fromtimestamp(t_ns / 1e9, timezone.utc)
-    return stamp.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+from deltoctl.units import utc_time
 
 
 def _size(n: float) -> str:

@@ -6,8 +6,8 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from deltoctl.app.sinks import stream_grids
 from deltoctl.core.runner import Sink
+from deltoctl.record.cdr import stream_grids
 
 LIVE_PERIOD = 0.05  # s between redraws of the live table: people read at most 20 a second
 

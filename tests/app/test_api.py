@@ -154,3 +154,14 @@ def test_servo_verbs_take_a_group_and_jogs_a_quantity():
             start + 0.0349066, abs=1e-6)
         with pytest.raises(InvalidInput, match="neither a joint nor a group"):
             robot.reboot("hed")
+
+
+def test_a_name_of_no_joint_lists_the_groups_the_profile_has():
+    from deltoctl.app.robot import select_joints
+    from deltoctl.profile.catalog import load_profile
+
+    mh5 = r"\(groups: arms, head, left_arm, left_leg, legs, right_arm, right_leg, all\)$"
+    with pytest.raises(InvalidInput, match=mh5):
+        select_joints(load_profile("mh5"), "zzz", "torque")
+    with pytest.raises(InvalidInput, match=r"of open-manipulator-x \(groups: all\)$"):
+        select_joints(load_profile("open-manipulator-x"), "zzz", "torque")

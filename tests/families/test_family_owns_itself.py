@@ -210,8 +210,8 @@ def test_open_robot_refuses_an_option_no_family_of_the_profile_declares():
 
 # -- nothing outside a family names it ---------------------------------------------------------
 
-NEUTRAL = ["deltoctl/cli/sim_cmd.py", "deltoctl/cli/doctor_cmd.py", "deltoctl/app/config.py",
-           "deltoctl/cli/fleet_cmd.py", "deltoctl/render/fleet.py"]
+NEUTRAL = ["deltoctl/cli/sim_cmd.py", "deltoctl/cli/doctor_cmd.py", "deltoctl/app/doctor.py",
+           "deltoctl/app/config.py", "deltoctl/cli/fleet_cmd.py", "deltoctl/render/fleet.py"]
 
 
 def _named(text: str) -> list[str]:

@@ -114,6 +114,12 @@ def test_a_remote_record_of_a_robot_of_two_blocks(arm, tmp_path):
                      cwd=tmp_path)
     assert one.returncode == 0, one.stderr
     assert [b["name"] for b in _info(tmp_path / "one.mcap")["blocks"]] == ["dg3f_m_driver"]
+    # {serial}: filled from the robot's block, and the file named as written
+    named = arm.remote("--hardware", "dg3f_m_driver", "record", "arm-{serial}.mcap",
+                       "--duration", "0.3", cwd=tmp_path)
+    assert named.returncode == 0, named.stderr
+    [written] = tmp_path.glob("arm-*.mcap")
+    assert "{serial}" not in written.name and f"wrote {written.name}:" in named.stderr
 
 
 def test_ctrl_c_on_the_caller_stops_the_stream_and_leaves_a_valid_file(hand, tmp_path):
