@@ -54,3 +54,29 @@ def _long_functions(limit: int) -> list[str]:
 def test_no_function_of_the_command_line_is_over_60_lines():
     assert _long_functions(MAX_CLI_FUNCTION_LINES) == []
     assert _long_functions(20)  # the walk sees the functions (and their signatures)
+
+
+MAX_CLI_LINES = 3000
+
+
+def test_the_command_line_stays_a_thin_layer():
+    """cli/ parses, confirms, calls the library and renders: at most MAX_CLI_LINES lines."""
+    lines = sum(len(p.read_text().splitlines()) for p in (PACKAGE / "cli").glob("*.py"))
+    assert 500 < lines <= MAX_CLI_LINES
+
+
+def test_no_block_above_cyclomatic_grade_c_in_the_front_layers():
+    """radon's grade of each function and class of cli/, app/ and render/: C at worst."""
+    from radon.complexity import cc_rank, cc_visit
+
+    def graded(layer: str) -> list[tuple[str, str]]:
+        return [(f"{path.relative_to(PACKAGE)}:{block.fullname}", cc_rank(block.complexity))
+                for path in (PACKAGE / layer).rglob("*.py")
+                for top in cc_visit(path.read_text())
+                for block in [top, *getattr(top, "methods", [])]]
+
+    front = [g for layer in ("cli", "app", "render") for g in graded(layer)]
+    assert len(front) > 100
+    assert [(where, rank) for where, rank in front if rank > "C"] == []
+    tangled = "def f(x):\n" + "".join(f"    if x == {i}:\n        return {i}\n" for i in range(25))
+    assert cc_rank(cc_visit(tangled)[0].complexity) == "D"  # what the walk would catch
