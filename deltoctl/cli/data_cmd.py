@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from deltoctl.cli.context import options
-from deltoctl.cli.output import emit_json, info, stdout_is_terminal
+from deltoctl.cli.output import emit_json, info, show, stdout_is_terminal
 
 FileArg = Annotated[Path, typer.Argument(metavar="FILE.mcap", help="A recording (MCAP).")]
 
@@ -19,7 +19,6 @@ def info_verb(ctx: typer.Context, file: FileArg) -> None:
     """What a recording holds: its times, blocks and their identities, topics with counts and
     rates, link losses and gaps with their times, the loop's lateness and jitter. Reads the
     file's summary and index, not every message."""
-    from deltoctl.cli.device_cmd import show
     from deltoctl.record.reader import describe
     from deltoctl.render.recording import summary
 

@@ -1,7 +1,7 @@
 """The lifecycle verbs on every block of a robot: connect, identify, detect, gpio, stream."""
 
 import contextlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from typing import Annotated, Any
 
 import typer
@@ -14,6 +14,7 @@ from deltoctl.cli.output import (
     emit_json_line,
     info,
     say,
+    show,
     stdout_is_terminal,
     table,
     warn,
@@ -52,15 +53,6 @@ def finish(system: Any, extra: list[str] | None = None) -> None:
         warn(w)
     if warnings:
         raise typer.Exit(WARNINGS)
-
-
-def show(parts: Sequence[str | tuple]) -> None:
-    """Lines and tables of a result for people, in their order."""
-    for part in parts:
-        if isinstance(part, str):
-            say(part)
-        else:
-            table(*part)
 
 
 def register(app: typer.Typer) -> None:

@@ -173,6 +173,15 @@ def advancing(bar: Progress | None, label: str) -> Callable[[float], None] | Non
     return lambda fraction: bar.update(task, completed=fraction)
 
 
+def show(parts: Sequence[str | tuple]) -> None:
+    """Lines and tables of a result for people, in their order."""
+    for part in parts:
+        if isinstance(part, str):
+            say(part)
+        else:
+            table(*part)
+
+
 def table(title: str | None, columns: Sequence[str], rows: Sequence[Sequence[Any]]) -> None:
     """A table of a verb's result on stdout (deltoctl.render.table)."""
     from deltoctl.render.table import cells, plain_lines, print_rich
