@@ -2,7 +2,9 @@
 against dynamixel-sdk's GroupSyncRead, then deltoctl against the wire's limit, paced; then the
 MH5's two buses in one System cycle against the slower bus's wire time; then a bus of mixed
 models (five XM430, two XL330) at 1 kHz and 4 Mbps against its wire time, read as one Sync
-Read, one Bulk Read or a Sync Read per model, and against dynamixel-sdk's GroupBulkRead."""
+Read, one Bulk Read or a Sync Read per model; flat out against dynamixel-sdk's GroupBulkRead
+on that paced bus (where the wire caps both), and on an unpaced one (what the software
+costs)."""
 
 from __future__ import annotations
 
@@ -191,7 +193,9 @@ def measure_two_buses(duration: float, servos: tuple[int, int] = (10, 12),
 MIXED = [1020] * 5 + [1200] * 2  # five XM430-W350 and two XL330-M288
 
 
-def _mixed_driver(pty: str, baud: int) -> Any:
+def _mixed_driver(pty: str, baud: int, fast: bool = False) -> Any:
+    """deltoctl's driver of the mixed bus (with ``fast``, its sync reads are Fast Sync
+    Reads: one status packet for all)."""
     from deltoctl import registry
     from deltoctl.core.driver import Block
     from deltoctl.families.dynamixel.driver import DynamixelDriver
@@ -199,9 +203,10 @@ def _mixed_driver(pty: str, baud: int) -> Any:
 
     family = registry.get("dynamixel")
     assert family is not None
-    hw = Hardware("bus", family=family.name, joints=[
-        Component("joint", f"j{i}", address=i, params={"model_number": str(n)})
-        for i, n in enumerate(MIXED, 1)])
+    hw = Hardware("bus", family=family.name, params={"fast_sync_read": str(fast).lower()},
+                  joints=[Component("joint", f"j{i}", address=i,
+                                    params={"model_number": str(n)})
+                          for i, n in enumerate(MIXED, 1)])
     driver = DynamixelDriver(Block(Profile("bench", hardware=[hw]), hw, family,
                                    f"serial://{pty}?baud={baud}"))
     driver.configure()
@@ -246,8 +251,21 @@ def _paced_ms(read: Any, duration: float,
             times[int(0.99 * (len(times) - 1))] * 1e3, short)
 
 
-def _sdk_bulk_hz(pty: str, baud: int, duration: float) -> float | None:
-    """dynamixel-sdk's GroupBulkRead of the same items, as fast as it goes."""
+def _flat_out(read: Any, duration: float) -> tuple[float, float]:
+    """Calls of ``read`` per second flat out, and this process's CPU µs per call."""
+    for _ in range(20):
+        read()
+    cycles, cpu, start = 0, time.process_time(), time.perf_counter()
+    while time.perf_counter() - start < duration:
+        read()
+        cycles += 1
+    elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu
+    return cycles / elapsed, cpu / cycles * 1e6
+
+
+def _sdk_bulk(pty: str, baud: int, duration: float) -> tuple[float, float] | None:
+    """dynamixel-sdk's GroupBulkRead of the same items, as fast as it goes: reads per second
+    and CPU µs per read (None when it is not installed)."""
     try:
         import dynamixel_sdk as sdk
     except ImportError:
@@ -258,19 +276,58 @@ def _sdk_bulk_hz(pty: str, baud: int, duration: float) -> float | None:
     group = sdk.GroupBulkRead(port, sdk.PacketHandler(2.0))
     for i in range(1, len(MIXED) + 1):
         group.addParam(i, 126, 10)
-    cycles, start = 0, time.perf_counter()
-    while time.perf_counter() - start < duration:
-        group.txRxPacket()
-        cycles += 1
-    rate = cycles / (time.perf_counter() - start)
-    port.closePort()
-    return rate
+    try:
+        return _flat_out(group.txRxPacket, duration)
+    finally:
+        port.closePort()
+
+
+def _sdk_bulk_hz(pty: str, baud: int, duration: float) -> float | None:
+    """dynamixel-sdk's GroupBulkRead of the same items, as fast as it goes."""
+    got = _sdk_bulk(pty, baud, duration)
+    return None if got is None else got[0]
+
+
+def measure_mixed_unpaced(duration: float, baud: int = 4_000_000) -> dict:
+    """The same seven servos and items on an unpaced bus (it answers at once, no wire time):
+    reads per second flat out and this process's CPU µs per read — deltoctl's Sync Read,
+    Bulk Read and Fast Sync Read against dynamixel-sdk's GroupBulkRead (and its GroupSyncRead,
+    for reference). What each side's software costs a read; the emulator's own time and the
+    pseudo-terminal's, the same for both, are in every read."""
+    proc, pty = _bus_process(len(MIXED), pace=False, models=MIXED)
+    try:
+        driver = _mixed_driver(pty, baud)
+        ways = _read_ways(driver)
+        ours = {k: _flat_out(ways[k], duration) for k in ("sync_read", "bulk_read")}
+        driver.cleanup()
+        driver = _mixed_driver(pty, baud, fast=True)
+        ours["fast_sync_read"] = _flat_out(_read_ways(driver)["sync_read"], duration)
+        driver.cleanup()
+        theirs = _sdk_bulk(pty, baud, duration)
+        theirs_sync = _sdk_rate(pty, len(MIXED), duration)
+    finally:
+        _stop(proc)
+    out: dict = {f"deltoctl_{k}_hz": round(hz, 1) for k, (hz, _) in ours.items()}
+    cpu = {f"deltoctl_{k}": round(us, 1) for k, (_, us) in ours.items()}
+    if theirs is not None:
+        hz, us = theirs
+        out.update({"dynamixel_sdk_bulk_read_hz": round(hz, 1),
+                    "ratio_to_sdk": round(ours["sync_read"][0] / hz, 2),
+                    "ratios_to_sdk": {k: round(v[0] / hz, 2) for k, v in ours.items()},
+                    "goal_ratio_ge_2": ours["sync_read"][0] >= 2 * hz})
+        cpu["dynamixel_sdk_bulk_read"] = round(us, 1)
+    if theirs_sync is not None:
+        out["dynamixel_sdk_sync_read_hz"] = round(theirs_sync[0], 1)
+    out["cpu_us_per_read"] = cpu
+    return out
 
 
 def measure_mixed_bus(duration: float, baud: int = 4_000_000) -> dict:
     """Five XM430 and two XL330 on one bus paced at ``baud``: deltoctl's read of all seven
     at 1 kHz against the wire time of one Sync Read, beside a Bulk Read and a Sync Read per
-    model; then deltoctl flat out against dynamixel-sdk's GroupBulkRead on the same bus."""
+    model; then deltoctl flat out against dynamixel-sdk's GroupBulkRead on the same bus,
+    paced (the wire's limit caps both: ``flat_out_wire_limit_hz``) and unpaced
+    (``unpaced``)."""
     from deltoctl.families.dynamixel import codec
 
     ids = list(range(1, len(MIXED) + 1))
@@ -294,14 +351,18 @@ def measure_mixed_bus(duration: float, baud: int = 4_000_000) -> dict:
     best = min(ways, key=lambda k: ways[k]["mean_ms"])
     sync = ways["sync_read"]["mean_ms"] / wire_ms["sync_read"]
     median = ways["sync_read"]["median_ms"] / wire_ms["sync_read"]
+    p99 = ways["sync_read"]["p99_ms"] / wire_ms["sync_read"]
     out: dict = {"baud": baud, "servos": {"XM430-W350": 5, "XL330-M288": 2}, "rate_hz": 1000,
                  "wire_ms": {k: round(v, 4) for k, v in wire_ms.items()}, "reads": ways,
                  "fastest": best, "sync_read_over_wire": round(sync, 3),
                  "sync_read_median_over_wire": round(median, 3),
+                 "sync_read_p99_over_wire": round(p99, 3),
                  "goal_sync_read_le_1_1_of_wire": sync <= 1.1,
-                 "deltoctl_flat_out_hz": round(flat, 1)}
+                 "deltoctl_flat_out_hz": round(flat, 1),
+                 "flat_out_wire_limit_hz": {k: round(1e3 / v, 1) for k, v in wire_ms.items()}}
     if theirs is not None:
         out.update({"dynamixel_sdk_bulk_read_hz": round(theirs, 1),
                     "ratio_to_sdk": round(flat / theirs, 2),
                     "goal_ratio_ge_2": flat >= 2 * theirs})
+    out["unpaced"] = measure_mixed_unpaced(duration, baud)
     return out

@@ -9,7 +9,7 @@ and the CRC every ``FF FF FD`` is stuffed to ``FF FF FD FD``; the CRC (CRC-16/BU
 from __future__ import annotations
 
 import struct
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from deltoctl.errors import ProtocolError
@@ -76,14 +76,25 @@ def _table16() -> list[int]:
     return _TABLE16
 
 
-def crc16(data: bytes, crc: int = 0) -> int:
-    """CRC-16 (polynomial 0x8005, not reflected) of the Dynamixel protocol."""
+_WORDS: dict[int, Callable[..., tuple[int, ...]]] = {}  # n → unpack_from of n words (n ≤ 64)
+
+
+def crc16(data: bytes, crc: int = 0, start: int = 0, end: int | None = None) -> int:
+    """CRC-16 (polynomial 0x8005, not reflected) of the Dynamixel protocol, of
+    ``data[start:end]`` (read in place: a reply is checked where it lies in the buffer)."""
     table = _TABLE16 or _table16()
-    n = len(data) & ~1
-    for word in struct.unpack_from(f">{n // 2}H", data):
+    if end is None:
+        end = len(data)
+    n = (end - start) >> 1
+    words = _WORDS.get(n)
+    if words is None:
+        words = struct.Struct(f">{n}H").unpack_from
+        if n <= 64:  # a packet of the sync loops; longer ones are rare
+            _WORDS[n] = words
+    for word in words(data, start):
         crc = table[crc ^ word]
-    if n != len(data):
-        crc = ((crc << 8) ^ _TABLE[(crc >> 8) ^ data[-1]]) & 0xFFFF
+    if (end - start) & 1:
+        crc = ((crc << 8) ^ _TABLE[(crc >> 8) ^ data[end - 1]]) & 0xFFFF
     return crc
 
 
@@ -197,9 +208,32 @@ def hardware_error_text(bits: int) -> list[str]:
     return [name for bit, name in HARDWARE_ERRORS.items() if bits >> bit & 1]
 
 
+_HEADS: dict[tuple[int, int], tuple[bytes, int]] = {}  # (ID, data length) → see _status_head
+
+
+def _status_head(device_id: int, length: int) -> tuple[bytes, int]:
+    """The first 8 bytes of a status packet from ``device_id`` with ``length`` bytes of data
+    (nothing stuffed), and their CRC: the same for every reply of a sync loop, so built once
+    (for the first few thousand kinds) and the CRC of each reply goes on from there."""
+    head = _HEADS.get((device_id, length))
+    if head is None:
+        size = length + 4  # INST, ERR, data, CRC
+        prefix = HEADER + bytes((device_id, size & 0xFF, size >> 8, STATUS))
+        head = (prefix, crc16(prefix))
+        if len(_HEADS) < 4096:
+            _HEADS[device_id, length] = head
+    return head
+
+
 def status(device_id: int, error: int = 0, params: bytes = b"") -> bytes:
-    """The emulator's side: a status packet."""
-    return packet(device_id, STATUS, bytes([error]) + params)
+    """The emulator's side: a status packet (as ``packet`` with STATUS builds it; a bus
+    answers a sync read of N servos with N of them, so the common case goes faster)."""
+    body = bytes((error,)) + params
+    if not (0 <= device_id <= MAX_ID or device_id == BROADCAST_ID) or b"\xff\xff\xfd" in body:
+        return packet(device_id, STATUS, body)
+    head, crc = _status_head(device_id, len(params))
+    crc = crc16(body, crc)
+    return head + body + bytes((crc & 0xFF, crc >> 8))
 
 
 class PacketReader:
@@ -254,13 +288,12 @@ def status_at(data: bytes, offset: int, length: int, device_id: int) -> tuple | 
     — read in place: ``(id, error, data)``; False for a bad CRC; None when the bytes do not
     have that shape."""
     end = offset + 11 + length
-    pkt = data[offset:end]
-    if (len(pkt) != end - offset or pkt[4] != device_id or pkt[7] != STATUS
-            or pkt[5] != (length + 4) & 0xFF or pkt[6] or not pkt.startswith(HEADER)):
+    head, crc = _status_head(device_id, length)
+    if len(data) < end or not data.startswith(head, offset):
         return None
-    if crc16(pkt[:-2]) != pkt[-2] | pkt[-1] << 8:
+    if crc16(data, crc, offset + 8, end - 2) != data[end - 2] | data[end - 1] << 8:
         return False
-    return device_id, pkt[8], pkt[9:9 + length]
+    return device_id, data[offset + 8], data[offset + 9:end - 2]
 
 
 class SyncReplies:
@@ -274,13 +307,15 @@ class SyncReplies:
         self.in_shape = True
 
     def feed(self, data: bytes) -> None:
-        found, ids, size = self.found, self.ids, self.size
-        while self.in_shape and len(found) < len(ids) and len(data) >= (len(found) + 1) * size:
-            reply = status_at(data, len(found) * size, self.length, ids[len(found)])
+        found, ids, size, length = self.found, self.ids, self.size, self.length
+        k, whole = len(found), min(len(data) // size, len(ids))
+        while k < whole and self.in_shape:
+            reply = status_at(data, k * size, length, ids[k])
             if reply is None:
                 self.in_shape = False
             else:
                 found.append(reply)
+                k += 1
 
     def result(self, data: bytes) -> list[tuple[int, int, bytes]]:
         self.feed(data)

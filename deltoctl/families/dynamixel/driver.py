@@ -6,7 +6,9 @@ rate (the block's ``<loop>_rate`` params) with its own communication statistics.
 from __future__ import annotations
 
 import contextlib
+import os
 import struct
+import time
 from typing import Any
 
 from deltoctl import trace
@@ -82,8 +84,6 @@ class DynamixelDriver(Driver):
     def _send(self, packet: bytes) -> None:
         """Write an instruction; bytes left over from an exchange that went wrong are dropped
         first."""
-        import os
-
         assert self.port is not None
         if self._stale:
             self.port.reset_input_buffer()
@@ -100,9 +100,6 @@ class DynamixelDriver(Driver):
         """The hot path of the sync loops: take reply bytes as they come until ``expected``
         are in or the timeout passes; ``on_data(buffer)`` sees the bytes so far after each
         read, so replies are checked while later ones are still on the wire."""
-        import os
-        import time
-
         if self._poll is None:
             data = self.port.read(expected)
         else:

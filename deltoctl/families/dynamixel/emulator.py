@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import os
 import struct
+import sys
 import termios
 import threading
 import time
@@ -45,6 +46,8 @@ if TYPE_CHECKING:
 _SPEEDS = {getattr(termios, f"B{b}"): b for b in BAUD_RATES.values() if hasattr(termios, f"B{b}")}
 ACCESS_ERROR, DATA_LENGTH_ERROR, INSTRUCTION_ERROR, RESULT_FAIL = 7, 5, 2, 1
 DATA_RANGE_ERROR, DATA_LIMIT_ERROR = 4, 6
+PR_SET_TIMERSLACK = 29  # prctl(2)
+PRECISE_MARGIN = 0.0001  # s a paced bus spins before a byte time, its timer slack cut
 RAW_PER_REV = 4096
 RPM_PER_UNIT = 0.229
 MOVING_CURRENT_MA = 120.0  # what a servo draws while it moves (no load model)
@@ -64,6 +67,7 @@ class Servo:
         self.set("Present Input Voltage", 120)
         self.set("Present Temperature", 30)
         self.registered: tuple[int, bytes] | None = None
+        self._at = self.items["Present Position"].address  # written at each read
         self.position = 2047.0
         self._move: tuple[float, float, float, float] | None = None  # start, goal, t0, duration
         self._turned_at = time.monotonic()  # velocity mode: when the position was last moved
@@ -181,7 +185,8 @@ class Servo:
             if fraction >= 1.0:
                 self._move = None
             self._effort(previous != self.position)
-        self.set("Present Position", round(self.position))
+        self.memory[self._at:self._at + 4] = round(self.position).to_bytes(4, "little",
+                                                                          signed=True)
 
     def _effort(self, moving: bool) -> None:
         """Present Current in the model's unit, or Present Load (0.1 %) without a sensor."""
@@ -225,8 +230,8 @@ class DynamixelBus:
         return servo
 
     def _status(self, servo: Servo, error: int = 0, params: bytes = b"") -> bytes:
-        data = codec.status(servo.id, error, params)
-        if servo.id in self.faults.corrupt_crc:
+        data = codec.status(servo.memory[7], error, params)
+        if self.faults.corrupt_crc and servo.id in self.faults.corrupt_crc:
             data = data[:-1] + bytes([data[-1] ^ 0xFF])
         return data
 
@@ -328,17 +333,33 @@ class DynamixelBus:
         return b"".join(replies)
 
 
-def wait_until(deadline: float) -> None:
-    """Sleep, then spin for the last fraction of a millisecond: byte-time precision. The spin
-    yields the CPU at each turn, so a host on a small machine is not starved by its devices."""
+def wait_until(deadline: float, margin: float = 0.0002) -> None:
+    """Sleep to ``margin`` before the deadline, then spin: byte-time precision. The spin
+    yields the CPU at each turn, so a host on a small machine is not starved by its devices;
+    a thread whose sleeps overshoot less (``precise_timers``) can sleep closer."""
     while True:
         left = deadline - time.perf_counter()
         if left <= 0:
             return
-        if left > 0.0003:
-            time.sleep(left - 0.0002)
+        if left > margin + 0.0001:
+            time.sleep(left - margin)
         else:
             os.sched_yield()
+
+
+def precise_timers() -> bool:
+    """The calling thread's timer slack cut from Linux's default 50 µs to 1 ns, so that its
+    sleeps end at their time, within the wake-up latency, instead of up to 50 µs after it
+    (a sleep of ``wait_until`` then leaves its spin the margin it counts on, even on a busy
+    machine). Returns whether it took (False elsewhere than on Linux)."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        import ctypes
+
+        return ctypes.CDLL(None, use_errno=True).prctl(PR_SET_TIMERSLACK, 1, 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
 
 
 def split_packets(data: bytes) -> list[bytes]:
@@ -365,6 +386,7 @@ class DynamixelPtyServer:
         tty.setraw(self.slave)
         self.port = os.ttyname(self.slave)
         self._stop = threading.Event()
+        self._margin = 0.0002  # s spun before each byte time (the default timer slack's)
         self._thread = threading.Thread(target=self._serve, name="dxl-sim", daemon=True)
 
     def start(self) -> DynamixelPtyServer:
@@ -376,6 +398,8 @@ class DynamixelPtyServer:
 
         reader = codec.PacketReader()
         if self.pace:
+            if precise_timers():  # this thread's: it sleeps to its byte times, spins less
+                self._margin = PRECISE_MARGIN
             os.set_blocking(self.master, False)
         while not self._stop.is_set():
             data = self._spin_read() if self.pace else b""
@@ -422,7 +446,7 @@ class DynamixelPtyServer:
         for packet in split_packets(reply):
             servo = self.bus.servos.get(packet[4])
             t += (servo.memory[9] * 2e-6 if servo else 0.0) + len(packet) * byte_time
-            wait_until(t)
+            wait_until(t, self._margin)
             os.write(self.master, packet)
 
     def close(self) -> None:

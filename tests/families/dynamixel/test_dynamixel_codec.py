@@ -103,3 +103,24 @@ def test_crc16_two_bytes_a_step_matches_the_byte_table():
         crc = ((crc << 8) ^ codec._TABLE[((crc >> 8) ^ byte) & 0xFF]) & 0xFFFF
     assert codec.crc16(data) == crc
     assert codec.crc16(data[:36]) != crc
+
+
+@pytest.mark.parametrize("device_id,error,params", [
+    (1, 0, bytes(10)), (7, 0x80, bytes(range(10))), (0xFE, 0, b"\x01\x02"), (3, 0, b""),
+    (3, 0, b"\xff\xff\xfd" + bytes(7)), (3, 0xff, b"\xff\xfd\x00"), (200, 4, bytes(300))])
+def test_a_status_is_the_packet_it_stands_for(device_id, error, params):
+    """The emulator's quick status packet, CRC carried on from a cached head, is byte for
+    byte the general one (stuffed when it must be)."""
+    assert codec.status(device_id, error, params) == codec.packet(
+        device_id, codec.STATUS, bytes([error]) + params)
+    with pytest.raises(ValueError):
+        codec.status(0xFD, 0, b"")
+
+
+def test_crc16_of_a_slice_in_place_and_carried_on():
+    data = bytes(range(256)) * 2
+    for start, end in ((0, 19), (21, 40), (5, 6), (7, 7), (3, 300)):
+        assert codec.crc16(data, 0, start, end) == codec.crc16(data[start:end])
+        middle = (start + end) // 2
+        assert codec.crc16(data, codec.crc16(data, 0, start, middle), middle, end) == \
+            codec.crc16(data[start:end])
