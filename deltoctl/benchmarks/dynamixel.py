@@ -232,17 +232,17 @@ def _read_ways(driver: Any) -> dict[str, Any]:
                                                for g in groups)}
 
 
-def _paced_ms(read: Any, duration: float,
-              rate: float = 1000.0) -> tuple[float, float, float, int]:
+def _paced_ms(read: Any, duration: float, rate: float = 1000.0,
+              expect: int = len(MIXED)) -> tuple[float, float, float, int]:
     """Reads at ``rate`` Hz for ``duration`` s: (mean, median and 99th percentile ms, the
-    reads that missed a servo)."""
+    reads that missed a servo: ``read`` returns how many answered, ``expect`` of them)."""
     from deltoctl.families.dynamixel.emulator import wait_until
 
     period, times, short = 1.0 / rate, [], 0
     start = next_at = time.perf_counter()
     while next_at - start < duration:
         t0 = time.perf_counter()
-        short += read() != len(MIXED)
+        short += read() != expect
         times.append(time.perf_counter() - t0)
         next_at += period
         wait_until(next_at)  # sleeps: the emulator's process keeps the other core
@@ -251,21 +251,40 @@ def _paced_ms(read: Any, duration: float,
             times[int(0.99 * (len(times) - 1))] * 1e3, short)
 
 
-def _flat_out(read: Any, duration: float) -> tuple[float, float]:
-    """Calls of ``read`` per second flat out, and this process's CPU µs per call."""
+def _cpu_s(pid: int) -> float | None:
+    """Another process's CPU seconds so far (user and system, all its threads), from /proc;
+    None where there is none."""
+    import os
+
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            fields = stat.read().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _flat_out(read: Any, duration: float,
+              emulator: int | None = None) -> tuple[float, float, float | None]:
+    """Calls of ``read`` per second flat out, this process's CPU µs per call, and the CPU µs
+    per call of the ``emulator`` process (None: not measured)."""
     for _ in range(20):
         read()
+    theirs = _cpu_s(emulator) if emulator is not None else None
     cycles, cpu, start = 0, time.process_time(), time.perf_counter()
     while time.perf_counter() - start < duration:
         read()
         cycles += 1
     elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu
-    return cycles / elapsed, cpu / cycles * 1e6
+    after = _cpu_s(emulator) if theirs is not None and emulator is not None else None
+    other = None if after is None or theirs is None else (after - theirs) / cycles * 1e6
+    return cycles / elapsed, cpu / cycles * 1e6, other
 
 
-def _sdk_bulk(pty: str, baud: int, duration: float) -> tuple[float, float] | None:
-    """dynamixel-sdk's GroupBulkRead of the same items, as fast as it goes: reads per second
-    and CPU µs per read (None when it is not installed)."""
+def _sdk_bulk(pty: str, baud: int, duration: float,
+              emulator: int | None = None) -> tuple[float, float, float | None] | None:
+    """dynamixel-sdk's GroupBulkRead of the same items, as fast as it goes: as ``_flat_out``
+    (None when it is not installed)."""
     try:
         import dynamixel_sdk as sdk
     except ImportError:
@@ -277,9 +296,62 @@ def _sdk_bulk(pty: str, baud: int, duration: float) -> tuple[float, float] | Non
     for i in range(1, len(MIXED) + 1):
         group.addParam(i, 126, 10)
     try:
-        return _flat_out(group.txRxPacket, duration)
+        return _flat_out(group.txRxPacket, duration, emulator)
     finally:
         port.closePort()
+
+
+_ECHO = """
+import os, tty
+master, slave = os.openpty()
+tty.setraw(master)
+tty.setraw(slave)
+print(os.ttyname(slave), flush=True)
+os.set_blocking(master, False)
+while True:  # watches the line as a paced bus does: spinning, yielding the CPU each turn
+    try:
+        data = os.read(master, 4096)
+    except BlockingIOError:
+        os.sched_yield()
+        continue
+    os.write(master, data)
+"""
+
+
+def _pty_round_trip(duration: float, size: int) -> tuple[float, float]:
+    """The pseudo-terminal's own share of a paced read: ``size`` bytes written to a process
+    that writes them straight back (watching the line as the paced bus does), read back as
+    the driver reads (poll, then read), at 1 kHz; (mean, median) ms of the round trip."""
+    import os
+    import select
+    import tty
+
+    proc = subprocess.Popen([sys.executable, "-c", _ECHO], stdout=subprocess.PIPE, text=True)
+    fd = -1
+    try:
+        fd = os.open(proc.stdout.readline().strip() if proc.stdout else "", os.O_RDWR
+                     | os.O_NOCTTY)
+        tty.setraw(fd)
+        poll = select.poll()
+        poll.register(fd, select.POLLIN)
+        message = bytes(size)
+
+        def echo() -> int:
+            os.write(fd, message)
+            got = 0
+            while got < size and poll.poll(100):
+                got += len(os.read(fd, 4096))
+            return got
+
+        for _ in range(20):
+            echo()
+        mean, median, _, _ = _paced_ms(echo, duration, expect=size)
+    finally:
+        if fd >= 0:
+            os.close(fd)
+        proc.kill()
+        proc.wait(timeout=5)
+    return mean, median
 
 
 def _sdk_bulk_hz(pty: str, baud: int, duration: float) -> float | None:
@@ -290,44 +362,47 @@ def _sdk_bulk_hz(pty: str, baud: int, duration: float) -> float | None:
 
 def measure_mixed_unpaced(duration: float, baud: int = 4_000_000) -> dict:
     """The same seven servos and items on an unpaced bus (it answers at once, no wire time):
-    reads per second flat out and this process's CPU µs per read — deltoctl's Sync Read,
-    Bulk Read and Fast Sync Read against dynamixel-sdk's GroupBulkRead (and its GroupSyncRead,
-    for reference). What each side's software costs a read; the emulator's own time and the
-    pseudo-terminal's, the same for both, are in every read."""
+    reads per second flat out — deltoctl's Sync Read, Bulk Read and Fast Sync Read against
+    dynamixel-sdk's GroupBulkRead (and its GroupSyncRead, for reference) — and the CPU µs a
+    read costs this process (the software's cost) and the emulator's (the same for both;
+    with the pseudo-terminal's wake-ups, in every read's time)."""
     proc, pty = _bus_process(len(MIXED), pace=False, models=MIXED)
     try:
         driver = _mixed_driver(pty, baud)
         ways = _read_ways(driver)
-        ours = {k: _flat_out(ways[k], duration) for k in ("sync_read", "bulk_read")}
+        ours = {k: _flat_out(ways[k], duration, proc.pid) for k in ("sync_read", "bulk_read")}
         driver.cleanup()
         driver = _mixed_driver(pty, baud, fast=True)
-        ours["fast_sync_read"] = _flat_out(_read_ways(driver)["sync_read"], duration)
+        ours["fast_sync_read"] = _flat_out(_read_ways(driver)["sync_read"], duration, proc.pid)
         driver.cleanup()
-        theirs = _sdk_bulk(pty, baud, duration)
+        theirs = _sdk_bulk(pty, baud, duration, proc.pid)
         theirs_sync = _sdk_rate(pty, len(MIXED), duration)
     finally:
         _stop(proc)
-    out: dict = {f"deltoctl_{k}_hz": round(hz, 1) for k, (hz, _) in ours.items()}
-    cpu = {f"deltoctl_{k}": round(us, 1) for k, (_, us) in ours.items()}
+    runs = {f"deltoctl_{k}": v for k, v in ours.items()}
+    out: dict = {f"{k}_hz": round(v[0], 1) for k, v in runs.items()}
     if theirs is not None:
-        hz, us = theirs
+        hz = theirs[0]
+        runs["dynamixel_sdk_bulk_read"] = theirs
         out.update({"dynamixel_sdk_bulk_read_hz": round(hz, 1),
                     "ratio_to_sdk": round(ours["sync_read"][0] / hz, 2),
                     "ratios_to_sdk": {k: round(v[0] / hz, 2) for k, v in ours.items()},
                     "goal_ratio_ge_2": ours["sync_read"][0] >= 2 * hz})
-        cpu["dynamixel_sdk_bulk_read"] = round(us, 1)
     if theirs_sync is not None:
         out["dynamixel_sdk_sync_read_hz"] = round(theirs_sync[0], 1)
-    out["cpu_us_per_read"] = cpu
+    out["cpu_us_per_read"] = {k: round(v[1], 1) for k, v in runs.items()}
+    out["emulator_cpu_us_per_read"] = {k: None if v[2] is None else round(v[2], 1)
+                                       for k, v in runs.items()}
     return out
 
 
 def measure_mixed_bus(duration: float, baud: int = 4_000_000) -> dict:
     """Five XM430 and two XL330 on one bus paced at ``baud``: deltoctl's read of all seven
     at 1 kHz against the wire time of one Sync Read, beside a Bulk Read and a Sync Read per
-    model; then deltoctl flat out against dynamixel-sdk's GroupBulkRead on the same bus,
-    paced (the wire's limit caps both: ``flat_out_wire_limit_hz``) and unpaced
-    (``unpaced``)."""
+    model, and the pseudo-terminal's own round trip (``pty_round_trip_ms``: the bus's
+    transport here, which a real bus does not have) taken out; then deltoctl flat out against
+    dynamixel-sdk's GroupBulkRead on the same bus, paced (the wire's limit caps both:
+    ``flat_out_wire_limit_hz``) and unpaced (``unpaced``)."""
     from deltoctl.families.dynamixel import codec
 
     ids = list(range(1, len(MIXED) + 1))
@@ -335,6 +410,7 @@ def measure_mixed_bus(duration: float, baud: int = 4_000_000) -> dict:
     wire = {"sync_read": len(codec.sync_read(126, 10, ids)) + replies,
             "bulk_read": len(codec.bulk_read([(i, 126, 10) for i in ids])) + replies}
     wire_ms = {k: n * 10 / baud * 1e3 for k, n in wire.items()}
+    pty_mean, pty_median = _pty_round_trip(duration, len(codec.sync_read(126, 10, ids)))
     proc, pty = _bus_process(len(MIXED), pace=True, models=MIXED)
     try:
         driver = _mixed_driver(pty, baud)
@@ -357,6 +433,12 @@ def measure_mixed_bus(duration: float, baud: int = 4_000_000) -> dict:
                  "fastest": best, "sync_read_over_wire": round(sync, 3),
                  "sync_read_median_over_wire": round(median, 3),
                  "sync_read_p99_over_wire": round(p99, 3),
+                 "pty_round_trip_ms": {"mean": round(pty_mean, 4),
+                                       "median": round(pty_median, 4)},
+                 "sync_read_less_pty_over_wire": round(
+                     (ways["sync_read"]["mean_ms"] - pty_mean) / wire_ms["sync_read"], 3),
+                 "sync_read_median_less_pty_over_wire": round(
+                     (ways["sync_read"]["median_ms"] - pty_median) / wire_ms["sync_read"], 3),
                  "goal_sync_read_le_1_1_of_wire": sync <= 1.1,
                  "deltoctl_flat_out_hz": round(flat, 1),
                  "flat_out_wire_limit_hz": {k: round(1e3 / v, 1) for k, v in wire_ms.items()}}
