@@ -88,11 +88,23 @@ def dynamixel_lines(results: dict[str, Any], servos: int) -> list[str]:
                  + ", ".join(f"{k.replace('_', ' ')} {v['mean_ms']:.3f} ms" for k, v in
                              mixed["reads"].items())
                  + f"; Sync Read = {mixed['sync_read_over_wire']:.3f} × its wire time "
-                   f"({mixed['wire_ms']['sync_read']:.3f} ms)")
+                   f"({mixed['wire_ms']['sync_read']:.3f} ms), "
+                   f"{mixed['sync_read_less_pty_over_wire']:.3f} × less the pseudo-terminal's "
+                   f"round trip ({mixed['pty_round_trip_ms']['mean']:.3f} ms)")
+    limit = mixed["flat_out_wire_limit_hz"]["sync_read"]
     if "ratio_to_sdk" in mixed:
-        lines.append(f"  flat out: deltoctl {mixed['deltoctl_flat_out_hz']:.1f} reads/s, "
-                     f"dynamixel-sdk GroupBulkRead {mixed['dynamixel_sdk_bulk_read_hz']:.1f}: "
+        lines.append(f"  flat out, paced: deltoctl {mixed['deltoctl_flat_out_hz']:.1f} reads/s "
+                     f"(the wire's limit {limit:.1f}), dynamixel-sdk GroupBulkRead "
+                     f"{mixed['dynamixel_sdk_bulk_read_hz']:.1f}: "
                      f"ratio {mixed['ratio_to_sdk']:.2f}")
+    unpaced = mixed["unpaced"]
+    if "ratio_to_sdk" in unpaced:
+        cpu = unpaced["cpu_us_per_read"]
+        lines.append(f"  flat out, unpaced: deltoctl {unpaced['deltoctl_sync_read_hz']:.1f} "
+                     f"reads/s ({cpu['deltoctl_sync_read']:.0f} µs CPU each), dynamixel-sdk "
+                     f"GroupBulkRead {unpaced['dynamixel_sdk_bulk_read_hz']:.1f} "
+                     f"({cpu['dynamixel_sdk_bulk_read']:.0f} µs CPU each): ratio "
+                     f"{unpaced['ratio_to_sdk']:.2f}")
     return lines
 
 
