@@ -1,4 +1,5 @@
-"""Where the shipped data directories are: inside the wheel, or at the source tree's root."""
+"""Where the shipped data directories are (inside the wheel, or at the source tree's root),
+and where deltoctl keeps its caches."""
 
 from __future__ import annotations
 
@@ -13,3 +14,14 @@ def data_dir(name: str) -> Path:
     if installed.is_dir():
         return installed
     return _PACKAGE.parent / name
+
+
+def cache_file(name: str) -> Path:
+    """A cache of this version of deltoctl: $XDG_CACHE_HOME/deltoctl/NAME-VERSION.json
+    (~/.cache/… by default)."""
+    import os
+
+    from deltoctl import __version__
+
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "deltoctl" / f"{name}-{__version__}.json"

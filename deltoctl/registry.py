@@ -293,16 +293,16 @@ def families() -> dict[str, Family]:
     """Every family: the entry points' (read once a process), then those registered."""
     global _families
     if _families is None:
-        from importlib.metadata import entry_points
+        from deltoctl.entry_points import declared
 
         found: dict[str, Family] = {}
-        for ep in entry_points(group=GROUP):
+        for name, ref in declared(GROUP):
             try:
-                family = ep.load()
+                family = _load(ref)
             except Exception as exc:  # a broken third-party package must not stop the tool
                 import sys
 
-                print(f"deltoctl: warning: family {ep.name!r} ({ep.value}) did not load: "
+                print(f"deltoctl: warning: family {name!r} ({ref}) did not load: "
                       f"{exc}", file=sys.stderr)
                 continue
             if isinstance(family, Family):
@@ -384,12 +384,11 @@ def transport_refs() -> dict[str, str]:
     process), then those registered. Nothing is imported."""
     global _transport_refs
     if _transport_refs is None:
-        from importlib.metadata import entry_points
-
+        from deltoctl.entry_points import declared
         from deltoctl.transport import BUILTIN
 
         found = dict(BUILTIN)
-        found.update({ep.name: ep.value for ep in entry_points(group=TRANSPORTS)})
+        found.update(declared(TRANSPORTS))
         _transport_refs = {**found, **_added_transports}
     return _transport_refs
 

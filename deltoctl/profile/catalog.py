@@ -6,6 +6,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from deltoctl.data import cache_file as data_cache_file
 from deltoctl.data import data_dir
 from deltoctl.errors import InvalidInput, ProfileError
 
@@ -28,11 +29,12 @@ def _plugin_dirs() -> list[Path]:
     """The profile folders installed packages name in the ``deltoctl.profiles`` entry-point
     group (``name = "package:folder"``), found without importing the packages."""
     import importlib.util
-    from importlib.metadata import entry_points
+
+    from deltoctl.entry_points import declared
 
     found = []
-    for ep in entry_points(group=PROFILES_GROUP):
-        package, _, folder = ep.value.partition(":")
+    for _, value in declared(PROFILES_GROUP):
+        package, _, folder = value.partition(":")
         try:
             spec = importlib.util.find_spec(package)
         except (ImportError, ValueError):
@@ -156,15 +158,6 @@ def profile_from_text(text: str, source: str) -> Profile:
     return validate(merge_interface_limits(profile_from_data(data, source)))
 
 
-def _cache_file() -> Path:
-    import os
-
-    from deltoctl import __version__
-
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "deltoctl" / f"catalog-{__version__}.json"
-
-
 def catalog_summaries(summarize: Callable[[Profile], dict[str, Any]]) -> list[dict[str, Any]]:
     """``summarize(profile)`` for every catalog profile, cached by file size and mtime.
 
@@ -174,7 +167,7 @@ def catalog_summaries(summarize: Callable[[Profile], dict[str, Any]]) -> list[di
     """
     import json
 
-    cache_file = _cache_file()
+    cache_file = data_cache_file("catalog")
     try:
         cache = json.loads(cache_file.read_text())
     except (OSError, ValueError):

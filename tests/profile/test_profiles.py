@@ -143,10 +143,10 @@ def test_profile_list_uses_the_cache_and_notices_changes(cli, monkeypatch, tmp_p
 def test_a_package_adds_its_profiles_to_the_catalog(tmp_path, monkeypatch):
     """The deltoctl.profiles entry-point group: a package's folder of profiles joins the
     catalog by name, never replacing one of deltoctl's own."""
-    import importlib.metadata
     import shutil
     import sys
 
+    from deltoctl import entry_points
     from deltoctl.profile import catalog
 
     package = tmp_path / "robots_pkg"
@@ -155,11 +155,10 @@ def test_a_package_adds_its_profiles_to_the_catalog(tmp_path, monkeypatch):
     shutil.copy(catalog.catalog_dir() / "rrbot-gpio.yaml", package / "profiles" / "my-rrbot.yaml")
     shutil.copy(catalog.catalog_dir() / "mh5.yaml", package / "profiles" / "dg-5f-right.yaml")
     monkeypatch.syspath_prepend(str(tmp_path))
-    ep = importlib.metadata.EntryPoint("robots", "robots_pkg:profiles", catalog.PROFILES_GROUP)
-    real = importlib.metadata.entry_points
-    monkeypatch.setattr(importlib.metadata, "entry_points",
-                        lambda **kw: [ep] if kw.get("group") == catalog.PROFILES_GROUP
-                        else real(**kw))
+    real = entry_points.declared
+    monkeypatch.setattr(entry_points, "declared",
+                        lambda group: [("robots", "robots_pkg:profiles")]
+                        if group == catalog.PROFILES_GROUP else real(group))
     assert "my-rrbot" in catalog.catalog_names()
     assert "my-rrbot" not in catalog.catalog_names(plugins=False)
     assert catalog.resolve("my-rrbot") == package / "profiles" / "my-rrbot.yaml"
