@@ -14,6 +14,10 @@ from __future__ import annotations
 import os
 import sys
 
+FAMILIES = "deltoctl.families"  # a family's descriptor: "module:FAMILY"
+TRANSPORTS = "deltoctl.transports"  # a URL scheme's transport: "module:attr"
+PROFILES = "deltoctl.profiles"  # a package's folder of catalog profiles: "package:folder"
+GROUPS = (FAMILIES, TRANSPORTS, PROFILES)
 KEYS_KEPT = 8  # sys.paths whose entry points the cache holds
 _read: tuple[list[list[object]], dict[str, list[list[str]]]] | None = None
 
@@ -65,10 +69,9 @@ def _cached(key: list[list[object]]) -> dict[str, list[list[str]]]:
 
 
 def _scan() -> dict[str, list[list[str]]]:
-    """deltoctl's groups (``deltoctl.*``) of every installed package's entry points."""
+    """deltoctl's groups of every installed package's entry points."""
     import importlib.metadata
 
-    found = importlib.metadata.entry_points()
-    return {group: [[ep.name, ep.value] for ep in found.select(group=group)]
-            for group in found.groups if group.startswith("deltoctl.")}
+    return {group: [[ep.name, ep.value] for ep in importlib.metadata.entry_points(group=group)]
+            for group in GROUPS}
 

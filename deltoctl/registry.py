@@ -25,14 +25,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from deltoctl import entry_points
 from deltoctl.errors import DeltoctlError, InvalidInput
 
 if TYPE_CHECKING:
     from deltoctl.core.serving import Emulator
     from deltoctl.transport import Transport
 
-GROUP = "deltoctl.families"
-TRANSPORTS = "deltoctl.transports"
+GROUP, TRANSPORTS = entry_points.FAMILIES, entry_points.TRANSPORTS
 
 # what a verb may ask of a driver, beyond the lifecycle and read/write, and the driver
 # methods each one calls (a family declaring a capability must have them; "home" moves to
@@ -293,10 +293,8 @@ def families() -> dict[str, Family]:
     """Every family: the entry points' (read once a process), then those registered."""
     global _families
     if _families is None:
-        from deltoctl.entry_points import declared
-
         found: dict[str, Family] = {}
-        for name, ref in declared(GROUP):
+        for name, ref in entry_points.declared(GROUP):
             try:
                 family = _load(ref)
             except Exception as exc:  # a broken third-party package must not stop the tool
@@ -384,11 +382,10 @@ def transport_refs() -> dict[str, str]:
     process), then those registered. Nothing is imported."""
     global _transport_refs
     if _transport_refs is None:
-        from deltoctl.entry_points import declared
         from deltoctl.transport import BUILTIN
 
         found = dict(BUILTIN)
-        found.update(declared(TRANSPORTS))
+        found.update(entry_points.declared(TRANSPORTS))
         _transport_refs = {**found, **_added_transports}
     return _transport_refs
 

@@ -6,6 +6,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from deltoctl import entry_points
 from deltoctl.data import cache_file as data_cache_file
 from deltoctl.data import data_dir
 from deltoctl.errors import InvalidInput, ProfileError
@@ -18,7 +19,7 @@ URDF_SUFFIXES = (".urdf", ".xacro", ".xml")
 MAX_PROFILE_BYTES = 16 << 20  # checked before a profile file is read
 
 
-PROFILES_GROUP = "deltoctl.profiles"  # a package's folder of catalog profiles: "package:folder"
+PROFILES_GROUP = entry_points.PROFILES
 
 
 def catalog_dir() -> Path:
@@ -30,10 +31,8 @@ def _plugin_dirs() -> list[Path]:
     group (``name = "package:folder"``), found without importing the packages."""
     import importlib.util
 
-    from deltoctl.entry_points import declared
-
     found = []
-    for _, value in declared(PROFILES_GROUP):
+    for _, value in entry_points.declared(PROFILES_GROUP):
         package, _, folder = value.partition(":")
         try:
             spec = importlib.util.find_spec(package)

@@ -8,7 +8,8 @@ from conftest import PROFILE
 from deltoctl import open_robot
 
 HIDE_PLUGIN = """
-import importlib.metadata as md, sys
+import importlib.metadata as md, os, sys, tempfile
+os.environ["XDG_CACHE_HOME"] = tempfile.mkdtemp()  # entry points read, not from the cache
 real = md.entry_points
 def entry_points(**kw):
     found = real(**kw)
