@@ -61,6 +61,26 @@ class ProtocolError(DeviceError):
     """Bytes on the wire that do not follow the protocol."""
 
 
+class NoAnswer(DeviceError):
+    """A device that did not answer within its time, after every try the exchange allows."""
+
+
+class DeviceFault(DeviceError):
+    """A device that answered with an error of its own; ``code`` is the error as it sent it."""
+
+    def __init__(self, message: str, code: int, hint: str | None = None) -> None:
+        super().__init__(message, hint)
+        self.code = code
+
+
+class LinkLost(DeviceError):
+    """A link that went away while in use (a closed connection, an unplugged adapter)."""
+
+
+class OutsideEnvelope(Refused):
+    """A command the safety envelope refuses (a limit, a step, a velocity or an effort)."""
+
+
 class ProfileError(InvalidInput):
     """A profile problem, located as ``file:line``."""
 
