@@ -107,6 +107,33 @@ def serve_profile(stack: contextlib.ExitStack, prof: Profile, options: ServeOpti
     return result
 
 
+def options_given(items: Sequence[str], what: str) -> dict[str, Any]:
+    """``NAME=VALUE`` items (``faces=+z:2,-z:2``, ``missing=head_y`` repeated, ``pace`` for a
+    flag) as ServeOptions' faults, each value checked later by its declaration; an item not
+    of that form, a flag given a value other than true or false, or a single-valued option
+    given twice is one InvalidInput naming it."""
+    declared = registry.sim_options()
+    faults: dict[str, Any] = {}
+    for item in items:
+        key, has_value, value = item.partition("=")
+        name = key.strip().removeprefix("--").replace("-", "_")
+        option = declared.get(name)
+        if option is not None and option.kind == "flag":
+            if value.lower() not in (("true", "false") if has_value else ("",)):
+                raise InvalidInput(f"{what} {item!r}: {option.flag} is on or off: {name} or "
+                                   f"{name}=true|false")
+            faults[name] = value.lower() != "false"
+        elif not name or not has_value:
+            raise InvalidInput(f"{what} {item!r} is not of the form NAME=VALUE")
+        elif option is not None and option.kind == "joints":
+            faults[name] = (*faults.get(name, ()), value)
+        elif name in faults:
+            raise InvalidInput(f"{what} {name} is given twice")
+        else:
+            faults[name] = value
+    return faults
+
+
 def serve_until_stopped(prof: Profile, options: ServeOptions, hardware: Sequence[str],
                         as_json: bool, announce: Callable[[str], None],
                         complain: Callable[[str], None] = print) -> None:
