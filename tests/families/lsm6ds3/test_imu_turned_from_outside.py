@@ -200,3 +200,14 @@ def test_a_bad_option_is_one_clear_error(cli, args, message):
     result = cli(*args)
     assert result.exit_code == 2, result.stderr
     assert message in result.stderr and "Traceback" not in result.stderr
+
+
+def test_the_pytest_fixture_runs_control_lines_too(deltoctl_sim, cli):
+    from deltoctl.errors import InvalidInput
+
+    url = deltoctl_sim.buses("mh5", accel_scale=(1.0, 1.0, 1.02))["i2c"]
+    assert deltoctl_sim.control("face -z") == "imu: -z up"
+    assert stream(cli, url, "imu/linear*")["imu/linear_acceleration.z"] == \
+        pytest.approx(-1.02 * G, abs=0.1)
+    with pytest.raises(InvalidInput, match="faces takes"):
+        deltoctl_sim.control("faces +z:1000")
