@@ -11,8 +11,9 @@ Bioscara arm); ``deltoctl_sim.buses(profile, **faults)`` returns ``{bus: URL}`` 
 profile (the MH5: two serial buses and the I2C bus), with the faults of ``deltoctl sim serve``
 (``missing=("head_y",)``, ``wrong_baud=…``, ``pace=True``, ``who_am_i=0x12`` …);
 ``deltoctl_sim.control("face -x")`` runs a control line of ``sim serve``'s standard input on
-the devices served (it returns the reply). The devices stop when the test ends. Kept import-light: pytest loads this module in every run, deltoctl's
-own modules are imported only when the fixture is used.
+the devices served (it returns the reply). The devices stop when the test ends. Kept
+import-light: pytest loads this module in every run, deltoctl's own modules are imported only
+when the fixture is used.
 """
 
 from __future__ import annotations

@@ -38,9 +38,8 @@ def serve(
 
     Each family's emulator serves its blocks behind a real link, with the faults and settings
     the family declares (below). --hardware serves some blocks only; --json prints one line.
-    A device that can be turned from outside reads control lines on the standard input, one
-    a line (a simulated IMU: face -x, tilt 10 0 0, rate 0 0 90, faces +z:2,-z:2); the line
-    help lists them."""
+    A device that can be turned or moved from outside answers control lines on the standard
+    input, one a line (face -x, tilt 10 0 0 …); the line help lists them."""
     from deltoctl.sim.serve import ServeOptions, serve_until_stopped
 
     opts = options(ctx)

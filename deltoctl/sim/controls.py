@@ -1,5 +1,5 @@
 """Control lines: what turns a simulated device from outside while it is served. An emulator
-answers lines that start with a word of its own (``face -x`` turns a simulated IMU);
+answers lines that start with a word of its own (``face -x`` turns one);
 ``deltoctl sim serve`` reads them on its standard input, one a line, and the pytest fixture
 passes them as text. A line runs no code: its first word picks an answerer its family
 declared, which checks the rest."""

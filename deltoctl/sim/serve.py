@@ -11,9 +11,9 @@ from typing import Any
 
 from deltoctl import registry
 from deltoctl.core.serving import ControlHandler, ServeContext
-from deltoctl.sim.controls import Controls
 from deltoctl.errors import InvalidInput
 from deltoctl.profile.model import Component, Hardware, Profile
+from deltoctl.sim.controls import Controls
 
 
 class ServeOptions:
