@@ -45,7 +45,7 @@ CAPABILITIES: dict[str, tuple[str, ...]] = {
     "calibrate_imu": ("sample", "self_test"),
 }
 
-SIM_KINDS = ("flag", "text", "int", "number", "numbers", "joints")
+SIM_KINDS = ("flag", "text", "int", "number", "numbers", "steps", "joints")
 _NAME = re.compile(r"[a-z][a-z0-9_]{0,31}")
 RESERVED = frozenset({"host", "port", "profile"})  # the options every `sim serve` has
 
@@ -58,8 +58,9 @@ class SimOption:
     ``joints`` option names as ``ctx.named("NAME", hw)``.
 
     kind: ``flag`` (on when given), ``text``, ``int`` (0x6A or 106), ``number``, ``numbers``
-    (comma-separated, ``count`` of them) or ``joints`` (repeatable joint names of the
-    profile); ``low``/``high`` bound a number."""
+    (comma-separated, ``count`` of them), ``steps`` (comma-separated ``CHOICE:SECONDS``,
+    ``count`` of them, each one of ``choices``: a timed sequence) or ``joints`` (repeatable
+    joint names of the profile); ``low``/``high`` bound a number (a step's seconds)."""
 
     name: str
     kind: str
@@ -67,7 +68,8 @@ class SimOption:
     default: Any = None
     low: float | None = None
     high: float | None = None
-    count: tuple[int, int] = (1, 16)  # how many numbers a ``numbers`` option takes
+    count: tuple[int, int] = (1, 16)  # how many numbers (steps) a ``numbers`` option takes
+    choices: tuple[str, ...] = ()  # what a ``steps`` option's steps may name
     metavar: str | None = None
 
     def __post_init__(self) -> None:
@@ -92,9 +94,14 @@ class SimOption:
                                f"{self._bounds()}, got {given!r}") from None
 
     def _bounds(self) -> str:
-        if self.kind == "numbers":
+        if self.kind in ("numbers", "steps"):
             low, high = self.count
-            return f", {low}" + (f" to {high}" if high != low else "") + " of them"
+            count = f", {low}" + (f" to {high}" if high != low else "") + " of them"
+            each = "" if self.low is None and self.high is None else \
+                f", each {_show(self.low)} to {_show(self.high)}"
+            if self.kind == "numbers":
+                return count + each
+            return f" ({'|'.join(self.choices)}){count}{each} s"
         if self.low is None and self.high is None:
             return ""
         return f" from {_show(self.low)} to {_show(self.high)}"
@@ -139,6 +146,20 @@ def _numbers(o: SimOption, v: Any) -> tuple[float, ...]:
     return tuple(o._bounded(float(x)) for x in items)
 
 
+def _steps(o: SimOption, v: Any) -> tuple[tuple[str, float], ...]:
+    items = v.split(",") if isinstance(v, str) else list(v)
+    if not o.count[0] <= len(items) <= o.count[1]:
+        raise ValueError(v)
+    steps = []
+    for item in items:
+        choice, seconds = item.split(":") if isinstance(item, str) else item
+        if not isinstance(choice, str) or choice.strip() not in o.choices or \
+                isinstance(seconds, bool):
+            raise ValueError(item)
+        steps.append((choice.strip(), o._bounded(float(seconds))))
+    return tuple(steps)
+
+
 def _joints(o: SimOption, v: Any) -> tuple[str, ...]:
     names = (v,) if isinstance(v, str) else tuple(v)
     if not all(isinstance(n, str) for n in names):
@@ -154,9 +175,10 @@ def _text(o: SimOption, v: Any) -> str:
 
 _CONVERT: dict[str, Callable[[SimOption, Any], Any]] = {
     "flag": _flag, "text": _text, "int": _int, "number": _number, "numbers": _numbers,
-    "joints": _joints}
+    "steps": _steps, "joints": _joints}
 _TAKES = {"flag": "true or false", "text": "a text", "int": "an integer (106 or 0x6A)",
           "number": "a number", "numbers": "comma-separated numbers",
+          "steps": "comma-separated CHOICE:SECONDS steps",
           "joints": "joint names"}
 
 

@@ -9,9 +9,11 @@
 target URL of a one-bus device (``tcp://`` for a Delto gripper, ``i2c+tcp://`` for the
 Bioscara arm); ``deltoctl_sim.buses(profile, **faults)`` returns ``{bus: URL}`` for any
 profile (the MH5: two serial buses and the I2C bus), with the faults of ``deltoctl sim serve``
-(``missing=("head_y",)``, ``wrong_baud=…``, ``pace=True``, ``who_am_i=0x12`` …). The devices
-stop when the test ends. Kept import-light: pytest loads this module in every run, deltoctl's
-own modules are imported only when the fixture is used.
+(``missing=("head_y",)``, ``wrong_baud=…``, ``pace=True``, ``who_am_i=0x12`` …);
+``deltoctl_sim.control("face -x")`` runs a control line of ``sim serve``'s standard input on
+the devices served (it returns the reply). The devices stop when the test ends. Kept
+import-light: pytest loads this module in every run, deltoctl's own modules are imported only
+when the fixture is used.
 """
 
 from __future__ import annotations
@@ -28,7 +30,10 @@ class SimDevices:
     ``{bus: URL}`` for any profile. Every device stops with ``stack``."""
 
     def __init__(self, stack: contextlib.ExitStack) -> None:
+        from deltoctl.sim.controls import Controls
+
         self._stack = stack
+        self._controls = Controls()
 
     def buses(self, profile: str, **faults: Any) -> dict[str, str]:
         from deltoctl.profile.catalog import load_profile
@@ -36,8 +41,13 @@ class SimDevices:
 
         options = ServeOptions(**faults)
         buses: dict[str, str] = serve_profile(self._stack, load_profile(profile),
-                                              options)["buses"]
+                                              options, controls=self._controls)["buses"]
         return buses
+
+    def control(self, line: str) -> str:
+        """Run a control line (``face -x``, ``tilt 10 0``) on the devices served; its reply,
+        or one InvalidInput naming what is wrong."""
+        return self._controls.run(line)
 
     def __call__(self, profile: str, firmware: str = "3.0", short_version: bool = False,
                  model_id: int | None = None) -> str:

@@ -79,6 +79,9 @@ def agent(
     opts = options(ctx)
     if opts.robot:
         raise InvalidInput("the agent serves this computer's robot: drop --robot")
+    if opts.sim_options:
+        raise InvalidInput("--sim-option is not for the agent: its simulator serves the "
+                           "profile as 'sim serve' does by default")
     robot = check_robot(name or host.default_name())
     if not (math.isfinite(deadline) and 0.1 <= deadline <= 10):
         raise InvalidInput(f"--deadline must be 0.1 to 10 seconds, got {deadline:g}")

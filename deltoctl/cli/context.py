@@ -20,6 +20,7 @@ class Options:
         profile: str | None = None,
         target: list[str] | None = None,
         sim: bool = False,
+        sim_options: list[str] | None = None,
         json: bool = False,
         yes: bool = False,
         verbose: int = 0,
@@ -34,6 +35,7 @@ class Options:
         self.profile = profile
         self.target = target or []
         self.sim = sim
+        self.sim_options = sim_options or []  # --sim-option NAME=VALUE, as given
         self.json = json
         self.yes = yes
         self.verbose = verbose

@@ -39,7 +39,12 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
     loaded it already; ``probe`` for a verb that looks at a bus where nothing may answer."""
     from deltoctl.app.robot import open_robot as open_app_robot
 
-    with open_app_robot(profile or opts.load_profile(), opts.target, sim=opts.sim,
+    sim: Any = opts.sim
+    if opts.sim and opts.sim_options:
+        from deltoctl.sim.serve import options_given
+
+        sim = options_given(opts.sim_options, "--sim-option")
+    with open_app_robot(profile or opts.load_profile(), opts.target, sim=sim,
                         hardware=opts.hardware, allow_model_mismatch=allow_model_mismatch,
                         probe=probe, notice=info, served_by=SERVED_SIMULATED) as robot:
         yield robot

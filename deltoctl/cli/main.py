@@ -198,6 +198,10 @@ TargetOpt = Annotated[list[str] | None, typer.Option(
     help="Where the device is, e.g. tcp://169.254.186.72:502 (repeatable).")]
 SimOpt = Annotated[bool, typer.Option(
     "--sim", help="Run against a simulated device started for this command.")]
+SimOptionOpt = Annotated[list[str] | None, typer.Option(
+    "--sim-option", metavar="NAME=VALUE",
+    help="With --sim: a fault or setting of the simulator, as 'sim serve --NAME VALUE' takes "
+         "it, e.g. faces=+z:2,-z:2 (repeatable).")]
 JsonOpt = Annotated[bool, typer.Option(
     "--json", help="Write one JSON document (NDJSON for streams) on stdout; an error is "
                    "one JSON object on stderr.")]
@@ -237,6 +241,7 @@ def root(
     profile: ProfileOpt = None,
     target: TargetOpt = None,
     sim: SimOpt = False,
+    sim_option: SimOptionOpt = None,
     json_out: JsonOpt = False,
     yes: YesOpt = False,
     verbose: VerboseOpt = 0,
@@ -257,6 +262,7 @@ def root(
         profile=profile,
         target=list(target or []),
         sim=sim,
+        sim_options=list(sim_option or []),
         json=json_out,
         yes=yes,
         verbose=verbose,
@@ -268,6 +274,9 @@ def root(
         robot=robot,
         zenoh_config=zenoh_config,
     )
+    if sim_option and not sim and not ctx.resilient_parsing:
+        raise InvalidInput("--sim-option is for the simulator --sim starts: add --sim "
+                           "(or give the option to 'deltoctl sim serve')")
     if robot and not ctx.resilient_parsing:
         from deltoctl.cli.fleet_cmd import forward
 

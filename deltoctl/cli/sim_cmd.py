@@ -7,7 +7,8 @@ import typer
 
 from deltoctl.cli.context import options
 from deltoctl.cli.main import complete_profile
-from deltoctl.cli.output import say
+from deltoctl.cli.output import emit_error, say
+from deltoctl.errors import USAGE
 
 if TYPE_CHECKING:
     from deltoctl.registry import SimOption
@@ -36,14 +37,16 @@ def serve(
     bus (BUS=URL, ready for --target).
 
     Each family's emulator serves its blocks behind a real link, with the faults and settings
-    the family declares (below). --hardware serves some blocks only; --json prints one line."""
+    the family declares (below). --hardware serves some blocks only; --json prints one line.
+    A device that can be turned or moved from outside answers control lines on the standard
+    input, one a line (face -x, tilt 10 0 0 …); the line help lists them."""
     from deltoctl.sim.serve import ServeOptions, serve_until_stopped
 
     opts = options(ctx)
     prof = opts.load_profile(profile)
     faults = {name: value for name, value in given.items() if value not in (None, False, [])}
     serve_until_stopped(prof, ServeOptions(host=host, port=port, **faults), opts.hardware,
-                        opts.json, say)
+                        opts.json, say, lambda m: emit_error(m, None, USAGE, opts.json))
 
 
 def _parameter(option: "SimOption") -> inspect.Parameter:

@@ -28,10 +28,16 @@ class ServeSettings(Protocol):
     def __getattr__(self, name: str) -> Any: ...
 
 
+# what a control line runs: its words after the first → a short reply; bad words are one
+# InvalidInput naming them
+ControlHandler = Callable[[list[str]], str]
+
+
 class ServeContext(Protocol):
     """What an emulator gets: the profile, the options, the stack that closes what it starts,
-    the report of each block it serves (``blocks[name] = {...}``) and the simulated I2C buses
-    that devices of several families share."""
+    the report of each block it serves (``blocks[name] = {...}``), the simulated I2C buses
+    that devices of several families share, and the control lines of ``sim serve``'s standard
+    input it answers (``control``)."""
 
     stack: contextlib.ExitStack
     profile: Profile
@@ -47,6 +53,11 @@ class ServeContext(Protocol):
     def i2c_bus(self, bus: str) -> tuple[Any, str]:
         """``(simulated bus, target URL)`` for a bus name, served once on loopback; each
         family adds its devices to the bus's ``devices``."""
+        ...
+
+    def control(self, word: str, usage: str, handler: ControlHandler) -> None:
+        """Answer the control lines that start with ``word`` (``face -x``) on ``sim serve``'s
+        standard input; ``usage`` (``face AXIS: …``) is what ``help`` lists."""
         ...
 
 

@@ -10,9 +10,10 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from deltoctl import registry
-from deltoctl.core.serving import ServeContext
+from deltoctl.core.serving import ControlHandler, ServeContext
 from deltoctl.errors import InvalidInput
 from deltoctl.profile.model import Component, Hardware, Profile
+from deltoctl.sim.controls import Controls
 
 
 class ServeOptions:
@@ -42,11 +43,15 @@ class _SimContext:
     options, the stack that closes what it starts, and the simulated I2C buses that devices of
     several families share."""
 
-    def __init__(self, stack: contextlib.ExitStack, profile: Profile,
-                 options: ServeOptions) -> None:
+    def __init__(self, stack: contextlib.ExitStack, profile: Profile, options: ServeOptions,
+                 controls: Controls) -> None:
         self.stack, self.profile, self.options = stack, profile, options
         self.blocks: dict[str, dict[str, Any]] = {}  # what each block's emulator reports
+        self.controls = controls
         self._i2c: dict[str, tuple[Any, str]] = {}
+
+    def control(self, word: str, usage: str, handler: ControlHandler) -> None:
+        self.controls.add(word, usage, handler)
 
     def named(self, option: str, hw: Hardware) -> list[Component]:
         """The joints of this block that a joint option (``missing`` …) names."""
@@ -66,10 +71,13 @@ class _SimContext:
 
 
 def serve_profile(stack: contextlib.ExitStack, prof: Profile, options: ServeOptions,
-                  hardware: list[str] | tuple[str, ...] = ()) -> dict[str, Any]:
+                  hardware: list[str] | tuple[str, ...] = (),
+                  controls: Controls | None = None) -> dict[str, Any]:
     """Start the simulated devices of the profile's blocks (or of those ``hardware`` names),
-    closed with ``stack``. Returns ``{"profile", "buses": {bus: target URL}, "blocks":
-    {block: what its emulator reports}}``, and ``endpoint`` when there is one bus."""
+    closed with ``stack``; the control lines their emulators answer are added to
+    ``controls``. Returns ``{"profile", "buses": {bus: target URL}, "blocks": {block: what
+    its emulator reports}}``, ``endpoint`` when there is one bus and ``controls`` (the first
+    words of the lines they answer) when there are some."""
     from deltoctl.core.system import select_blocks
 
     blocks = select_blocks(prof, hardware)
@@ -81,7 +89,8 @@ def serve_profile(stack: contextlib.ExitStack, prof: Profile, options: ServeOpti
         by_family.setdefault(name, []).append(hw)
         families[name] = family
     options = _checked(prof, blocks, options, [f for f in families.values() if f])
-    ctx: ServeContext = _SimContext(stack, prof, options)
+    controls = Controls() if controls is None else controls
+    ctx: ServeContext = _SimContext(stack, prof, options, controls)
     buses: dict[str, str] = {}
     for name, family in families.items():
         serve = family.emulator_function() if family else None
@@ -93,30 +102,81 @@ def serve_profile(stack: contextlib.ExitStack, prof: Profile, options: ServeOpti
     result: dict[str, Any] = {"profile": prof.name, "buses": buses, "blocks": ctx.blocks}
     if len(buses) == 1:
         result["endpoint"] = next(iter(buses.values()))
+    if controls.words():
+        result["controls"] = controls.words()
     return result
 
 
+def options_given(items: Sequence[str], what: str) -> dict[str, Any]:
+    """``NAME=VALUE`` items (``faces=+z:2,-z:2``, ``missing=head_y`` repeated, ``pace`` for a
+    flag) as ServeOptions' faults, each value checked later by its declaration; an item not
+    of that form, a flag given a value other than true or false, or a single-valued option
+    given twice is one InvalidInput naming it."""
+    declared = registry.sim_options()
+    faults: dict[str, Any] = {}
+    for item in items:
+        key, has_value, value = item.partition("=")
+        name = key.strip().removeprefix("--").replace("-", "_")
+        option = declared.get(name)
+        if option is not None and option.kind == "flag":
+            if value.lower() not in (("true", "false") if has_value else ("",)):
+                raise InvalidInput(f"{what} {item!r}: {option.flag} is on or off: {name} or "
+                                   f"{name}=true|false")
+            faults[name] = value.lower() != "false"
+        elif not name or not has_value:
+            raise InvalidInput(f"{what} {item!r} is not of the form NAME=VALUE")
+        elif option is not None and option.kind == "joints":
+            faults[name] = (*faults.get(name, ()), value)
+        elif name in faults:
+            raise InvalidInput(f"{what} {name} is given twice")
+        else:
+            faults[name] = value
+    return faults
+
+
 def serve_until_stopped(prof: Profile, options: ServeOptions, hardware: Sequence[str],
-                        as_json: bool, announce: Callable[[str], None]) -> None:
+                        as_json: bool, announce: Callable[[str], None],
+                        complain: Callable[[str], None] = print) -> None:
     """Serve the profile's simulated devices until Ctrl-C or SIGTERM (``deltoctl sim serve``).
     Once they are up, ``announce`` is told the targets, a ``--target BUS=URL`` line each (with
-    ``as_json``: serve_profile's result on one line)."""
+    ``as_json``: serve_profile's result on one line). When the devices answer control lines,
+    each line of the standard input runs one: ``announce`` is told its reply (with
+    ``as_json``, ``{"control", "reply"}`` on one line), ``complain`` a bad one."""
     import gc
     import json
     import signal
+    import sys
     import threading
 
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     gc.disable()  # a served device answers within microseconds; no collector pauses
+    controls = Controls()
     with contextlib.ExitStack() as stack:
-        info = serve_profile(stack, prof, options, list(hardware))
+        info = serve_profile(stack, prof, options, list(hardware), controls)
         if as_json:
             announce(json.dumps(info))
         else:
             announce("\n".join(f"--target {bus}={url}" for bus, url in info["buses"].items()))
+
+        def reply(line: str, answer: str) -> None:
+            announce(json.dumps({"control": line, "reply": answer}) if as_json else answer)
+
         with contextlib.suppress(KeyboardInterrupt):
+            fd = _input_fd(sys.stdin) if controls.words() else None
+            if fd is not None:
+                if hasattr(signal, "SIGTTIN"):  # in the background: wait, do not stop
+                    signal.signal(signal.SIGTTIN, signal.SIG_IGN)
+                controls.follow(fd, stop, reply, complain)
             stop.wait()
+
+
+def _input_fd(stream: Any) -> int | None:
+    """The file descriptor of the standard input, if it has one (not under a test runner)."""
+    try:
+        return int(stream.fileno())
+    except (AttributeError, OSError, ValueError):
+        return None
 
 
 def _checked(prof: Profile, blocks: list[Hardware], options: ServeOptions,

@@ -19,6 +19,18 @@ FAMILY = Family(
                   "(LSM6DS3TR-C), or another value to rehearse a wrong part.", 0x6A, 0, 0xFF),
         SimOption("orientation", "numbers", "The IMU's roll,pitch[,yaw] in degrees (gravity "
                   "follows).", (0.0, 0.0), count=(2, 3), metavar="ROLL,PITCH"),
+        SimOption("faces", "steps", "Turn the IMU through these faces, each axis up for its "
+                  "seconds, over and over (a rehearsal of calibrate imu --tumble).", (),
+                  0.5, 600.0, count=(1, 36), choices=("+x", "-x", "+y", "-y", "+z", "-z"),
+                  metavar="AXIS:SECONDS,..."),
+        SimOption("accel_bias", "numbers", "The IMU accelerometer's bias, m/s² per axis.",
+                  (0.0, 0.0, 0.0), -5.0, 5.0, count=(3, 3), metavar="X,Y,Z"),
+        SimOption("accel_scale", "numbers", "The IMU accelerometer's scale factor per axis.",
+                  (1.0, 1.0, 1.0), 0.5, 1.5, count=(3, 3), metavar="X,Y,Z"),
+        SimOption("gyro_bias", "numbers", "The IMU gyroscope's bias, rad/s per axis.",
+                  (0.0, 0.0, 0.0), -0.5, 0.5, count=(3, 3), metavar="X,Y,Z"),
+        SimOption("gyro_scale", "numbers", "The IMU gyroscope's scale factor per axis.",
+                  (1.0, 1.0, 1.0), 0.5, 1.5, count=(3, 3), metavar="X,Y,Z"),
     ),
     identity_fields=(("chip", "{}"), ("output_rate_hz", "at {} Hz")),
 )
