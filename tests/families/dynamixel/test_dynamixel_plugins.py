@@ -8,6 +8,7 @@ import json
 
 import pytest
 
+from deltoctl.families.dynamixel.plugins import servo_ids
 from deltoctl.profile.catalog import load_profile
 from tests.conftest import block_of
 
@@ -99,16 +100,17 @@ def test_dynamixel_hardware_use_dummy_runs_on_the_emulator(tmp_path, cli):
     assert "simulated" in run.stderr
 
 
-def test_dynamixel_hardware_interface_servo_gpios_become_the_joints_servos(tmp_path, cli):
+def test_dynamixel_hardware_interface_servo_gpios_drive_the_joints(tmp_path, cli):
     path = robotis(tmp_path)
     profile = load_profile(path)
     hw = profile.hardware[0]
-    assert hw.gpios == []  # the servos, not GPIOs
-    joints = {j.name: j for j in hw.joints}
+    assert [g.name for g in hw.gpios] == ["dxl1", "dxl2"]  # kept, as ros2_control has them
+    joints = servo_ids(profile, hw)
     # transmission_to_joint_matrix 0 1 / -1 0: joint1 is servo 22, joint2 is servo 21 reversed
-    assert (joints["joint1"].address, joints["joint1"].inverse) == (22, False)
-    assert (joints["joint2"].address, joints["joint2"].inverse) == (21, True)
-    assert joints["joint1"].params["Position P Gain"] == "800"
+    assert (joints[22].name, joints[22].inverse) == ("joint1", False)
+    assert (joints[21].name, joints[21].inverse) == ("joint2", True)
+    assert joints[22].params["Position P Gain"] == "800"
+    assert [j.address for j in hw.joints] == [None, None]  # the profile's own, untouched
     assert profile.buses[hw.bus] == "serial:///dev/ttyUSB0?baud=1000000"
     run = cli("--sim", "-p", str(path), "identify", "--json")
     assert run.exit_code == 0, run.stderr
@@ -122,6 +124,9 @@ def test_dynamixel_hardware_interface_servo_gpios_become_the_joints_servos(tmp_p
     ("1, 0, 0", ("21", "22"), "2 × 2 finite numbers"),
     ("1, 0, 0, nan", ("21", "22"), "2 × 2 finite numbers"),
     ("1, 0, 0, 1", ("21", "x"), "no ID param"),
+    ("1, 0, 0, 1", ("21", "21"), "ID 21 is given to 2 servo gpios"),
+    ("1, 0, 0, 1", ("21", "253"), "ID 253 is not a Dynamixel ID"),
+    ("1, 0, 1, 0", ("21", "22"), "both take servo 'dxl1'"),
 ])
 def test_a_description_deltoctl_cannot_drive_is_one_clear_error(tmp_path, cli, matrix, ids,
                                                                 says):
