@@ -109,6 +109,20 @@ def servo_gpios(profile: Profile, hw: Hardware) -> dict[int, tuple[Component, Co
     return found
 
 
+# the readings a servo gpio may declare as state interfaces, and what the bus reads them as
+GPIO_READINGS = ("Present Position", "Present Velocity", "Present Current", "Present Load",
+                 "Present Input Voltage", "Present Temperature")
+
+
+def gpio_readings(profile: Profile, hw: Hardware) -> dict[int, dict[str, str]]:
+    """ID → {reading: the servo gpio's state interface}, for the readings it declares."""
+    if hw.plugin != ROBOTIS:
+        return {}
+    return {device_id: {i.name: f"{gpio.name}/{i.name}" for i in gpio.state_interfaces
+                        if i.name in GPIO_READINGS}
+            for device_id, (_, gpio, _) in servo_gpios(profile, hw).items()}
+
+
 def _id(profile: Profile, hw: Hardware, gpio: str, text: str | None) -> int:
     if text is None or not text.strip().isdigit():
         raise _fail(profile, hw, f"gpio {gpio!r} has no ID param with the servo's ID (got "
