@@ -50,8 +50,11 @@ def servo_ids(profile: Profile, hw: Hardware) -> dict[int, Component]:
         address = part_address(profile, hw, joint)
         if address is not None:
             ids[address] = joint
-    if hw.plugin == ROBOTIS and not ids:
-        for device_id, (joint, gpio, factor) in servo_gpios(profile, hw).items():
+    if hw.plugin != ROBOTIS:
+        return ids
+    addressed = {j.name for j in ids.values()}  # a joint's own address comes first
+    for device_id, (joint, gpio, factor) in servo_gpios(profile, hw).items():
+        if joint.name not in addressed and device_id not in ids:
             params = {**{k: v for k, v in gpio.params.items() if k not in ("type", "ID")},
                       **joint.params}
             ids[device_id] = replace(joint, address=device_id, params=params,
