@@ -23,7 +23,7 @@ from deltoctl.families.dynamixel.control_table import (
     Item,
 )
 from deltoctl.families.dynamixel.models import Model, by_number, expected_model, label
-from deltoctl.families.dynamixel.plugins import servo_ids
+from deltoctl.families.dynamixel.plugins import gpio_readings, servo_ids
 
 RAD_PER_RAW = 0.001533980787886  # 2π/4096
 CENTER = 2047
@@ -50,6 +50,8 @@ class DynamixelDriver(Driver):
         parse_bus_url(self.url)  # a rate its servos cannot run: exit 2 before a port opens
         hw = block.hw
         self.joints = servo_ids(block.profile, hw)
+        # dynamixel_hardware_interface's servo gpios: their Present ... states, by servo
+        self.gpio_states = gpio_readings(block.profile, hw)
         self.port: Any = None
         self.reader = codec.PacketReader()
         self.present: dict[int, tuple[int, int]] = {}  # id → (model, firmware)
@@ -318,7 +320,22 @@ class DynamixelDriver(Driver):
             # sensor, the Present Load
             unit = self._current_units.get(device_id)
             values[name + "/effort"] = load * (LOAD_SCALE if unit is None else unit)
+            states = self.gpio_states.get(device_id)
+            if states:
+                self._servo_states(states, {
+                    "Present Position": (position - CENTER) * RAD_PER_RAW,
+                    "Present Velocity": velocity * RAD_S_PER_RAW,
+                    "Present Current" if unit else "Present Load": load * (unit or 0.1)})
         return values
+
+    def _servo_states(self, states: dict[str, str], readings: dict[str, float]) -> None:
+        """A servo gpio's states, as the servo reports them: rad, rad/s, A, % of load, V, °C
+        (a servo the profile reverses reports reversed values: deltoctl reverses it by its
+        Drive Mode)."""
+        for item, value in readings.items():
+            name = states.get(item)
+            if name is not None:
+                self.values[name] = value
 
     @property
     def _current_units(self) -> dict[int, float | None]:
@@ -365,6 +382,10 @@ class DynamixelDriver(Driver):
             voltage, temperature = struct.unpack("<Hb", data)
             self.values[f"{name}/voltage"] = voltage / 10.0
             self.values[f"{name}/temperature"] = float(temperature)
+            states = self.gpio_states.get(device_id)
+            if states:
+                self._servo_states(states, {"Present Input Voltage": voltage / 10.0,
+                                            "Present Temperature": float(temperature)})
 
     def _broadcast_ping(self, timeout: float) -> dict[int, int]:
         """ID → model number of every servo that answers a broadcast ping."""

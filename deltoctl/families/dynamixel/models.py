@@ -2,7 +2,8 @@
 operating modes, as data (ROBOTIS e-manual, emanual.robotis.com/docs/en/dxl/x/<model>/).
 
 Models that share an address layout share one table; a model's entry adds what differs (its
-current unit, the default and maximum of its limits, its voltage range, its modes). Every X
+current unit, the default and maximum of its limits, its voltage range, its modes, the defaults
+of its control loops' gains: a row of ``GAINS``, one per distinct set). Every X
 model keeps Present Current or Load, Velocity and Position at 126/128/132 and Present Input
 Voltage and Temperature at 144/146, so one Sync Read serves a bus of mixed models; the meaning
 of 126 (load or current, and the current's unit) is the servo's own.
@@ -79,6 +80,7 @@ class Model:
     voltage: tuple[int, int, int, int] = (140, 60, 60, 140)  # max, min default; range (0.1 V)
     temperature_limit: int = 80  # °C, default
     baud_codes: int = 7  # the highest Baud Rate (8) code: 7 = 4.5 Mbps, 6 = 4 Mbps
+    gains: str = "XL430-W250"  # a key of GAINS: the control loops' defaults
     overrides: dict[str, int] = field(default_factory=dict)  # other defaults by item name
 
     @property
@@ -100,6 +102,8 @@ class Model:
             "Current Limit": {"default": self.current_limit, "low": 0,
                               "high": self.current_limit},
         }
+        for name, value in zip(GAIN_ITEMS, GAINS[self.gains]):
+            changes.setdefault(name, {})["default"] = value
         for name, value in self.overrides.items():
             changes.setdefault(name, {})["default"] = value
         return tuple(replace(i, **changes[i.name]) if i.name in changes else i
@@ -129,93 +133,96 @@ class Model:
         return raw * (self.current_unit or 0.0) / 1000.0
 
 
-_X430 = dict(voltage=(160, 95, 95, 160))
-_XH_V = dict(voltage=(300, 110, 110, 300))
+# The control loops' defaults (RAM, restored at each reboot): Velocity I and P, Position D, I
+# and P Gain, one row per distinct set of the pages, named after the first; both Feedforward
+# Gains are 0 on every page.
+GAIN_ITEMS = ("Velocity I Gain", "Velocity P Gain", "Position D Gain", "Position I Gain",
+              "Position P Gain")
+GAINS: dict[str, tuple[int, int, int, int, int]] = {
+    "XL430-W250": (1000, 100, 4000, 0, 640),  # xl430-w250.md (the layout's own)
+    "2XL430-W250": (1800, 100, 2000, 0, 640),  # 2xl430-w250.md
+    "XC430-W150": (1920, 100, 0, 0, 460),  # xc430-w150.md
+    "XC430-W240": (1920, 100, 0, 0, 700),  # xc430-w240.md
+    # xm430-w350/-w210, xh430-v350/-v210, xm540-w270/-w150, xh540-w270/-w150/-v270/-v150,
+    # xd540-t270/-t150, xw540-t260/-t140/-h260.md
+    "XM430-W350": (1920, 100, 0, 0, 800),
+    # xh430-w350/-w210, xd430-t350/-t210, xw430-t200/-t333.md
+    "XH430-W350": (1920, 100, 0, 0, 900),
+    "XL330-M288": (1600, 180, 0, 0, 400),  # xl330-m288.md
+    "XL330-M077": (400, 40, 0, 400, 400),  # xl330-m077.md
+    "XC330-T288": (1200, 40, 0, 0, 900),  # xc330-t288.md, xc330-t181.md
+    "XC330-M288": (1600, 50, 500, 0, 1100),  # xc330-m288.md
+    "XC330-M181": (1400, 100, 500, 0, 1200),  # xc330-m181.md
+}
+
+_X430 = dict(voltage=(160, 95, 95, 160), gains="XM430-W350")
+_XH_W = dict(voltage=(160, 95, 95, 160), gains="XH430-W350")
+_XH_V = dict(voltage=(300, 110, 110, 300), gains="XM430-W350")
+_XC430 = dict(voltage=(160, 60, 60, 160), temperature_limit=80)
 _XL330 = dict(layout="X330", current_unit=1.0, current_limit=1750, velocity_max=2047,
               voltage=(70, 35, 31, 70), temperature_limit=70, baud_codes=6,
               overrides={"Shutdown": 53})
 _XC330_T = dict(layout="X330", current_unit=1.0, current_limit=910, velocity_max=2047,
                 voltage=(140, 55, 55, 140), temperature_limit=70, baud_codes=6,
-                overrides={"PWM Slope": 255})
+                gains="XC330-T288", overrides={"PWM Slope": 255})
 _XC330_M = dict(layout="X330", current_unit=1.0, current_limit=2352, velocity_max=2047,
-                voltage=(70, 37, 37, 70), temperature_limit=70, baud_codes=6)
+                voltage=(70, 35, 31, 70), temperature_limit=70, baud_codes=6)
 
+# Each row's page is docs/en/dxl/x/<model>.md (lower case), e.g. docs/en/dxl/x/xm430-w350.md.
 MODELS: tuple[Model, ...] = (
-    # docs/en/dxl/x/xl430-w250.md, 2xl430-w250.md, xc430-w150.md, xc430-w240.md
     Model(1060, "XL430-W250", "X430 without current", temperature_limit=72),
-    Model(1090, "2XL430-W250", "X430 without current", temperature_limit=72),
-    Model(1070, "XC430-W150", "X430 without current", velocity_limit=460,
-          voltage=(160, 65, 65, 160)),
-    Model(1080, "XC430-W240", "X430 without current", velocity_limit=306,
-          voltage=(160, 65, 65, 160)),
-    # docs/en/dxl/x/xm430-w350.md, xm430-w210.md
+    Model(1090, "2XL430-W250", "X430 without current", velocity_limit=250,
+          temperature_limit=72, gains="2XL430-W250"),
+    Model(1070, "XC430-W150", "X430 without current", velocity_limit=460, gains="XC430-W150",
+          overrides={"Moving Threshold": 20}, **_XC430),
+    Model(1080, "XC430-W240", "X430 without current", velocity_limit=306, gains="XC430-W240",
+          **_XC430),
     Model(1020, "XM430-W350", "X430", 2.69, 1193, velocity_limit=200, **_X430),
     Model(1030, "XM430-W210", "X430", 2.69, 1193, velocity_limit=330, **_X430),
-    # docs/en/dxl/x/xh430-w350.md, xh430-w210.md, xh430-v350.md, xh430-v210.md
-    Model(1000, "XH430-W350", "X430", 2.69, 648, velocity_limit=280, **_X430),
-    Model(1010, "XH430-W210", "X430", 2.69, 648, velocity_limit=480, **_X430),
+    Model(1000, "XH430-W350", "X430", 2.69, 648, velocity_limit=130, **_XH_W),
+    Model(1010, "XH430-W210", "X430", 2.69, 648, velocity_limit=210, **_XH_W),
     Model(1040, "XH430-V350", "X430", 1.34, 689, velocity_limit=135, **_XH_V),
     Model(1050, "XH430-V210", "X430", 1.34, 689, velocity_limit=230, **_XH_V),
-    # docs/en/dxl/x/xd430-t350.md, xd430-t210.md
-    Model(1001, "XD430-T350", "X430", 2.69, 648, velocity_limit=280, **_X430),
-    Model(1011, "XD430-T210", "X430", 2.69, 648, velocity_limit=480, **_X430),
-    # docs/en/dxl/x/xw430-t200.md, xw430-t333.md
-    Model(1280, "XW430-T200", "XW", 2.69, 1193, velocity_limit=250, **_X430),
-    Model(1270, "XW430-T333", "XW", 2.69, 1193, velocity_limit=150, **_X430),
-    # docs/en/dxl/x/xm540-w270.md, xm540-w150.md
+    # the XD's tables are the XH's (its pages say so)
+    Model(1001, "XD430-T350", "X430", 2.69, 648, velocity_limit=130, **_XH_W),
+    Model(1011, "XD430-T210", "X430", 2.69, 648, velocity_limit=210, **_XH_W),
+    Model(1280, "XW430-T200", "XW", 2.69, 2047, velocity_limit=235, **_XH_W),
+    Model(1270, "XW430-T333", "XW", 2.69, 2047, velocity_limit=139, **_XH_W),
     Model(1120, "XM540-W270", "X540", 2.69, 2047, velocity_limit=128, **_X430),
     Model(1130, "XM540-W150", "X540", 2.69, 2047, velocity_limit=230, **_X430),
-    # docs/en/dxl/x/xh540-w270.md, xh540-w150.md, xh540-v270.md, xh540-v150.md
-    Model(1100, "XH540-W270", "X540", 2.69, 2047, velocity_limit=128, **_X430),
-    Model(1110, "XH540-W150", "X540", 2.69, 2047, velocity_limit=230, **_X430),
+    Model(1100, "XH540-W270", "X540", 2.69, 2047, velocity_limit=167, **_X430),
+    Model(1110, "XH540-W150", "X540", 2.69, 2047, velocity_limit=300, **_X430),
     Model(1140, "XH540-V270", "X540", 2.69, 2047, velocity_limit=128, **_XH_V),
-    Model(1150, "XH540-V150", "X540", 2.69, 2047, velocity_limit=230, **_XH_V),
-    # docs/en/dxl/x/xd540-t270.md, xd540-t150.md
-    Model(1101, "XD540-T270", "X540", 2.69, 2047, velocity_limit=128, **_X430),
-    Model(1111, "XD540-T150", "X540", 2.69, 2047, velocity_limit=230, **_X430),
-    # docs/en/dxl/x/xw540-t260.md, xw540-t140.md, xw540-h260.md
+    Model(1150, "XH540-V150", "X540", 2.69, 1188, velocity_limit=230, **_XH_V),
+    Model(1101, "XD540-T270", "X540", 2.69, 2047, velocity_limit=167, **_X430),
+    Model(1111, "XD540-T150", "X540", 2.69, 2047, velocity_limit=300, **_X430),
     Model(1170, "XW540-T260", "XW", 2.69, 2047, velocity_limit=167, **_X430),
-    Model(1180, "XW540-T140", "XW", 2.69, 2047, velocity_limit=300, **_X430),
-    Model(1310, "XW540-H260", "XW", 2.69, 2047, velocity_limit=167, **_X430),
-    # docs/en/dxl/x/xl330-m288.md, xl330-m077.md
-    Model(1200, "XL330-M288", velocity_limit=445, **_XL330),
-    Model(1190, "XL330-M077", velocity_limit=1620, **_XL330),
-    # docs/en/dxl/x/xc330-t288.md, xc330-t181.md, xc330-m288.md, xc330-m181.md
+    Model(1180, "XW540-T140", "XW", 2.69, 2047, velocity_limit=304, **_X430),
+    Model(1310, "XW540-H260", "XW", 2.69, 1188, velocity_limit=145, **_XH_V),
+    Model(1200, "XL330-M288", velocity_limit=445, gains="XL330-M288", **_XL330),
+    Model(1190, "XL330-M077", velocity_limit=1620, gains="XL330-M077", **_XL330),
     Model(1220, "XC330-T288", velocity_limit=320, **_XC330_T),
-    Model(1210, "XC330-T181", velocity_limit=520, **_XC330_T),
-    Model(1240, "XC330-M288", velocity_limit=445, **_XC330_M),
-    Model(1230, "XC330-M181", velocity_limit=705, **_XC330_M),
+    Model(1210, "XC330-T181", velocity_limit=510, **_XC330_T),
+    Model(1240, "XC330-M288", velocity_limit=350, gains="XC330-M288", **_XC330_M),
+    Model(1230, "XC330-M181", velocity_limit=545, gains="XC330-M181", **_XC330_M),
 )
 
 # What was not checked against the model's own e-manual page (the layouts of all of them were
-# checked against ROBOTIS' dynamixel_hardware_interface model files; the rest of each row
-# named here is an estimate from its siblings). Correct a value, then remove it from here.
+# checked against ROBOTIS' dynamixel_hardware_interface model files). Correct a value, then
+# remove it from here. Every page gives the same Return Delay Time (250), Drive Mode (0),
+# Operating Mode (3), Moving Threshold (10, but 20 on the XC430-W150), PWM Limit (885),
+# position limits (0-4095), Shutdown (52, but 53 on the XL330s), Bus Watchdog and profile
+# (0). The pages disagree with themselves in three places, where the table keeps its value:
+# the XD430-T350 and XD540-T270 pages' Model Number rows repeat the XH's (1000, 1100), and the
+# XW430 pages give Protocol Type 1 (the emulator speaks Protocol 2.0 only).
 UNVERIFIED: dict[str, tuple[str, ...]] = {
-    "2XL430-W250": ("temperature_limit", "velocity_limit"),
-    "XC430-W150": ("velocity_limit", "voltage", "temperature_limit"),
-    "XC430-W240": ("velocity_limit", "voltage", "temperature_limit"),
-    "XM430-W210": ("velocity_limit",),
-    "XH430-W350": ("velocity_limit",),
+    # the pages read were an older edition, whose Velocity Limits (350, 360, 285, 380) the
+    # newer editions of their siblings lowered (the XD430-T210's, the XH430-W210's table,
+    # gives 210)
+    "XM430-W350": ("velocity_limit",),
     "XH430-W210": ("velocity_limit",),
+    "XH430-V350": ("velocity_limit",),
     "XH430-V210": ("velocity_limit",),
-    "XD430-T350": ("current_unit", "current_limit", "velocity_limit"),
-    "XD430-T210": ("current_unit", "current_limit", "velocity_limit"),
-    "XW430-T200": ("current_unit", "current_limit", "velocity_limit", "voltage"),
-    "XW430-T333": ("current_unit", "current_limit", "velocity_limit", "voltage"),
-    "XM540-W270": ("velocity_limit",),
-    "XM540-W150": ("velocity_limit",),
-    "XH540-W270": ("velocity_limit",),
-    "XH540-W150": ("velocity_limit",),
-    "XH540-V270": ("current_unit", "velocity_limit", "voltage"),
-    "XH540-V150": ("current_unit", "velocity_limit", "voltage"),
-    "XD540-T270": ("current_unit", "current_limit", "velocity_limit"),
-    "XD540-T150": ("current_unit", "current_limit", "velocity_limit"),
-    "XW540-T140": ("velocity_limit",),
-    "XW540-H260": ("velocity_limit", "voltage"),
-    "XL330-M077": ("velocity_limit",),
-    "XC330-T181": ("current_limit", "velocity_limit"),
-    "XC330-M288": ("current_limit", "velocity_limit", "voltage"),
-    "XC330-M181": ("current_limit", "velocity_limit", "voltage"),
 }
 
 BY_NUMBER = {m.number: m for m in MODELS}
