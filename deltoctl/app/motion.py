@@ -156,6 +156,7 @@ def plan_home(profile: Profile, hardware: Sequence[str] = (),
               joints: Sequence[str] = ()) -> HomePlan:
     """The homing plan of the selected blocks (or of ``joints`` only), each home pose within
     the envelope — checked before anyone is asked."""
+    from deltoctl import registry
     from deltoctl.core import motion
     from deltoctl.core.system import select_blocks
 
@@ -163,11 +164,16 @@ def plan_home(profile: Profile, hardware: Sequence[str] = (),
     for name in joints:
         if name not in known:
             raise InvalidInput(f"{profile.name} has no joint {name!r}" + _near(name, known))
-    chosen = [j for hw in select_blocks(profile, hardware) for j in hw.joints
-              if not joints or j.name in joints]
-    plan = HomePlan(profile.name, [j.name for j in chosen if j.command("home")])
+    blocks = select_blocks(profile, hardware)
+    chosen = [j for hw in blocks for j in hw.joints if not joints or j.name in joints]
+    routine = {j.name for j in chosen if j.command("home")}
+    for hw in blocks:  # and those whose family says their device homes by a routine
+        family = registry.of_block(profile.family_of(hw), hw.plugin)
+        if family is not None:
+            routine |= family.joints_with_homing(profile, hw)
+    plan = HomePlan(profile.name, [j.name for j in chosen if j.name in routine])
     for j in chosen:
-        if not j.command("home") and (j.command("effort") or j.command("position")) \
+        if j.name not in routine and (j.command("effort") or j.command("position")) \
                 and j.mimic is None:
             plan.targets[j.name] = profile.safety.home_pose.get(j.name, 0.0)
             motion.check_move(profile, j, plan.targets[j.name], None, None, jog=False)
