@@ -334,6 +334,13 @@ def of_block(family_name: str | None, plugin: str) -> Family | None:
     return get(family_name or for_plugin(plugin))
 
 
+def homing_joints(profile: Any, hw: Any) -> set[str]:
+    """The joints of block ``hw`` whose family says its devices home them by a routine of
+    their own (its descriptor's ``homing_joints``)."""
+    family = of_block(profile.family_of(hw), hw.plugin)
+    return family.joints_with_homing(profile, hw) if family is not None else set()
+
+
 # -- what the families declare, merged ------------------------------------------------------
 
 def sim_options(names: Sequence[str] | None = None) -> dict[str, SimOption]:

@@ -166,14 +166,11 @@ def plan_home(profile: Profile, hardware: Sequence[str] = (),
             raise InvalidInput(f"{profile.name} has no joint {name!r}" + _near(name, known))
     blocks = select_blocks(profile, hardware)
     chosen = [j for hw in blocks for j in hw.joints if not joints or j.name in joints]
-    routine = {j.name for j in chosen if j.command("home")}
-    for hw in blocks:  # and those whose family says their device homes by a routine
-        family = registry.of_block(profile.family_of(hw), hw.plugin)
-        if family is not None:
-            routine |= family.joints_with_homing(profile, hw)
-    plan = HomePlan(profile.name, [j.name for j in chosen if j.name in routine])
+    # a routine: a home interface, or the family says the device homes the joint itself
+    homing = set().union(*(registry.homing_joints(profile, hw) for hw in blocks))
+    plan = HomePlan(profile.name, [j.name for j in chosen if j.command("home") or j.name in homing])
     for j in chosen:
-        if j.name not in routine and (j.command("effort") or j.command("position")) \
+        if j.name not in plan.routine and (j.command("effort") or j.command("position")) \
                 and j.mimic is None:
             plan.targets[j.name] = profile.safety.home_pose.get(j.name, 0.0)
             motion.check_move(profile, j, plan.targets[j.name], None, None, jog=False)

@@ -36,8 +36,9 @@ POWERED = (READY, SWITCHED_ON, ENABLED, QUICK_STOP)
 FOLLOWING_ERROR = 0x8611  # EMCY / 0x603F: following error
 # what the drive keeps: (index, sub) → value, with the EDS's defaults applied at start
 PARAMS = {(0x605A, 0): 2, (0x6065, 0): 1000, (0x607A, 0): 0, (0x607C, 0): 0,
-          (0x6081, 0): 20000, (0x6083, 0): 100000, (0x6084, 0): 100000, (0x6098, 0): 35, (0x6099, 1): 10000,
-          (0x6099, 2): 2000, (0x609A, 0): 50000, (0x60FF, 0): 0, (0x607D, 1): -(1 << 31), (0x607D, 2): (1 << 31) - 1}
+          (0x6081, 0): 20000, (0x6083, 0): 100000, (0x6084, 0): 100000, (0x6098, 0): 35,
+          (0x6099, 1): 10000, (0x6099, 2): 2000, (0x609A, 0): 50000, (0x60FF, 0): 0,
+          (0x607D, 1): -(1 << 31), (0x607D, 2): (1 << 31) - 1}
 HOMING_METHODS = range(1, 38)
 
 

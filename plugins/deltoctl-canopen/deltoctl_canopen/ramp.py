@@ -82,9 +82,10 @@ def _phases(distance: float, v: float, speed: float, accel: float, decel: float)
     if braking > distance:  # too fast to stop in time: stop past the target, then come back
         phases.append((v / decel, -decel))
         back = _phases(braking - distance, 0.0, speed, accel, decel)
-        return phases + [(t, -a) for t, a in back]
+        return [*phases, *((t, -a) for t, a in back)]
     peak = min(speed, math.sqrt((2 * accel * decel * distance + decel * v * v) / (accel + decel)))
     rising = (peak * peak - v * v) / (2 * accel)
     falling = peak * peak / (2 * decel)
     cruise = (distance - rising - falling) / peak if peak > 0 else 0.0
-    return phases + [((peak - v) / accel, accel), (max(0.0, cruise), 0.0), (peak / decel, -decel)]
+    return [*phases, ((peak - v) / accel, accel), (max(0.0, cruise), 0.0),
+            (peak / decel, -decel)]

@@ -26,9 +26,9 @@ def without_homing_method(text):
     return "\n".join(line for line in text.splitlines() if "0x6098" not in line)
 
 
-def jog_to(cli, profile, *more):
+def jog_to(cli, profile, velocity="0.2"):
     return cli("-p", profile, "--sim", "--json", "jog", "axis_1", "--to", "0.2",
-               "--velocity", "0.2", "--yes", *more)
+               "--velocity", velocity, "--yes")
 
 
 def test_jog_settles_at_the_target_when_the_drive_says_so(cli, variant):
@@ -44,7 +44,7 @@ def test_jog_settles_at_the_target_when_the_drive_says_so(cli, variant):
 def test_a_move_longer_than_its_time_is_unsettled(cli, variant):
     profile = variant(profile=lambda t: t.replace("home_timeout: 10", "home_timeout: 0.3"),
                       bus=slow)
-    result = jog_to(cli, profile)
+    result = jog_to(cli, profile, "0.1")  # a ramp of 2.2 s; 0.19 rad after 2.1 s
     assert result.exit_code == 1, result.output + result.stderr
     doc = json.loads(result.stdout)
     assert not doc["settled"] and doc["unsettled"] == ["axis_1"]
@@ -101,6 +101,7 @@ def test_a_home_interface_still_asks_for_the_homing_mode(cli, variant, homings):
                       bus=without_homing_method)
     result, doc = home(cli, profile)
     assert result.exit_code == 0, result.output + result.stderr
+    assert {v["outcome"] for v in doc["blocks"][0]["joints"].values()} == {"homed"}
     assert [m for m, _, _ in homings] == [6, 6]  # the drive's own method (its EDS: 35)
 
 
