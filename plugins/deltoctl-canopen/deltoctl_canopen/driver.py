@@ -462,7 +462,8 @@ class CanopenDriver(Driver):
         try:
             seconds = 0.0
             for joint, target in targets.items():
-                seconds = max(seconds, self._start_move(self._axis(joint), target, speed))
+                here = values.get(f"{joint}/position", target)
+                seconds = max(seconds, self._start_move(self._axis(joint), here, target, speed))
             start = time.monotonic()
             limit = self.profile.safety.home_timeout or seconds + 5.0
             while pending and time.monotonic() - start < limit and not self.halted.is_set():
@@ -490,17 +491,21 @@ class CanopenDriver(Driver):
 
     def _reached(self, axis: Axis) -> bool:
         """Target reached, as the drive says it now: the last word a TPDO brought says so,
-        and a word read by SDO (an answer to a request sent now) agrees; then the position
-        it stopped at is read."""
+        and a word read by SDO (an answer to a request sent now) agrees, its set-point
+        acknowledge cleared (the handshake of bit 4 done: the word is about the new
+        set-point); then the position it stopped at is read."""
         if not int(axis.values.get(0x6041, 0)) & codec.SW_TARGET_REACHED:
             return False
-        if not self.statusword(axis) & codec.SW_TARGET_REACHED:
+        word = self.statusword(axis)
+        if word & (codec.SW_TARGET_REACHED | codec.SW_SETPOINT_ACK) != codec.SW_TARGET_REACHED:
             return False
-        axis.values[0x6064] = self.sdo_read(axis, 0x6064)
+        if 0x6064 in axis.node.object_dictionary:
+            axis.values[0x6064] = self.sdo_read(axis, 0x6064)
         return True
 
-    def _start_move(self, axis: Axis, target: float, speed: float) -> float:
-        """The set-point given and acknowledged; how long the drive's ramp to it takes (s)."""
+    def _start_move(self, axis: Axis, here: float, target: float, speed: float) -> float:
+        """The set-point given and acknowledged; how long the drive's ramp to it from
+        ``here`` takes (s)."""
         from deltoctl_canopen.ramp import Ramp
 
         self.sdo_write(axis, 0x6060, 0, codec.MODE_PROFILE_POSITION)
@@ -508,7 +513,6 @@ class CanopenDriver(Driver):
         velocity = max(1, abs(axis.config.vel_to_dev(speed)))
         self.sdo_write(axis, 0x6081, 0, velocity)
         self.sdo_write(axis, 0x607A, 0, axis.config.to_dev(target))
-        here = int(self.sdo_read(axis, 0x6064))
         accel, decel = (int(self.sdo_read(axis, index)) if index in axis.node.object_dictionary
                         else 0 for index in (0x6083, 0x6084))
         self.controlword(axis, codec.CW_ENABLE | codec.CW_CHANGE_IMMEDIATELY)
@@ -521,8 +525,8 @@ class CanopenDriver(Driver):
                                   "set-point")
             time.sleep(0.002)
         self.controlword(axis, codec.CW_ENABLE | codec.CW_CHANGE_IMMEDIATELY)
-        return Ramp.plan(here, 0.0, axis.config.to_dev(target), velocity, accel or velocity,
-                         decel or accel or velocity, 0.0).seconds
+        return Ramp.plan(axis.config.to_dev(here), 0.0, axis.config.to_dev(target), velocity,
+                         accel or velocity, decel or accel or velocity, 0.0).seconds
 
     def _check_faults(self, joints: list[str]) -> None:
         if self.lost:
