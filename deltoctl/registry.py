@@ -36,7 +36,8 @@ GROUP, TRANSPORTS = entry_points.FAMILIES, entry_points.TRANSPORTS
 
 # what a verb may ask of a driver, beyond the lifecycle and read/write, and the driver
 # methods each one calls (a family declaring a capability must have them; "home" moves to
-# the home pose, and runs a joint's homing routine where its profile gives it one)
+# the home pose, and runs a joint's homing routine where its profile gives it one — a
+# ``home`` command interface — or its family says its device has one: ``homing_joints``)
 CAPABILITIES: dict[str, tuple[str, ...]] = {
     "identify": ("identify",), "detect": ("detect",), "home": ("move",), "jog": ("move",),
     "calibrate_ft": ("tare_ft",), "gpio": ("set_command",),
@@ -227,6 +228,10 @@ class Family:
     # "module:function" (profile, block) → None: reads a block written for one of its plugins
     # (their own params and tags) into deltoctl's model when a URDF is loaded
     import_block: str | None = None
+    # "module:function" (profile, block) → the names of the block's joints whose device runs
+    # a homing routine of its own (the driver's ``home``), as its configuration says; a joint
+    # with a ``home`` command interface has one whatever this says
+    homing_joints: str | None = None
 
     def __post_init__(self) -> None:
         unknown = self.capabilities - CAPABILITIES.keys()
@@ -262,6 +267,10 @@ class Family:
     def config_rule_table(self) -> dict[str, tuple[int | None, int | None, str | None]]:
         return dict(_load(self.config_rules)()) if self.config_rules else {}
 
+    def joints_with_homing(self, profile: Any, hw: Any) -> set[str]:
+        """The joints of block ``hw`` that its devices home by a routine of their own."""
+        return set(_load(self.homing_joints)(profile, hw)) if self.homing_joints else set()
+
     def show_address(self, address: int) -> str:
         return format(address, self.address_format)
 
@@ -275,8 +284,11 @@ def unimplemented(family: Family, cls: type) -> str:
     everything): each capability's methods must be its own, not the base class's refusal."""
     from deltoctl.core.driver import Driver
 
-    missing = [f"{capability} needs {method}()" for capability in sorted(family.capabilities)
-               for method in CAPABILITIES[capability]
+    needs = [(capability, method) for capability in sorted(family.capabilities)
+             for method in CAPABILITIES[capability]]
+    if family.homing_joints:  # it says which joints home by a routine: the driver runs it
+        needs.append(("homing_joints", "home"))
+    missing = [f"{capability} needs {method}()" for capability, method in needs
                if getattr(cls, method, None) is None
                or getattr(cls, method) is getattr(Driver, method, None)]
     if not missing:
@@ -342,6 +354,13 @@ def for_plugin(plugin: str) -> str | None:
 def of_block(family_name: str | None, plugin: str) -> Family | None:
     """A block's family: the one it names (or its profile names), else its plugin's."""
     return get(family_name or for_plugin(plugin))
+
+
+def homing_joints(profile: Any, hw: Any) -> set[str]:
+    """The joints of block ``hw`` whose family says its devices home them by a routine of
+    their own (its descriptor's ``homing_joints``)."""
+    family = of_block(profile.family_of(hw), hw.plugin)
+    return family.joints_with_homing(profile, hw) if family is not None else set()
 
 
 # -- what the families declare, merged ------------------------------------------------------

@@ -156,6 +156,7 @@ def plan_home(profile: Profile, hardware: Sequence[str] = (),
               joints: Sequence[str] = ()) -> HomePlan:
     """The homing plan of the selected blocks (or of ``joints`` only), each home pose within
     the envelope — checked before anyone is asked."""
+    from deltoctl import registry
     from deltoctl.core import motion
     from deltoctl.core.system import select_blocks
 
@@ -163,11 +164,13 @@ def plan_home(profile: Profile, hardware: Sequence[str] = (),
     for name in joints:
         if name not in known:
             raise InvalidInput(f"{profile.name} has no joint {name!r}" + _near(name, known))
-    chosen = [j for hw in select_blocks(profile, hardware) for j in hw.joints
-              if not joints or j.name in joints]
-    plan = HomePlan(profile.name, [j.name for j in chosen if j.command("home")])
+    blocks = select_blocks(profile, hardware)
+    chosen = [j for hw in blocks for j in hw.joints if not joints or j.name in joints]
+    # a routine: a home interface, or the family says the device homes the joint itself
+    homing = set().union(*(registry.homing_joints(profile, hw) for hw in blocks))
+    plan = HomePlan(profile.name, [j.name for j in chosen if j.command("home") or j.name in homing])
     for j in chosen:
-        if not j.command("home") and (j.command("effort") or j.command("position")) \
+        if j.name not in plan.routine and (j.command("effort") or j.command("position")) \
                 and j.mimic is None:
             plan.targets[j.name] = profile.safety.home_pose.get(j.name, 0.0)
             motion.check_move(profile, j, plan.targets[j.name], None, None, jog=False)

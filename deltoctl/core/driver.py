@@ -184,7 +184,8 @@ class Driver:
 
     def home(self, joints: list[str], force: bool = False,
              progress: HomeProgress | None = None) -> dict[str, str]:
-        """A homing routine (joints with a ``home`` command interface): joint → outcome."""
+        """A homing routine (joints with a ``home`` command interface, and those the family's
+        ``homing_joints`` names): joint → outcome."""
         raise Unsupported(f"{self.hw.name} has no homing routine")
 
     def tare_ft(self) -> None:

@@ -173,6 +173,15 @@ def test_a_capability_without_its_method_is_refused_at_registration():
         assert registry.unimplemented(family, family.driver_class()) == ""
 
 
+def test_a_family_naming_homing_joints_needs_a_homing_routine():
+    from dataclasses import replace
+
+    homing = replace(FAMILY, name="homingtoy", homing_joints="tests.toyfamily:FAMILY")
+    with pytest.raises(ValueError, match=r"homing_joints needs home\(\)"):
+        registry.register(homing)
+    assert registry.get("homingtoy") is None
+
+
 def test_a_capability_without_its_method_is_one_error_on_first_use(cli, toy, tmp_path,
                                                                     monkeypatch):
     # as a family found through an entry point: checked when its driver is first loaded

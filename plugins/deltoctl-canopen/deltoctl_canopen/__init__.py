@@ -23,6 +23,7 @@ FAMILY = Family(
     address_kind="node ID",
     capabilities=frozenset({"identify", "detect", "home", "jog", "registers", "config"}),
     import_block="deltoctl_canopen.nodes:import_block",
+    homing_joints="deltoctl_canopen.nodes:homing_joints",
     serve_options=(
         SimOption("missing", "joints", "Fault: a joint's node that never answers (repeatable)."),
         SimOption("wrong_identity", "int", "Fault: every node reports this product code "

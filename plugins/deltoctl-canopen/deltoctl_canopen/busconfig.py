@@ -62,6 +62,7 @@ class NodeConfig:
     rpdo: list[PdoConfig] = field(default_factory=list)
     heartbeat_producer: int = 0  # ms; 0: node guarding instead
     position_mode: int = 1
+    homing_timeout: int = 0  # s (homing_timeout_seconds); 0: the profile's home_timeout
     identity: dict[str, int] = field(default_factory=dict)  # vendor_id, product_code …
     line: int | None = None
 
@@ -191,6 +192,7 @@ class _Reader:
             self.pdos(name, "rpdo", merged.get("rpdo"), body),
             self.integer(name, merged, "heartbeat_producer", 0, 0, 65535, body),
             self.integer(name, merged, "position_mode", 1, -128, 127, body),
+            self.integer(name, merged, "homing_timeout_seconds", 0, 0, 3600, body),
             identity, getattr(body, "line", None))
 
     def integer(self, name: str, merged: dict, key: str, default: int, low: int, high: int,

@@ -2,8 +2,10 @@
 profile velocity, homing, the following error, and a fault to inject.
 
 Pure: every call takes the time (s, monotonic), so tests drive it without sleeping. Positions
-are in device units (increments), velocities in increments/s. The motion is a constant-speed
-ramp of the demand to each target; the actual position follows the demand, unless the axis is
+are in device units (increments), velocities in increments/s. The demand runs a trapezoidal
+ramp to each target at the profile velocity, acceleration and deceleration (0x6081, 0x6083,
+0x6084; homing at 0x6099 and 0x609A), and target reached (statusword bit 10) is set when it
+ends, exactly at the target; the actual position follows the demand, unless the axis is
 stalled (a fault the emulator injects): then the following error grows until it passes the
 window (0x6065) and the drive faults with 0x8611, as a real one does.
 """
@@ -25,6 +27,7 @@ from deltoctl_canopen.codec import (
     SW_SETPOINT_ACK,
     SW_TARGET_REACHED,
 )
+from deltoctl_canopen.ramp import Ramp
 
 SOD, READY, SWITCHED_ON, ENABLED = ("SWITCH ON DISABLED", "READY TO SWITCH ON", "SWITCHED ON",
                                     "OPERATION ENABLED")
@@ -33,8 +36,9 @@ POWERED = (READY, SWITCHED_ON, ENABLED, QUICK_STOP)
 FOLLOWING_ERROR = 0x8611  # EMCY / 0x603F: following error
 # what the drive keeps: (index, sub) → value, with the EDS's defaults applied at start
 PARAMS = {(0x605A, 0): 2, (0x6065, 0): 1000, (0x607A, 0): 0, (0x607C, 0): 0,
-          (0x6081, 0): 20000, (0x6083, 0): 100000, (0x6098, 0): 35, (0x6099, 1): 10000,
-          (0x6099, 2): 2000, (0x60FF, 0): 0, (0x607D, 1): -(1 << 31), (0x607D, 2): (1 << 31) - 1}
+          (0x6081, 0): 20000, (0x6083, 0): 100000, (0x6084, 0): 100000, (0x6098, 0): 35,
+          (0x6099, 1): 10000, (0x6099, 2): 2000, (0x609A, 0): 50000, (0x60FF, 0): 0,
+          (0x607D, 1): -(1 << 31), (0x607D, 2): (1 << 31) - 1}
 HOMING_METHODS = range(1, 38)
 
 
@@ -51,9 +55,7 @@ class Drive402:
         self.homing_error = False
         self._homing: float | None = None  # the home offset to take at the ramp's end
         self._ack = False
-        # the demand ramp: from p0 at t0 to p1 at speed v (increments/s)
-        self._p0 = self._p1 = 0.0
-        self._v, self._t0 = 0.0, now
+        self._ramp = Ramp.still(0.0, now)  # the demand's way to its target
         self._held: float | None = None  # a stalled axis's actual position
 
     # -- the object dictionary's view --------------------------------------------------------
@@ -82,35 +84,29 @@ class Drive402:
 
     # -- motion ------------------------------------------------------------------------------
     def demand(self, now: float) -> float:
-        if self._v <= 0:
-            return self._p1
-        span = abs(self._p1 - self._p0)
-        done = min(span, (now - self._t0) * self._v)
-        return self._p0 + (done if self._p1 >= self._p0 else -done)
+        return self._ramp.at(now)[0]
 
     def actual(self, now: float) -> float:
         return self._held if self._held is not None else self.demand(now)
 
     def moving(self, now: float) -> bool:
-        return self.demand(now) != self._p1
+        return now < self._ramp.end
 
     def velocity(self, now: float) -> float:
-        if self._held is not None or not self.moving(now):
-            return 0.0
-        return self._v if self._p1 >= self._p0 else -self._v
+        return 0.0 if self._held is not None else self._ramp.at(now)[1]
 
-    def _ramp(self, target: float, speed: float, now: float) -> None:
-        here = self.demand(now)
-        self._p0, self._p1, self._t0 = here, target, now
-        self._v = max(1.0, abs(speed))
+    def _move(self, target: float, speed: float, now: float, homing: bool = False) -> None:
+        """A ramp from where the demand is, at the speed it has, to ``target``."""
+        here, moving_at = self._ramp.at(now)
+        accel, decel = (self.params[0x609A, 0],) * 2 if homing else \
+            (self.params[0x6083, 0], self.params[0x6084, 0])
+        self._ramp = Ramp.plan(here, moving_at, target, speed, accel, decel, now)
         if self.stalled and self._held is None:
             self._held = here
 
     def _hold(self, now: float) -> None:
         """Stop where the demand is now."""
-        here = self.demand(now)
-        self._p0 = self._p1 = here
-        self._v = 0.0
+        self._ramp = Ramp.still(self.demand(now), now)
 
     def _velocity(self, now: float) -> None:
         """Profile velocity: a ramp far away at the target velocity, until the next command."""
@@ -119,14 +115,12 @@ class Drive402:
             self._hold(now)
         else:
             far = self.params[0x607D, 2 if speed > 0 else 1]
-            self._ramp(float(far), speed, now)
+            self._move(float(far), speed, now)
 
     def update(self, now: float) -> None:
         """What time changes: a homing ramp that ended, a following error past the window."""
         if self._homing is not None and not self.moving(now) and self._held is None:
-            shift = self._homing - self.demand(now)
-            self._p0 += shift
-            self._p1 += shift
+            self._ramp = self._ramp.shifted(self._homing - self.demand(now))
             self._homing = None
             self.homed = True
         if self.state == ENABLED and self._held is not None:
@@ -189,9 +183,9 @@ class Drive402:
         if self.mode == MODE_PROFILE_POSITION:
             target = float(self.params[0x607A, 0])
             if cw & CW_RELATIVE:
-                target += self._p1
+                target += self._ramp.target
             low, high = self.params[0x607D, 1], self.params[0x607D, 2]
-            self._ramp(min(max(target, low), high), self.params[0x6081, 0], now)
+            self._move(min(max(target, low), high), self.params[0x6081, 0], now)
         elif self.mode == MODE_HOMING:
             self._home(now)
         elif self.mode == MODE_PROFILE_VELOCITY:
@@ -209,14 +203,14 @@ class Drive402:
             self.update(now)
         else:  # a search for the switch and the index, here at device zero
             self._homing = offset
-            self._ramp(0.0, self.params[0x6099, 1], now)
+            self._move(0.0, self.params[0x6099, 1], now, homing=True)
 
     def fault(self, code: int, now: float) -> None:
         """A drive fault: motion stops, Fault, the error code, an EMCY."""
         self._hold(now)
         if self._held is not None:
             self._held = self.actual(now)
-            self._p0 = self._p1 = self._held
+            self._ramp = Ramp.still(self._held, now)
         self.state, self.error_code = FAULT, code
         self._homing = None
         if self.on_fault is not None:

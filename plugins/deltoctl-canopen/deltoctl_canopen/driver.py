@@ -446,49 +446,75 @@ class CanopenDriver(Driver):
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:
         """Profile position: mode 1, enabled, the profile velocity and target written, a new
-        set-point (controlword bit 4) acknowledged; then the position read until it is
-        within tolerance, the timeout passes or the System halts the move."""
-        from deltoctl.core.motion import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
+        set-point (controlword bit 4) acknowledged (statusword bit 12); then done when each
+        drive says target reached (bit 10), read back by SDO so a word sent before the
+        set-point cannot end it, and its position read then. The move's time is the
+        profile's ``home_timeout``, else its ramp's own (the trapezoid of the profile
+        velocity and the drive's acceleration) and 5 s; when it runs out, or the System halts
+        the move, the joints not there are unsettled."""
+        from deltoctl.core.motion import DEFAULT_VELOCITY
 
-        safety = self.profile.safety
-        tolerance = safety.home_tolerance or DEFAULT_TOLERANCE
-        timeout = safety.home_timeout or 5.0
         speed = velocity or DEFAULT_VELOCITY
         values = self.read()
         distance = max((abs(t - values.get(f"{j}/position", t)) for j, t in targets.items()),
                        default=0.0)
+        pending = set(targets)
         try:
+            seconds = 0.0
             for joint, target in targets.items():
-                self._start_move(self._axis(joint), target, speed)
+                here = values.get(f"{joint}/position", target)
+                seconds = max(seconds, self._start_move(self._axis(joint), here, target, speed))
             start = time.monotonic()
-            errors: dict[str, float] = {}
-            limit = distance / speed + timeout
-            while time.monotonic() - start < limit and not self.halted.is_set():
+            limit = self.profile.safety.home_timeout or seconds + 5.0
+            while pending and time.monotonic() - start < limit and not self.halted.is_set():
                 self.start_read()
                 values = self.read()
                 self._check_faults(list(targets))
                 if self.on_cycle is not None:
                     self.on_cycle(time.time_ns(), values,
                                   {j: (t, speed, NAN) for j, t in targets.items()})
-                errors = {j: abs(t - values.get(f"{j}/position", float("inf")))
-                          for j, t in targets.items()}
-                worst = max(errors.values(), default=0.0)
+                pending -= {j for j in pending if self._reached(self.axes[j])}
                 if progress:
+                    worst = max(abs(t - values.get(f"{j}/position", t))
+                                for j, t in targets.items())
                     progress(max(0.0, 1.0 - worst / (distance or 1.0)))
-                if worst <= tolerance:
-                    return MoveResult(True, time.monotonic() - start, errors, [])
-                time.sleep(0.01)
+                if pending:
+                    time.sleep(0.01)
         except BaseException:
             self.stop()
             raise
-        return MoveResult(False, time.monotonic() - start, errors,
-                          [j for j, e in errors.items() if e > tolerance])
+        self._store()
+        errors = {j: abs(t - self.values.get(f"{j}/position", float("inf")))
+                  for j, t in targets.items()}
+        return MoveResult(not pending, time.monotonic() - start, errors,
+                          [j for j in targets if j in pending])
 
-    def _start_move(self, axis: Axis, target: float, speed: float) -> None:
+    def _reached(self, axis: Axis) -> bool:
+        """Target reached, as the drive says it now: the last word a TPDO brought says so,
+        and a word read by SDO (an answer to a request sent now) agrees, its set-point
+        acknowledge cleared (the handshake of bit 4 done: the word is about the new
+        set-point); then the position it stopped at is read."""
+        if not int(axis.values.get(0x6041, 0)) & codec.SW_TARGET_REACHED:
+            return False
+        word = self.statusword(axis)
+        if word & (codec.SW_TARGET_REACHED | codec.SW_SETPOINT_ACK) != codec.SW_TARGET_REACHED:
+            return False
+        if 0x6064 in axis.node.object_dictionary:
+            axis.values[0x6064] = self.sdo_read(axis, 0x6064)
+        return True
+
+    def _start_move(self, axis: Axis, here: float, target: float, speed: float) -> float:
+        """The set-point given and acknowledged; how long the drive's ramp to it from
+        ``here`` takes (s)."""
+        from deltoctl_canopen.ramp import Ramp
+
         self.sdo_write(axis, 0x6060, 0, codec.MODE_PROFILE_POSITION)
         self.enable(axis)
-        self.sdo_write(axis, 0x6081, 0, max(1, abs(axis.config.vel_to_dev(speed))))
+        velocity = max(1, abs(axis.config.vel_to_dev(speed)))
+        self.sdo_write(axis, 0x6081, 0, velocity)
         self.sdo_write(axis, 0x607A, 0, axis.config.to_dev(target))
+        accel, decel = (int(self.sdo_read(axis, index)) if index in axis.node.object_dictionary
+                        else 0 for index in (0x6083, 0x6084))
         self.controlword(axis, codec.CW_ENABLE | codec.CW_CHANGE_IMMEDIATELY)
         self.controlword(axis, codec.CW_ENABLE | codec.CW_NEW_SETPOINT |
                          codec.CW_CHANGE_IMMEDIATELY)
@@ -499,6 +525,8 @@ class CanopenDriver(Driver):
                                   "set-point")
             time.sleep(0.002)
         self.controlword(axis, codec.CW_ENABLE | codec.CW_CHANGE_IMMEDIATELY)
+        return Ramp.plan(axis.config.to_dev(here), 0.0, axis.config.to_dev(target), velocity,
+                         accel or velocity, decel or accel or velocity, 0.0).seconds
 
     def _check_faults(self, joints: list[str]) -> None:
         if self.lost:
@@ -516,11 +544,13 @@ class CanopenDriver(Driver):
     def home(self, joints: list[str], force: bool = False,
              progress: HomeProgress | None = None) -> dict[str, str]:
         """Homing mode (6) with the method, offset and speeds the start-up wrote (0x6098,
-        0x607C, 0x6099), one axis at a time; then back to profile position."""
-        timeout = self.profile.safety.home_timeout or 30.0
+        0x607C, 0x6099), one axis at a time, as ros2_canopen's init runs it: controlword bit
+        4 starts it, statusword bits 12 and 10 say home is attained, bit 13 a homing error;
+        then back to profile position. Method 0 ("no homing") leaves the axis as it is."""
         outcome = {}
         for joint in joints:
             axis = self._axis(joint)
+            timeout = axis.config.homing_timeout or self.profile.safety.home_timeout or 30.0
             if progress:
                 progress(joint, "homing", 0.0)
             try:
@@ -533,6 +563,9 @@ class CanopenDriver(Driver):
         return outcome
 
     def _home_one(self, axis: Axis, timeout: float) -> str:
+        method = self.sdo_read(axis, 0x6098)
+        if method == 0:
+            return "not homed: method 0 (no homing)"
         self.sdo_write(axis, 0x6060, 0, codec.MODE_HOMING)
         self.enable(axis)
         self.controlword(axis, codec.CW_ENABLE)
@@ -542,7 +575,6 @@ class CanopenDriver(Driver):
             while time.monotonic() < deadline and not self.halted.is_set():
                 word = self.statusword(axis)
                 if word & codec.SW_HOMING_ERROR:
-                    method = self.sdo_read(axis, 0x6098)
                     raise DeviceError(f"{axis.joint} (node {axis.id}): homing error "
                                       f"(method {method})")
                 if codec.state_of(word) == "FAULT":
@@ -554,7 +586,10 @@ class CanopenDriver(Driver):
         finally:
             self.controlword(axis, codec.CW_ENABLE)
             self.sdo_write(axis, 0x6060, 0, codec.MODE_PROFILE_POSITION)
-        return "halted" if self.halted.is_set() else "timed out"
+        if self.halted.is_set():
+            return "halted"
+        raise DeviceError(f"{axis.joint} (node {axis.id}) did not attain home within "
+                          f"{timeout:g} s (homing method {method})")
 
     def stop(self) -> None:
         """Quick stop to every axis this driver enabled: one frame each by RPDO."""

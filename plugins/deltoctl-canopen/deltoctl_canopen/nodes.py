@@ -22,6 +22,7 @@ if TYPE_CHECKING:
 
 PROFILES = Path(__file__).resolve().parent / "profiles"
 GENERIC_EDS = PROFILES / "generic-cia402.eds"
+HOMING_METHOD = 0x6098
 
 
 def bus_file(profile: Profile, hw: Hardware) -> Path | None:
@@ -56,6 +57,20 @@ def block_nodes(profile: Profile, hw: Hardware) -> dict[str, NodeConfig]:
         if node is not None:
             found[joint.name] = replace(node, dcf=node.dcf or _block_eds(profile, hw))
     return found
+
+
+def homing_joints(profile: Profile, hw: Hardware) -> list[str]:
+    """The joints whose node's start-up writes a homing method (0x6098 in its ``sdo:``
+    list): ``home`` runs the drive's homing mode for them, as ros2_canopen's init does.
+    Method 0 is CiA 402's "no homing": such a joint goes to the home pose."""
+    return [joint for joint, node in block_nodes(profile, hw).items()
+            if _homing_method(node) not in (None, 0)]
+
+
+def _homing_method(node: NodeConfig) -> int | float | None:
+    """The homing method the node's start-up writes last, if any."""
+    methods = [write.value for write in node.sdo if write.index == HOMING_METHOD]
+    return methods[-1] if methods else None
 
 
 def _block_eds(profile: Profile, hw: Hardware) -> Path:

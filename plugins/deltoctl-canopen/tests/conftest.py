@@ -3,6 +3,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +15,7 @@ from typer.testing import CliRunner
 from deltoctl_canopen.nodes import GENERIC_EDS, PROFILES
 
 PROFILE = PROFILES / "cia402-two-axis.yaml"
+BUS = PROFILES / "cia402-two-axis.bus.yml"
 DELTOCTL = [sys.executable, "-m", "deltoctl"]
 
 
@@ -72,3 +74,18 @@ def client(drives):
     network.connect()
     yield network
     network.disconnect()
+
+
+@pytest.fixture
+def variant(tmp_path):
+    """The two-axis profile written anew beside its bus file and EDS, each text changed by
+    ``profile`` and ``bus`` (functions of the shipped text)."""
+
+    def make(profile=lambda text: text, bus=lambda text: text) -> Path:
+        shutil.copy(GENERIC_EDS, tmp_path)
+        (tmp_path / BUS.name).write_text(bus(BUS.read_text()))
+        out = tmp_path / PROFILE.name
+        out.write_text(profile(PROFILE.read_text()))
+        return out
+
+    return make

@@ -3,6 +3,8 @@ model behind it."""
 
 import time
 
+import pytest
+
 from deltoctl_canopen import codec
 from deltoctl_canopen.drive import FAULT, FOLLOWING_ERROR, Drive402
 from deltoctl_canopen.nodes import GENERIC_EDS
@@ -74,21 +76,35 @@ def test_state_machine_and_fault_reset():
     assert drive.state == "SWITCH ON DISABLED" and drive.error_code == 0
 
 
-def test_profile_position():
+def test_profile_position_ramps_at_the_profile_velocity_and_acceleration():
     drive = Drive402(0.0)
     enabled(drive)
     drive.write(0x607A, 0, 1000, 0.0)
-    drive.write(0x6081, 0, 2000, 0.0)
+    drive.write(0x6081, 0, 2000, 0.0)  # increments/s
+    drive.write(0x6083, 0, 10000, 0.0)  # increments/s²: 0.2 s to full speed
+    drive.write(0x6084, 0, 10000, 0.0)
     drive.command(0x1F, 0.0)
     assert drive.statusword(0.0) & codec.SW_SETPOINT_ACK
-    assert drive.read(0x6064, 0, 0.25) == 500
-    assert not drive.statusword(0.25) & codec.SW_TARGET_REACHED
-    assert drive.read(0x6064, 0, 1.0) == 1000
-    assert drive.statusword(1.0) & codec.SW_TARGET_REACHED
+    assert drive.read(0x6064, 0, 0.1) == 50  # accelerating: a·t²/2
+    assert drive.read(0x606C, 0, 0.1) == 1000
+    assert drive.read(0x6064, 0, 0.3) == 400  # 200 to full speed, then 2000/s
+    assert not drive.statusword(0.69) & codec.SW_TARGET_REACHED  # braking (ends at 0.7 s)
+    assert drive.read(0x6064, 0, 0.7) == 1000
+    assert drive.statusword(0.7) & codec.SW_TARGET_REACHED
     drive.command(0x0F, 1.0)
     drive.write(0x607A, 0, 500, 1.0)
     drive.command(0x5F, 1.0)  # relative
     assert drive.read(0x6064, 0, 5.0) == 1500
+
+
+def test_a_new_set_point_while_moving_brakes_and_comes_back():
+    from deltoctl_canopen.ramp import Ramp
+
+    ramp = Ramp.plan(0.0, 2000.0, -100.0, 2000, 10000, 10000, 0.0)  # 200 to stop
+    positions = [ramp.at(t / 100)[0] for t in range(0, 200)]
+    assert max(positions) == pytest.approx(200, abs=1)  # it stops past, then turns
+    assert ramp.at(ramp.end) == (-100.0, 0.0)
+    assert min(positions) >= -100 - 1e-9  # never beyond the target
 
 
 def test_homing_current_position_and_error():

@@ -84,6 +84,8 @@ def test_flat_layout_from_a_urdf(tmp_path, cli):
     ("joint_1:\n  node_id: 2\n  colour: red\n", "unknown key colour", 3),
     ("nodes:\n  a: {node_id: 2}\n  b: {node_id: 2}\n", "node_id 2 is a's too", 3),
     ("joint_1:\n  node_id: 2\n  sdo:\n    - {index: 0x6081, value: nope}\n", "sdo item 1", 4),
+    ("joint_1:\n  node_id: 2\n  homing_timeout_seconds: -1\n",
+     "homing_timeout_seconds must be an integer 0 to 3600", 3),
 ])
 def test_bad_bus_files(tmp_path, text, words, line):
     path = tmp_path / "bus.yml"
@@ -91,6 +93,22 @@ def test_bad_bus_files(tmp_path, text, words, line):
     with pytest.raises(ProfileError) as caught:
         load_bus(path)
     assert words in caught.value.message and f"bus.yml:{line}" in str(caught.value)
+
+
+def test_the_joints_whose_bus_file_gives_a_homing_method_home_by_the_drive(tmp_path):
+    from deltoctl.profile.catalog import load_profile
+
+    from deltoctl_canopen.nodes import homing_joints
+
+    (tmp_path / "generic-cia402.eds").write_bytes(GENERIC_EDS.read_bytes())
+    (tmp_path / "bus.yml").write_text(FLAT.replace(  # joint_1: method 0, "no homing"
+        "value: 4000}", "value: 4000}\n    - {index: 0x6098, sub_index: 0, value: 0}")
+        + "  homing_timeout_seconds: 7\n  sdo:\n    - {index: 0x6098, sub_index: 0, value: 17}\n")
+    assert load_bus(tmp_path / "bus.yml").nodes["joint_2"].homing_timeout == 7
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(URDF)
+    profile = load_profile(str(urdf))
+    assert homing_joints(profile, profile.hardware[0]) == ["joint2"]
 
 
 @pytest.mark.parametrize("edit, words, line", [
