@@ -154,7 +154,7 @@ def effect(path: str) -> str:
 
 
 def describe(path: str) -> str:
-    """The effect of a command in words, for its help: ``reads the robot; moves it with
+    """The effect of a command in words, for its help: ``reads the robot; moves with
     --yes/-y``."""
     entry = lookup(path)
     if entry is None:

@@ -144,6 +144,21 @@ def test_the_effect_of_an_option_is_in_the_table_and_in_help():
     assert verbs.effect(verbs.Command("spin", {"--yes"})) == verbs.MOVES  # undeclared
 
 
+def test_the_callers_confirmation_follows_the_parse():
+    """A fleet run asks before motion only for a line that moves: `report` reads."""
+    from deltoctl.fleet.run import confirmed
+
+    asked: list[bool] = []
+
+    def ask() -> bool:
+        asked.append(True)
+        return True
+
+    assert confirmed([["report", "--json"]], ask) == [["report", "--json"]] and not asked
+    lines = [["report", "-y"], ["identify"]]
+    assert confirmed(lines, ask) == [["--yes", "report", "-y"], ["identify"]] and asked
+
+
 def test_a_verbs_help_says_its_effect(cli):
     out = cli("report", "--help").stdout
     assert "Effect: reads the robot; moves with --yes/-y." in " ".join(out.split())

@@ -82,9 +82,11 @@ def test_a_report_reads_for_an_unauthenticated_peer_and_moves_only_with_yes(agen
     """What a command line does is its parse: `report` reads (it runs), `report --yes` and
     `-y report` would move the joints (refused without mTLS)."""
     code, out, err = call(agent, ["report", "--json", "-o", "acceptance.html"])
-    assert code in (0, 3), err
     doc = json.loads(out)["result"]
-    assert doc["verdict"] in ("pass", "warn") and not doc["failed"]
+    assert doc["kind"] == "deltoctl_report" and "refused" not in err
+    # it ran: 0 or 3, or 1 when a loaded machine misses one of the profile's link timings
+    assert code in (0, 3) or (code == 1 and all(f.startswith("link.") for f in doc["failed"]))
+    assert [c["verdict"] for c in doc["checks"] if c["id"] == "motion"] == ["skip"]
     for argv in (["report", "--yes"], ["-y", "report"], ["report", "-qy", "--json"]):
         code, _, err = call(agent, argv)
         assert code == 5, err

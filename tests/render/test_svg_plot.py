@@ -68,3 +68,14 @@ def test_ticks_are_round_and_cover_the_range():
     ticks = nice_ticks(-0.13, 0.07)
     assert ticks[0] >= -0.13 and ticks[-1] <= 0.07 and 0.0 in ticks
     assert nice_ticks(3, 3) == [3] and nice_ticks(math.nan, 1) == []
+
+
+def test_every_point_lies_in_the_plot_area():
+    t = [i * 0.01 for i in range(200)]
+    svg = parse(figure("p", "rad", [("a", t, [math.sin(x * 7) * 3 for x in t]),
+                                    ("b", t, [-5.0 + x for x in t])]))
+    width, height = (float(v) for v in svg.get("viewBox").split()[2:])
+    for path in svg.findall(f"{SVG}path"):
+        numbers = path.get("d").replace("M", " ").replace("L", " ").split()
+        xs, ys = [float(v) for v in numbers[::2]], [float(v) for v in numbers[1::2]]
+        assert 0 <= min(xs) and max(xs) <= width and 0 <= min(ys) and max(ys) <= height
