@@ -78,4 +78,4 @@ def test_every_point_lies_in_the_plot_area():
     for path in svg.findall(f"{SVG}path"):
         numbers = path.get("d").replace("M", " ").replace("L", " ").split()
         xs, ys = [float(v) for v in numbers[::2]], [float(v) for v in numbers[1::2]]
-        assert 0 <= min(xs) and max(xs) <= width and 0 <= min(ys) and max(ys) <= height
+        assert min(xs) >= 0 and max(xs) <= width and min(ys) >= 0 and max(ys) <= height
