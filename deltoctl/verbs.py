@@ -3,8 +3,10 @@ it, what it does to the robot (reads, actuates an output or a setting, moves a j
 a robot's agent runs it for a remote caller, and the example its help shows.
 
 The CLI loads verbs and teaches their help from this table; the fleet agent judges a remote
-command line by it. Fail-closed: a command whose effect is not declared here counts as one that
-moves the robot. No typer or click here: the fleet reads the table without loading the CLI,
+command line by it. A command's effect may depend on its options (``report`` reads, and moves
+the joints with ``--yes``): the options a command line gives, as the CLI parses them, raise its
+effect. Fail-closed: a command whose effect is not declared here counts as one that moves the
+robot. No typer or click here: the fleet reads the table without loading the CLI,
 and finds which command a command line runs through the resolver the CLI provides
 (``provide_resolver``), the very parse that will run it.
 """
@@ -12,25 +14,43 @@ and finds which command a command line runs through the resolver the CLI provide
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 
 READS, ACTUATES, MOVES = "reads", "actuates", "moves"
+_RANK = {READS: 0, ACTUATES: 1, MOVES: 2}  # anything else ranks as MOVES
 UNRESOLVED = "?"  # the path of a command line no resolver could read: it counts as moving
 
 
 class Verb:
     """A verb or a sub-command. A group's own effect is what it does with no sub-command
-    (show its help). (A plain class: the table is read at every start-up.)"""
+    (show its help). ``when``: an option's spellings (``("--yes", "-y")``, global options
+    too) → the effect of the command when it is given. (A plain class: the table is read at
+    every start-up.)"""
 
-    __slots__ = ("effect", "example", "module", "remote", "subs")
+    __slots__ = ("effect", "example", "module", "remote", "subs", "when")
 
     def __init__(self, effect: str, example: str = "", module: str = "", remote: bool = True,
-                 subs: Mapping[str, Verb] | None = None) -> None:
+                 subs: Mapping[str, Verb] | None = None,
+                 when: Mapping[tuple[str, ...], str] | None = None) -> None:
         self.effect = effect
         self.example = example
         self.module = module  # top-level verbs: the deltoctl.cli module whose register(app) adds it
         self.remote = remote
         self.subs: Mapping[str, Verb] = subs or {}
+        self.when: Mapping[tuple[str, ...], str] = when or {}
+
+    def effects(self) -> frozenset[str]:
+        """Every effect the command may have, with or without its options."""
+        return frozenset((self.effect, *self.when.values()))
+
+    def effect_given(self, given: Collection[str]) -> str:
+        """The effect with the options ``given`` (their spellings): the strongest of its own
+        and of theirs."""
+        found = [e for spellings, e in self.when.items() if set(spellings) & set(given)]
+        return max((self.effect, *found), key=lambda e: _RANK.get(e, 2))
+
+
+YES = ("--yes", "-y")  # the global option that confirms motion without asking
 
 
 TABLE: dict[str, Verb] = {
@@ -71,8 +91,8 @@ TABLE: dict[str, Verb] = {
     # with --device it moves the robot along the recording
     "replay": Verb(MOVES, "deltoctl replay fault.mcap --tolerance 1deg --json", "replay_cmd"),
     # the acceptance sequence: with --yes its motion checks move the joints
-    "report": Verb(MOVES, "deltoctl -p dg-5f-right report -o acceptance.html --record 5",
-                   "report_cmd"),
+    "report": Verb(READS, "deltoctl -p dg-5f-right report -o acceptance.html --record 5",
+                   "report_cmd", when={YES: MOVES}),
     "torque": Verb(ACTUATES, "deltoctl -p mh5 torque off left_arm", "servo_cmd"),
     "reboot": Verb(ACTUATES, "deltoctl -p mh5 reboot head_y", "servo_cmd"),
     "register": Verb(READS, "deltoctl -p mh5 register get head_y present_temperature",
@@ -112,10 +132,40 @@ def lookup(path: str) -> Verb | None:
     return entry
 
 
+class Command(str):
+    """A command path (``gpio set``) as a command line runs it: the string is the path, and
+    ``given`` the spellings of the options that command line gives (``--yes``, ``-y``)."""
+
+    given: frozenset[str]
+
+    def __new__(cls, path: str, given: Collection[str] = ()) -> Command:
+        command = super().__new__(cls, path)
+        command.given = frozenset(given)
+        return command
+
+
 def effect(path: str) -> str:
-    """What a command does to the robot; MOVES for one the table does not declare."""
+    """What a command does to the robot — with a Command, as its options make it; MOVES for
+    one the table does not declare."""
     entry = lookup(path)
-    return entry.effect if entry is not None else MOVES
+    if entry is None:
+        return MOVES
+    return entry.effect_given(path.given) if isinstance(path, Command) else entry.effect
+
+
+def describe(path: str) -> str:
+    """The effect of a command in words, for its help: ``reads the robot; moves with
+    --yes/-y``."""
+    entry = lookup(path)
+    if entry is None:
+        return "moves the robot (not declared)"
+    words = {READS: "reads the robot", ACTUATES: "actuates an output or a setting",
+             MOVES: "moves the robot"}
+    text = words.get(entry.effect, words[MOVES])
+    for spellings, then in entry.when.items():
+        if then != entry.effect:
+            text += f"; {then if then in _RANK else MOVES} with {'/'.join(spellings)}"
+    return text
 
 
 def remote(path: str) -> bool:
@@ -125,8 +175,9 @@ def remote(path: str) -> bool:
 
 
 class Effects:
-    """The command paths of some effects, as a set: ``"jog" in MOTION``. A path the table
-    does not declare is in every set that holds MOVES (fail-closed)."""
+    """The command paths of some effects, as a set: ``"jog" in MOTION``; a Command (what a
+    command line runs) is in it by the effect its options give it. A path the table does not
+    declare is in every set that holds MOVES (fail-closed)."""
 
     def __init__(self, *effects: str) -> None:
         self.effects = frozenset(effects)
@@ -135,8 +186,8 @@ class Effects:
         return isinstance(path, str) and effect(path) in self.effects
 
     def declared(self) -> frozenset[str]:
-        """The declared paths of these effects."""
-        return frozenset(p for p, v in walk() if v.effect in self.effects)
+        """The declared paths that may have one of these effects (with some option)."""
+        return frozenset(p for p, v in walk() if v.effects() & self.effects)
 
 
 def walk() -> list[tuple[str, Verb]]:
@@ -165,21 +216,25 @@ def examples() -> dict[str, str]:
 
 # -- which command a command line runs --------------------------------------------------------
 
-Resolver = Callable[[Sequence[str]], tuple[str, ...]]
+# a command line → (its command path, the spellings of the options it gives)
+Resolver = Callable[[Sequence[str]], tuple[tuple[str, ...], Collection[str]]]
 _resolver: list[Resolver] = []
 _lock = threading.Lock()  # the CLI's command tree loads verbs as it resolves: one at a time
 
 
 def provide_resolver(resolver: Resolver) -> None:
-    """The CLI's resolution of a command line into its command path (``("gpio", "set")``):
-    click's own, as the command line will be parsed when it runs."""
+    """The CLI's resolution of a command line into its command path (``("gpio", "set")``)
+    and the options it gives, global ones too (``{"--yes", "-y"}``): click's own, as the
+    command line will be parsed when it runs."""
     _resolver[:] = [resolver]
 
 
-def resolve(args: Sequence[str]) -> str:
-    """The command path (``gpio set``) a command line runs, by the CLI's own parse; an empty
-    string when it names no verb, UNRESOLVED without a CLI to resolve it."""
+def resolve(args: Sequence[str]) -> Command:
+    """The command (``gpio set``) a command line runs and the options it gives, by the CLI's
+    own parse; an empty path when it names no verb, UNRESOLVED without a CLI to resolve
+    it."""
     if not _resolver:
-        return UNRESOLVED
+        return Command(UNRESOLVED)
     with _lock:
-        return " ".join(_resolver[0](args))
+        path, given = _resolver[0](args)
+    return Command(" ".join(path), given)

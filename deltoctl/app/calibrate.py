@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from deltoctl.core.system import System
 
 AXES = ("force.x", "force.y", "force.z", "torque.x", "torque.y", "torque.z")
+DRIFT_AXES = ("fx", "fy", "fz", "tx", "ty", "tz")  # AXES as the drift checks name them
 RATE = 200.0  # Hz between two samples of a check
 
 
@@ -144,6 +145,46 @@ def _mean_force(system: System, sensor: str, count: int) -> tuple[float, ...]:
     return tuple(statistics.fmean(samples[a]) for a in AXES[:3])
 
 
+def _means(system: System, sensors: list[str], count: int) -> dict[str, tuple[float, ...]]:
+    """Each sensor's mean on every axis (AXES) over ``count`` samples."""
+    samples = _collect(system, sensors, count)
+    return {s: tuple(statistics.fmean(samples[s][a]) for a in AXES) for s in sensors}
+
+
+def drift_limits(force: float, torque: float, given: dict[str, float] | None = None
+                 ) -> dict[str, float]:
+    """The largest drift allowed per axis (DRIFT_AXES): the force tolerance (N) on fx, fy,
+    fz, the torque tolerance (N·m) on tx, ty, tz, and the ones ``given``."""
+    limits = {a: force if a.startswith("f") else torque for a in DRIFT_AXES}
+    for axis, value in (given or {}).items():
+        if axis not in limits:
+            raise InvalidInput(f"--drift-limit {axis}: the axes are {', '.join(DRIFT_AXES)}")
+        if not (math.isfinite(value) and value > 0):
+            raise InvalidInput(f"--drift-limit {axis}={value:g}: a positive number")
+        limits[axis] = value
+    return limits
+
+
+def drift_checks(system: System, sensors: list[str], watch: float, limits: dict[str, float],
+                 samples: int) -> list[dict[str, Any]]:
+    """How far each sensor's reading moves in ``watch`` seconds, axis by axis: a check each
+    (``SENSOR.drift.fz``), the change against ± its limit, the rate in its note."""
+    from deltoctl.app.checks import check
+
+    start = _means(system, sensors, samples)
+    time.sleep(watch)
+    end = _means(system, sensors, samples)
+    checks = []
+    for s in sensors:
+        for axis, name, before, after in zip(DRIFT_AXES, AXES, start[s], end[s]):
+            unit = "N" if axis.startswith("f") else "N·m"
+            drift, limit = after - before, limits[axis]
+            checks.append(check(f"{s}.drift.{axis}", f"{name} drift over {watch:g} s",
+                                round(drift, 5), unit, -limit, limit,
+                                note=f"{drift / watch:+.4f} {unit}/s"))
+    return checks
+
+
 def _settled_load(system: System, sensor: str, least: float,
                   timeout: float) -> tuple[float, ...]:
     """The mean force once a load of at least ``least`` N holds still for SETTLE_WINDOW."""
@@ -168,7 +209,8 @@ def _settled_load(system: System, sensor: str, least: float,
                            "more time")
 
 
-def check_verify(mass: float | None, watch: float | None, timeout: float) -> None:
+def check_verify(mass: float | None, watch: float | None, timeout: float,
+                 drift_limit: dict[str, float] | None = None) -> None:
     if mass is not None and not (math.isfinite(mass) and 0.01 <= mass <= 50):
         raise InvalidInput(f"--mass must be 0.01 to 50 kg, got {mass:g}")
     if watch is not None and not (math.isfinite(watch) and 0 < watch <= 3600):
@@ -177,19 +219,22 @@ def check_verify(mass: float | None, watch: float | None, timeout: float) -> Non
     if not (math.isfinite(timeout) and 0 < timeout <= 3600):
         raise InvalidInput(f"--timeout must be a positive number of seconds up to 3600, "
                            f"got {timeout:g}")
+    drift_limits(1.0, 1.0, drift_limit)
 
 
 def verify_ft(system: System, tare: dict[str, Any], mass: float | None = None,
               sensor: str | None = None, watch: float | None = None,
               ask: Callable[[str], None] | None = None, timeout: float = 60.0,
-              samples: int = 50) -> list[dict[str, Any]]:
+              samples: int = 50, drift_limit: dict[str, float] | None = None
+              ) -> list[dict[str, Any]]:
     """Checks after ``tare_ft``: each sensor's residual force and torque against the
-    tolerance; with ``watch``, how far the residual force drifts in that many seconds (against
-    the same tolerance); with ``mass`` (kg), the load read once the operator (``ask``) put it
-    on ``sensor`` (the first F/T sensor by default) against its weight."""
+    tolerance; with ``watch``, how far each axis drifts in that many seconds (against the
+    force or torque tolerance, or its ``drift_limit``: ``{"fz": 0.1}``); with ``mass`` (kg),
+    the load read once the operator (``ask``) put it on ``sensor`` (the first F/T sensor by
+    default) against its weight."""
     from deltoctl.app.checks import check
 
-    check_verify(mass, watch, timeout)
+    check_verify(mass, watch, timeout, drift_limit)
     tolerance = tare["blocks"][0]["tolerance"]
     sensors = [s for block in tare["blocks"] for s in block["sensors"]]
     checks = []
@@ -200,14 +245,8 @@ def verify_ft(system: System, tare: dict[str, Any], mass: float | None = None,
                        check(f"{name}.residual_torque", "residual torque after the tare",
                              r["residual_torque_nm"], "N·m", None, tolerance["torque_nm"])]
     if watch is not None:
-        start = {s: _mean_force(system, s, samples) for s in sensors}
-        time.sleep(watch)
-        for s in sensors:
-            end = _mean_force(system, s, samples)
-            drift = math.dist(start[s], end)
-            checks.append(check(f"{s}.drift", f"residual force drift over {watch:g} s", drift,
-                                "N", None, tolerance["force_n"],
-                                note=f"{drift / watch:.4f} N/s"))
+        limits = drift_limits(tolerance["force_n"], tolerance["torque_nm"], drift_limit)
+        checks += drift_checks(system, sensors, watch, limits, samples)
     if mass is not None:
         sensor = sensor or sensors[0]
         if sensor not in sensors:

@@ -2,8 +2,8 @@
 every block, the bus scan, the configuration's fingerprint (and its differences from an
 approved snapshot), link quality, motion checks where allowed, the sensors verified, plots of
 a recording — each check with an id, a limit, a value, a unit and a verdict. ``run_report``
-returns the JSON; ``render_html`` makes the self-contained HTML twin (Jinja2, inline CSS and
-SVG: nothing is fetched when it is opened)."""
+returns the JSON (the recording's figures as their sampled data); ``write_report`` writes it
+and its self-contained HTML twin, which the caller renders (deltoctl.render.report_html)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import json
 import math
 import socket
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -31,11 +32,11 @@ FORMAT = 1
 DEFAULTS = {"rtt_p50_ms": 10.0, "rtt_p99_ms": 25.0, "error_rate_perc": 1.0,
             "loop_rate_ratio": 0.9, "jitter_p99_ms": 5.0, "homes": 3}
 LINK_RATE = 100.0  # Hz of the link-quality stream
-PLOTS = (("positions", "*/position"), ("forces", "*/force.*"),
-         ("accelerations", "*/linear_acceleration.*"))
+# the figures of a recording: title, the interfaces drawn, their unit (positions: the joints')
+PLOTS = (("positions", "*/position", ""), ("forces", "*/force.*", "N"),
+         ("accelerations", "*/linear_acceleration.*", "m/s²"))
 MAX_SERIES = 8  # per plot
 MAX_POINTS = 400  # per series, drawn
-SVG_SIZE = (640.0, 220.0)
 
 
 @dataclass
@@ -282,51 +283,58 @@ def sensor_checks(robot: Robot) -> list[dict[str, Any]]:
 
 # -- the recording and its plots -----------------------------------------------------------------
 
-def _points(times: Any, values: Any, t0: int, t1: int, low: float, high: float) -> str:
-    width, height = SVG_SIZE
-    stride = max(1, len(times) // MAX_POINTS)
-    span, rise = max(t1 - t0, 1), (high - low) or 1.0
-    return " ".join(f"{(t - t0) / span * width:.1f},{height - (v - low) / rise * height:.1f}"
-                    for t, v in zip(times[::stride], values[::stride]) if math.isfinite(v))
+def _finite_or_none(value: float) -> float | None:
+    """A value as JSON holds it: NaN and infinities (not JSON numbers) as null."""
+    return value if math.isfinite(value) else None
 
 
-def plots(path: Path) -> list[dict[str, Any]]:
+def position_unit(robot: Robot, names: list[str]) -> str:
+    """The unit of these joints' positions: rad, m (prismatic), or both."""
+    units = []
+    for name in names:
+        joint = robot.profile.component(name.rsplit("/", 1)[0])
+        unit = "m" if joint is not None and joint.joint_type == "prismatic" else "rad"
+        if unit not in units:
+            units.append(unit)
+    return ", ".join(units)
+
+
+def plots(path: Path, robot: Robot | None = None) -> list[dict[str, Any]]:
     """A figure per kind of interface the recording carries (positions, forces,
-    accelerations): each series's polyline in SVG coordinates, with its range."""
-    from deltoctl.record.reader import interfaces, read_recording, select, series
+    accelerations): its unit, range and duration, and each series's samples (seconds from
+    the figure's start, values; null where not finite), read with the standard library."""
+    from deltoctl.record.reader import interfaces, read_recording, sampled_series, select
 
     rec = read_recording(path, keep=None)
     available = interfaces(rec)
     figures = []
-    for title, glob in PLOTS:
+    for title, glob, unit in PLOTS:
         wanted = select(available, [glob])[:MAX_SERIES]
         if not wanted:
             continue
-        data = series(rec, wanted)
-        finite = [float(v) for t, vs in data.values() for v in vs if math.isfinite(v)]
-        times = [int(t) for ts, _ in data.values() for t in ts[:1]] + \
-                [int(t) for ts, _ in data.values() for t in ts[-1:]]
-        if not finite or not times:
+        data = sampled_series(rec, wanted, MAX_POINTS)
+        times = [t for ts, _ in data.values() for t in ts]
+        if not times:
             continue
-        low, high, t0, t1 = min(finite), max(finite), min(times), max(times)
-        figures.append({"title": title, "low": low, "high": high,
-                        "seconds": round((t1 - t0) / 1e9, 3),
-                        "series": [{"name": n, "points": _points(*data[n], t0, t1, low, high)}
-                                   for n in wanted]})
+        finite = [v for _, vs in data.values() for v in vs if math.isfinite(v)]
+        t0, t1 = min(times), max(times)
+        if not unit:
+            unit = position_unit(robot, wanted) if robot is not None else "rad"
+        figures.append({
+            "title": title, "unit": unit,
+            "low": min(finite) if finite else None, "high": max(finite) if finite else None,
+            "seconds": round((t1 - t0) / 1e9, 3),
+            "series": [{"name": n, "t": [round((t - t0) / 1e9, 4) for t in data[n][0]],
+                        "v": [_finite_or_none(v) for v in data[n][1]]} for n in wanted]})
     return figures
 
 
 def recording_section(robot: Robot, seconds: float, path: Path) -> dict[str, Any]:
     result = robot.record(path, 100.0, seconds)
-    section = {"file": str(path), "seconds": seconds, "sha256": _sha256(path.read_bytes()),
-               "cycles": result.get("stats", {}).get("cycles") if isinstance(
-                   result.get("stats"), dict) else None}
-    try:
-        section["plots"] = plots(path)
-    except ImportError:
-        section["plots"] = []
-        section["note"] = "no plots: pip install 'deltoctl[plot]' (numpy)"
-    return section
+    return {"file": str(path), "seconds": seconds, "sha256": _sha256(path.read_bytes()),
+            "cycles": result.get("stats", {}).get("cycles") if isinstance(
+                result.get("stats"), dict) else None,
+            "plots": plots(path, robot)}
 
 
 # -- the whole sequence ---------------------------------------------------------------------------
@@ -411,36 +419,6 @@ def _user() -> str:
         return "unknown"
 
 
-# -- the HTML twin -------------------------------------------------------------------------------
-
-def _number(value: Any) -> Any:
-    """A figure as people read it: six significant digits at most."""
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    return value
-
-
-def _environment() -> Any:
-    import jinja2
-
-    env = jinja2.Environment(loader=jinja2.PackageLoader("deltoctl.app", "templates"),
-                             autoescape=True, trim_blocks=True, lstrip_blocks=True)
-    env.filters["num"] = _number
-    return env
-
-
-def render_html(doc: dict[str, Any]) -> str:
-    """The report as one self-contained HTML5 page (the template ships in the package)."""
-    env = _environment()
-    counts = {v: sum(c["verdict"] == v for c in doc["checks"]) for v in (PASS, FAIL, WARN,
-                                                                          SKIP)}
-    return env.get_template("report.html.j2").render(r=doc, counts=counts, size=SVG_SIZE)
-
-
-def render_fleet_html(doc: dict[str, Any]) -> str:
-    return _environment().get_template("fleet.html.j2").render(f=doc)
-
-
 def fleet_report(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """Each robot's report (``fleet run report``: robot, exit_code, output, error) in one
     document, the worst first; a robot without one fails."""
@@ -468,15 +446,21 @@ def _write(html: Path, text: str, doc: dict[str, Any]) -> Path:
     return twin
 
 
-def write_report(doc: dict[str, Any], html: Path) -> Path:
-    """Write a report as ``html`` and its JSON twin beside it; returns the twin."""
-    return _write(html, render_html(doc), doc)
+Render = Callable[[dict[str, Any]], str]  # a document → its HTML page
 
 
-def write_fleet_report(runs: list[dict[str, Any]]) -> tuple[dict[str, Any], Path]:
+def write_report(doc: dict[str, Any], html: Path, render: Render) -> Path:
+    """Write a report as ``html`` (the page ``render`` makes of it) and its JSON twin
+    beside it; returns the twin."""
+    return _write(html, render(doc), doc)
+
+
+def write_fleet_report(runs: list[dict[str, Any]], render: Render
+                       ) -> tuple[dict[str, Any], Path]:
     """Every robot's report (``fleet run report``'s runs, each report taken out of the
     JSON envelope it may come in) in one fleet report, written as
-    fleet-report-<time>.html here and its JSON twin; the document and the HTML file."""
+    fleet-report-<time>.html here (the page ``render`` makes of it) and its JSON twin; the
+    document and the HTML file."""
     for run in runs:
         out = run.get("output")
         if isinstance(out, dict) and out.get("verb") == "report" and "result" in out:
@@ -484,5 +468,5 @@ def write_fleet_report(runs: list[dict[str, Any]]) -> tuple[dict[str, Any], Path
     doc = fleet_report(runs)
     stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
     html = Path(f"fleet-report-{stamp}.html")
-    _write(html, render_fleet_html(doc), doc)
+    _write(html, render(doc), doc)
     return doc, html

@@ -6,7 +6,7 @@ from typing import Annotated, Any
 
 import typer
 
-from deltoctl.cli.context import Options, options
+from deltoctl.cli.context import Options, options, parse_pairs
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import emit_json, info, table
 
@@ -33,8 +33,12 @@ def calibrate_ft(
     sensor: Annotated[str | None, typer.Option(
         help="The fingertip the mass goes on (the first F/T sensor by default).")] = None,
     watch: Annotated[float | None, typer.Option(
-        help="Seconds to watch the residual drift (it must stay within the force "
-             "tolerance).")] = None,
+        help="Seconds to watch the drift of each axis (Fx, Fy, Fz within the force "
+             "tolerance, Tx, Ty, Tz within the torque tolerance, or --drift-limit).")] = None,
+    drift_limit: Annotated[list[str] | None, typer.Option(
+        "--drift-limit", metavar="AXIS=LIMIT",
+        help="The drift allowed on one axis (fx, fy, fz in N; tx, ty, tz in N·m), e.g. "
+             "fz=0.1 (repeatable).")] = None,
     timeout: Annotated[float, typer.Option(
         help="Seconds to wait for the mass to settle.")] = 60.0,
     allow_model_mismatch: AllowMismatch = False,
@@ -42,21 +46,33 @@ def calibrate_ft(
     """Tare the F/T sensors of every block that has them (SET_FT_SENSOR_OFFSET), then check
     the residual over N samples; exit 1 when over tolerance. One report per block, saved as
     calibration-<model>-<address>-<time>.json. --verify reports each check (id, value,
-    limit, verdict); --watch S the drift over S seconds; --mass KG a known mass's weight."""
+    limit, verdict); --watch S the drift of each axis over S seconds; --mass KG a known
+    mass's weight."""
     from deltoctl.app.calibrate import check_tare, check_verify, fail_ft, verify_ft
 
     opts = options(ctx)
+    drift = _drift_limits(drift_limit or [])
     check_tare(samples, force_tolerance, torque_tolerance, output_dir)
-    check_verify(mass, watch, timeout)
+    check_verify(mass, watch, timeout, drift)
     verify = verify or mass is not None or watch is not None
     with open_robot(opts, allow_model_mismatch) as robot:
         result = robot.calibrate_ft(samples, force_tolerance, torque_tolerance, output_dir)
         if verify:
             result["checks"] = verify_ft(robot.system, result, mass, sensor, watch, _ask,
-                                         timeout, samples)
+                                         timeout, samples, drift)
     _show_ft(opts, result, verify)
     fail_ft(result)
     finish(robot.system)
+
+
+def _drift_limits(items: list[str]) -> dict[str, float]:
+    """``--drift-limit fz=0.1`` … as {axis: limit}; the axes and values are checked by
+    check_verify."""
+    from deltoctl.units import quantity
+
+    pairs = parse_pairs(items, "=", "--drift-limit", "AXIS=LIMIT (fz=0.1)")
+    return {axis.lower(): quantity(value, f"--drift-limit {axis}")
+            for axis, value in pairs.items()}
 
 
 def _ask(text: str) -> None:

@@ -99,7 +99,7 @@ def _record_file_dropped(argv: list[str]) -> list[str]:
     hoisted = hoist_global_options(argv)
     args = verb_args(hoisted)
     try:
-        if command_path(hoisted) != ("record",) or {"--help", "-h"} & set(args):
+        if command_path(hoisted)[0] != ("record",) or {"--help", "-h"} & set(args):
             return argv
     except InvalidInput:
         return argv

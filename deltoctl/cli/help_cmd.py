@@ -41,13 +41,14 @@ def teach_verbs(root: Any, loaded: dict[str, Any]) -> None:
 
 
 def teach(command: Any, path: str, globals_: list[Any]) -> None:
-    """Give a verb (and its sub-verbs) the global options panel, its example and the exit
-    codes."""
+    """Give a verb (and its sub-verbs) the global options panel, its effect on the robot
+    and its example (from the verb table), and the exit codes."""
     known = {o for p in command.params for o in getattr(p, "opts", ())}
     command.params.extend(p for p in globals_ if not known & set(p.opts))
     command.parse_args = _lenient(command, command.parse_args)
     example = EXAMPLES.get(path)
-    command.epilog = (f"Example: {example}\n\n" if example else "") + EXIT_LINE
+    command.epilog = (f"Effect: {verbs.describe(path)}.\n\n"
+                      + (f"Example: {example}\n\n" if example else "") + EXIT_LINE)
     for name, sub in getattr(command, "commands", {}).items():
         teach(sub, f"{path} {name}", globals_)
 

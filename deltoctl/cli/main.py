@@ -297,15 +297,17 @@ def _command_tree() -> Any:
     return typer.main.get_command(app)
 
 
-def command_path(args: Sequence[str]) -> tuple[str, ...]:
-    """The verb and sub-commands a command line runs (``("gpio", "set")``), resolved as
-    DeltoctlGroup.invoke resolves them — click's own parse, ``--`` and hoisted global options
-    included — but resiliently: no callback, prompt or help runs. A command line click would
-    refuse is InvalidInput; one that cannot be read otherwise is UNRESOLVED (it counts as
-    moving)."""
+def command_path(args: Sequence[str]) -> tuple[tuple[str, ...], frozenset[str]]:
+    """The verb and sub-commands a command line runs (``("gpio", "set")``) and the spellings
+    of the options it gives (a flag set, an option with a value; global ones too), resolved
+    as DeltoctlGroup.invoke resolves them — click's own parse, ``--`` and hoisted global
+    options included — but resiliently: no callback, prompt or help runs. A command line
+    click would refuse is InvalidInput; one that cannot be read otherwise is UNRESOLVED (it
+    counts as moving)."""
     try:
         ctx = _command_tree().make_context("deltoctl", list(args), resilient_parsing=True)
         path: list[str] = []
+        given = set(_given(ctx))
         rest = [*ctx._protected_args, *ctx.args]
         while rest and hasattr(ctx.command, "resolve_command"):
             word = rest[0]
@@ -317,12 +319,30 @@ def command_path(args: Sequence[str]) -> tuple[str, ...]:
                                    + did_you_mean(word, ctx.command.list_commands(ctx)))
             path.append(name)
             ctx = command.make_context(name, rest, parent=ctx, resilient_parsing=True)
+            given.update(_given(ctx))
             rest = [*ctx._protected_args, *ctx.args]
-        return tuple(path)
+        return tuple(path), frozenset(given)
     except click_exceptions.UsageError as exc:
         raise InvalidInput(exc.format_message()) from None
     except (click_exceptions.ClickException, typer.Exit, typer.Abort):
-        return (verbs.UNRESOLVED,)
+        return (verbs.UNRESOLVED,), frozenset()
+
+
+def _given(ctx: Any) -> list[str]:
+    """The spellings of the options a context's command line (or environment) gave: not
+    their defaults, nor a flag given as off."""
+    from typer._click.core import ParameterSource
+
+    given: list[str] = []
+    for param in ctx.command.params:
+        if param.param_type_name != "option":
+            continue
+        source = ctx.get_parameter_source(param.name) if param.name else None
+        if source in (None, ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP):
+            continue
+        if ctx.params.get(param.name) is not False:
+            given += getattr(param, "opts", [])
+    return given
 
 
 verbs.provide_resolver(command_path)

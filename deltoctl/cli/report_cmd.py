@@ -40,6 +40,7 @@ def report(
     section. Exit 0 when every check passes, 1 when one fails (named), 3 with warnings."""
     from deltoctl.app.report import Plan, check_plan, report_paths, run_report, write_report
     from deltoctl.render.checks import check_rows
+    from deltoctl.render.report_html import report_html
 
     opts = options(ctx)
     profile = opts.load_profile()
@@ -48,7 +49,7 @@ def report(
     check_plan(plan)
     with open_robot(opts, allow_model_mismatch, profile) as robot:
         doc = run_report(robot, plan)
-    write_report(doc, html)
+    write_report(doc, html, report_html)
     if opts.json:
         emit_json(doc)
     else:
@@ -68,8 +69,9 @@ def fleet_summary(runs: list[dict[str, Any]], as_json: bool, code: int) -> None:
     robot, the worst first), fleet-report-<time>.html and its JSON twin; exits with the
     fleet's worst code."""
     from deltoctl.app.report import write_fleet_report
+    from deltoctl.render.report_html import fleet_html
 
-    doc, html = write_fleet_report(runs)
+    doc, html = write_fleet_report(runs, fleet_html)
     if as_json:
         emit_json(doc)
     else:

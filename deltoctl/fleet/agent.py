@@ -478,7 +478,9 @@ class Agent:
             self.check(verb, argv)
 
     def _launch(self, rid: str, verb: str, argv: list[str], beat: bytes = b"") -> Running:
-        if verb in ACTUATING and not self.motion_allowed:  # undeclared commands too
+        # by what this command line does (report reads; report --yes moves); undeclared
+        # commands too
+        if verb in ACTUATING and not self.motion_allowed:
             what = ("a command deltoctl cannot classify (it counts as motion)"
                     if verb == UNRESOLVED else f"'{verb}'")
             raise Refused(f"{what} refused: {self.why_not}",

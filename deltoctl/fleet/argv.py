@@ -109,11 +109,12 @@ def _check_option(arg: str, workdir: str) -> None:
                            "only (no absolute path, '~' or '..')")
 
 
-def check_argv(argv: object, workdir: str = ".", links: list[str] | None = None) -> str:
-    """The command (``jog``, ``gpio set``) of a remote command line, after checking it, as the
-    CLI will resolve it with the agent's ``links`` before it; raises InvalidInput for what the
-    agent does not run. A command it cannot resolve is verbs.UNRESOLVED (it counts as
-    moving)."""
+def check_argv(argv: object, workdir: str = ".",
+               links: list[str] | None = None) -> verbs.Command:
+    """The command (``jog``, ``gpio set``) of a remote command line and the options it gives
+    (its effect: ``report --yes`` moves), after checking it, as the CLI will resolve it with
+    the agent's ``links`` before it; raises InvalidInput for what the agent does not run. A
+    command it cannot resolve is verbs.UNRESOLVED (it counts as moving)."""
     args = _bounded(argv)
     for arg in hoist_global_options(args):
         _check_option(arg, workdir)

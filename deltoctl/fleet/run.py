@@ -14,6 +14,7 @@ from typing import Any
 
 from deltoctl.errors import DeltoctlError, InvalidInput, Unreachable
 from deltoctl.fleet import MOTION
+from deltoctl.verbs import Command
 
 # exit codes from best to worst: the fleet's code is the worst of its robots'
 SEVERITY = (0, 3, 1, 4, 2, 5, 130)
@@ -26,9 +27,9 @@ def worst(codes: list[int]) -> int:
     return max(codes, key=lambda c: rank.get(c, len(SEVERITY)), default=0)
 
 
-def verb_of(argv: list[str], robot: str = "") -> str:
-    """The verb a remote command line runs (``jog``, ``gpio set``), checked as the agent
-    checks it; a refusal names the robot."""
+def verb_of(argv: list[str], robot: str = "") -> Command:
+    """The verb a remote command line runs (``jog``, ``gpio set``) with the options it gives,
+    checked as the agent checks it; a refusal names the robot."""
     from deltoctl.fleet.argv import check_argv
 
     try:

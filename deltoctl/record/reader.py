@@ -30,6 +30,7 @@ from __future__ import annotations
 import fnmatch
 import io
 import json
+import math
 import multiprocessing
 import os
 import struct
@@ -825,6 +826,38 @@ def series(rec: Recording, wanted: list[str], start_ns: int | None = None,
             if end_ns is not None:
                 window &= times <= end_ns
             result[name] = (times[window], values[window])
+    return result
+
+
+def sampled_series(rec: Recording, wanted: list[str], points: int
+                   ) -> dict[str, tuple[list[int], list[float]]]:
+    """{interface: (times in ns, values)} as lists, about ``points`` of each taken evenly
+    through the recording (every n-th message), with the standard library alone: what a
+    figure draws, on an install without numpy."""
+    where = interfaces(rec)
+    by_channel: dict[int, list[str]] = {}
+    for name in wanted:
+        by_channel.setdefault(where[name], []).append(name)
+    result: dict[str, tuple[list[int], list[float]]] = {}
+    for cid, names in by_channel.items():
+        channel = rec.channels[cid]
+        layout_of = LAYOUTS[channel.type]
+        every = max(1, channel.count // max(points, 1)) if channel.count else 1
+        layouts: dict[int, dict[str, int]] = {}  # by message length: one shape each
+        times: list[int] = []
+        values: dict[str, list[float]] = {n: [] for n in names}
+        for i, (t, data) in enumerate(rec.read(cid)):
+            if i % every:
+                continue
+            layout = layouts.get(len(data))
+            if layout is None:
+                layout = layouts[len(data)] = dict(layout_of(Cdr(data), channel.topic))
+            times.append(int(t))
+            for name in names:
+                values[name].append(struct.unpack_from("<d", data, layout[name])[0]
+                                    if name in layout else math.nan)
+        for name in names:
+            result[name] = (times, values[name])
     return result
 
 

@@ -1,7 +1,7 @@
 """Manual pages rendered from the CLI's command tree: ``deltoctl.1`` (the global options, the
 verbs, the exit codes) and ``deltoctl-VERB.1`` per verb (its synopsis, description, options and
-sub-commands, the verb table's examples). ``deltoctl completion man --out DIR`` writes them;
-the package ships them beside the completion scripts. The tree comes in built (click's
+sub-commands, the verb table's effects and examples). ``deltoctl completion man --out DIR``
+writes them; the package ships them beside the completion scripts. The tree comes in built (click's
 commands, read through their attributes): nothing here parses a command line.
 """
 
@@ -65,8 +65,11 @@ def _verb_page(name: str, command: Any, parent: Any,
             options = _options(sub, sub_ctx)
             if options:
                 lines += [".PP", "Options:", *options]
-    entries = {path: v.example for path, v in verbs.walk()
-               if (path == name or path.startswith(name + " ")) and v.example}
+    paths = [path for path, _ in verbs.walk() if path == name or path.startswith(name + " ")]
+    lines += [".SH EFFECT ON THE ROBOT"]
+    for path in paths:
+        lines += [".TP", rf"\fB{_escape(path)}\fR", _escape(verbs.describe(path))]
+    entries = {path: v.example for path in paths if (v := verbs.lookup(path)) and v.example}
     lines += _examples(entries)
     lines += _exit_status(exit_codes)
     lines += [".SH SEE ALSO", rf"\fBdeltoctl\fR({SECTION})"]

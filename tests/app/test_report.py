@@ -8,6 +8,7 @@ import json
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -132,24 +133,40 @@ def test_golden_snapshot_differences_fail(cli, tmp_path):
         same["sections"]["configuration"]["fingerprint"]
 
 
-def test_a_recording_is_plotted_and_hashed(cli, tmp_path):
-    pytest.importorskip("numpy")
+SVG = "{http://www.w3.org/2000/svg}"
+
+
+@pytest.mark.parametrize("hidden", [(), ("numpy", "matplotlib", "plotext")],
+                         ids=["with the plot extra", "without it"])
+def test_a_recording_is_plotted_and_hashed(cli, tmp_path, monkeypatch, hidden):
+    """The figures are inline SVG drawn with the standard library: a path per interface,
+    axes with ticks and the unit, a legend — with or without deltoctl[plot]."""
+    for module in hidden:
+        monkeypatch.setitem(sys.modules, module, None)  # `import numpy` fails
     result, out = report(cli, tmp_path, "--record", "0.5")
     assert result.exit_code == 0, result.stderr
     recording = unwrap(json.loads(result.stdout))["sections"]["recording"]
     mcap = out.with_suffix(".mcap")
     import hashlib
 
-    assert recording["file"] == str(mcap)
+    assert recording["file"] == str(mcap) and "note" not in recording
     assert recording["sha256"] == hashlib.sha256(mcap.read_bytes()).hexdigest()
-    titles = [p["title"] for p in recording["plots"]]
-    assert titles == ["positions", "forces"]
+    assert [(p["title"], p["unit"]) for p in recording["plots"]] == [("positions", "rad"),
+                                                                     ("forces", "N")]
     text, tree = parse_html(out)
     assert_self_contained(text, tree)
-    svgs = tree.findall(".//{http://www.w3.org/2000/svg}svg")
+    assert "pip install" not in text
+    svgs = tree.findall(f".//{SVG}svg")
     assert len(svgs) == 2
-    lines = svgs[0].findall("{http://www.w3.org/2000/svg}polyline")
-    assert len(lines) == 8 and len(lines[0].get("points").split()) > 10
+    positions, forces = svgs
+    paths = positions.findall(f"{SVG}path")
+    assert len(paths) == 8 and len(paths[0].get("d").split("L")) > 10
+    names = [p.get("data-name") for p in paths]
+    assert names == [s["name"] for s in recording["plots"][0]["series"]]
+    labels = [t.text for t in positions.iter(f"{SVG}text")]
+    assert "time [s]" in labels and "rad" in labels and names[0] in labels  # axes, legend
+    assert len(forces.findall(f"{SVG}path")) == 8 and "N" in [t.text for t in
+                                                             forces.iter(f"{SVG}text")]
 
 
 def test_motion_checks_run_only_with_yes(cli, tmp_path):

@@ -114,6 +114,56 @@ def test_a_command_line_is_judged_by_the_clis_own_resolution(argv, path):
     assert check_argv(argv) == path
 
 
+@pytest.mark.parametrize("argv, moves", [
+    (["report"], False),
+    (["report", "-o", "acceptance.html", "--json"], False),
+    (["report", "--yes"], True),
+    (["report", "-y", "--record", "1"], True),
+    (["-y", "report"], True),
+    (["--yes", "report"], True),
+    (["-yq", "report"], True),
+    (["-q", "report", "-vy"], True),
+])
+def test_an_option_raises_a_commands_effect_as_the_cli_parses_it(argv, moves):
+    """`report` reads; with the global --yes/-y, before or after the verb, in a cluster too,
+    its motion checks move the joints."""
+    command = check_argv(argv)
+    assert command == "report"
+    assert verbs.effect(command) == (verbs.MOVES if moves else verbs.READS)
+    assert (command in MOTION) is moves and (command in ACTUATING) is moves
+    assert "report" not in MOTION  # the path alone: the table's own effect
+
+
+def test_the_effect_of_an_option_is_in_the_table_and_in_help():
+    report = verbs.lookup("report")
+    assert report is not None and report.effect == verbs.READS
+    assert report.effects() == {verbs.READS, verbs.MOVES}
+    assert verbs.describe("report") == "reads the robot; moves with --yes/-y"
+    assert verbs.describe("jog") == "moves the robot"
+    assert verbs.effect(verbs.Command("report", {"-o"})) == verbs.READS
+    assert verbs.effect(verbs.Command("spin", {"--yes"})) == verbs.MOVES  # undeclared
+
+
+def test_the_callers_confirmation_follows_the_parse():
+    """A fleet run asks before motion only for a line that moves: `report` reads."""
+    from deltoctl.fleet.run import confirmed
+
+    asked: list[bool] = []
+
+    def ask() -> bool:
+        asked.append(True)
+        return True
+
+    assert confirmed([["report", "--json"]], ask) == [["report", "--json"]] and not asked
+    lines = [["report", "-y"], ["identify"]]
+    assert confirmed(lines, ask) == [["--yes", "report", "-y"], ["identify"]] and asked
+
+
+def test_a_verbs_help_says_its_effect(cli):
+    out = cli("report", "--help").stdout
+    assert "Effect: reads the robot; moves with --yes/-y." in " ".join(out.split())
+
+
 @pytest.mark.parametrize("argv, message", [
     (["gpio", "sett", "output_2", "on"], "no command 'gpio sett'"),
     (["--json"], "no verb given"),

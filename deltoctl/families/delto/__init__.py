@@ -28,6 +28,9 @@ FAMILY = Family(
         SimOption("input_1", "flag", "Drive gpio/input_1 high.", False),
         SimOption("delay", "number", "Fault: seconds added before every reply.", 0.0, 0, 10),
         SimOption("stall", "joints", "Fault: a joint that cannot move (repeatable)."),
+        SimOption("ft_creep", "numbers", "Fault: every fingertip F/T offset creeps, per axis "
+                  "Fx,Fy,Fz (N/s),Tx,Ty,Tz (N·m/s); the axes not given stay.", None, -100,
+                  100, (1, 6), "FX,FY,FZ,…"),
     ),
     identity_fields=(("reported_model", "{}"), ("firmware", "fw {}")),
 )

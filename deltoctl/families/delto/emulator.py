@@ -47,7 +47,7 @@ INERTIA = 0.01  # kg·m², seen at the joint
 DAMPING = 0.5  # N·m·s/rad
 FRICTION = 0.01  # N·m
 FT_NOISE = 0.02  # N (torques: 1/10 of it in N·m)
-FT_DRIFT = 0.005  # N/s, random walk of the sensor offset
+FT_DRIFT = 0.005  # N/s, random walk of the sensor offset (torques: 1/10 of it in N·m/s)
 GRAVITY = (0.0, 0.0, -0.49)  # N on each fingertip (50 g)
 FT_OFFSET_FROM = (2, 3)  # firmware that added SET_FT_SENSOR_OFFSET
 TICK = 0.001  # s: the model moves in 1 ms steps, however often it is asked
@@ -92,7 +92,8 @@ class DeltoFirmware:
         self.rng = random.Random(seed)
         self.ft_offset = [[self.rng.uniform(-2, 2) for _ in range(6)] for _ in range(model.fingers)]
         self.ft_tare = [[0.0] * 6 for _ in range(model.fingers)]
-        # what a test puts on a fingertip (N, from ``put_mass``) and a steady offset creep (N/s)
+        # what a test puts on a fingertip (N, from ``put_mass``) and a steady offset creep per
+        # axis (N/s, N·m/s: sim serve --ft-creep)
         self.ft_load = [[0.0, 0.0, 0.0] for _ in range(model.fingers)]
         self.ft_creep = (0.0, 0.0, 0.0)
         self.faults = Faults()
@@ -159,7 +160,7 @@ class DeltoFirmware:
             sigma = FT_DRIFT * math.sqrt(self._drift_dt)
             for offset in self.ft_offset:
                 for k in range(6):
-                    offset[k] += self.rng.gauss(0.0, sigma)
+                    offset[k] += self.rng.gauss(0.0, sigma if k < 3 else sigma / 10)
                 for k, creep in enumerate(self.ft_creep):
                     offset[k] += creep * self._drift_dt
             self._drift_dt = 0.0
@@ -512,6 +513,8 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
         device.input_1 = o.input_1
         device.faults.delay = o.delay
         device.faults.stalled |= {hw.joints.index(j) for j in ctx.named("stall", hw)}
+        if o.ft_creep:
+            device.ft_creep = tuple(o.ft_creep)
         server = ctx.stack.enter_context(
             DeltoServer(device, host=o.host, port=o.port if n == 0 else 0, hub=hub))
         buses[hw.bus or hw.name] = server.endpoint
