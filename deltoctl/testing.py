@@ -19,7 +19,7 @@ allow motion).
 
 ``deltoctl_robot(profile=None, hardware=(), allow_model_mismatch=False, **faults)`` opens the
 robot (``deltoctl.open_robot``), released when the test ends; ``profile`` defaults to the
-configured one. ``deltoctl_sim(profile, firmware="3.0", short_version=False,
+configured one; what goes wrong raises deltoctl's errors, as ``open_robot`` does. ``deltoctl_sim(profile, firmware="3.0", short_version=False,
 model_id=None)`` returns the target URL of a one-bus device (``tcp://`` for a Delto gripper,
 ``i2c+tcp://`` for the Bioscara arm); ``deltoctl_sim.buses(profile, **faults)`` returns
 ``{bus: URL}`` for any profile (the MH5: two serial buses and the I2C bus), with the faults
@@ -189,10 +189,7 @@ def _config_file(start: Path, rootdir: Path) -> tuple[Path | None, dict[str, Any
     """The nearest deltoctl.toml from ``start`` up to ``rootdir`` and its [pytest] table,
     checked."""
     folders = [start, *start.parents]
-    if rootdir in folders:
-        folders = folders[:folders.index(rootdir) + 1]
-    else:
-        folders = [start]
+    folders = folders[:folders.index(rootdir) + 1] if rootdir in folders else [start]
     path = next((f / CONFIG_FILE for f in folders if (f / CONFIG_FILE).is_file()), None)
     if path is None:
         return None, {}
@@ -236,17 +233,6 @@ def _checked_table(path: Path, table: Any) -> dict[str, Any]:
 
 # -- the fixtures ----------------------------------------------------------------------------
 
-def _opened(open_it: Callable[[], Any]) -> Any:
-    """A robot or devices opened; a deltoctl error fails the test with its one line."""
-    from deltoctl.errors import DeltoctlError
-
-    try:
-        return open_it()
-    except DeltoctlError as exc:
-        pytest.fail(f"deltoctl: {exc.message}" + (f" ({exc.hint})" if exc.hint else ""),
-                    pytrace=False)
-
-
 def _no_faults(robot: RobotUnderTest, faults: dict[str, Any]) -> None:
     given = sorted(name for name, value in faults.items() if value not in (None, False, ()))
     if robot.hardware and given:
@@ -265,13 +251,12 @@ class SimDevices:
     def buses(self, profile: str, **faults: Any) -> dict[str, str]:
         if self._robot.hardware:
             _no_faults(self._robot, faults)
-            _opened(lambda: self._robot.chosen(profile))
+            self._robot.chosen(profile)
             return self._robot.buses()
         from deltoctl.sim.serve import ServeOptions, serve_profile
 
         options = ServeOptions(**faults)
-        buses: dict[str, str] = _opened(lambda: serve_profile(
-            self._stack, _loaded(profile), options)["buses"])
+        buses: dict[str, str] = serve_profile(self._stack, _loaded(profile), options)["buses"]
         return buses
 
     def __call__(self, profile: str, firmware: str = "3.0", short_version: bool = False,
@@ -303,13 +288,13 @@ def deltoctl_robot(request: pytest.FixtureRequest) -> Iterator[Callable[..., Any
             from deltoctl.app.robot import open_robot
 
             _no_faults(robot, faults)
-            chosen = _opened(lambda: robot.chosen(profile))
+            chosen = robot.chosen(profile)
             if robot.hardware:
                 opened = open_robot(chosen, robot.targets, hardware=hardware,
                                     allow_model_mismatch=allow_model_mismatch)
             else:
                 opened = open_robot(chosen, sim=faults or True, hardware=hardware,
                                     allow_model_mismatch=allow_model_mismatch)
-            return _opened(lambda: stack.enter_context(opened))
+            return stack.enter_context(opened)
 
         yield open_one
