@@ -19,12 +19,13 @@ allow motion).
 
 ``deltoctl_robot(profile=None, hardware=(), allow_model_mismatch=False, **faults)`` opens the
 robot (``deltoctl.open_robot``), released when the test ends; ``profile`` defaults to the
-configured one; what goes wrong raises deltoctl's errors, as ``open_robot`` does. ``deltoctl_sim(profile, firmware="3.0", short_version=False,
-model_id=None)`` returns the target URL of a one-bus device (``tcp://`` for a Delto gripper,
-``i2c+tcp://`` for the Bioscara arm); ``deltoctl_sim.buses(profile, **faults)`` returns
-``{bus: URL}`` for any profile (the MH5: two serial buses and the I2C bus), with the faults
-of ``deltoctl sim serve`` (``missing=("head_y",)``, ``wrong_baud=…``, ``pace=True``,
-``who_am_i=0x12`` …). The devices stop when the test ends.
+configured one; what goes wrong raises deltoctl's errors, as ``open_robot`` does.
+``deltoctl_sim(profile, firmware="3.0", short_version=False, model_id=None)`` returns the
+target URL of a one-bus device (``tcp://`` for a Delto gripper, ``i2c+tcp://`` for the
+Bioscara arm); ``deltoctl_sim.buses(profile, **faults)`` returns ``{bus: URL}`` for any
+profile (the MH5: two serial buses and the I2C bus), with the faults of ``deltoctl sim
+serve`` (``missing=("head_y",)``, ``wrong_baud=…``, ``pace=True``, ``who_am_i=0x12`` …).
+The devices stop when the test ends; on hardware, they are the robot's targets.
 
 Kept import-light: pytest loads this module in every run; deltoctl's own modules are imported
 only when a robot is configured or a fixture is used. Neither the options nor the file run
