@@ -44,6 +44,11 @@ def slug(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_]+", "_", name).strip("_").lower() or "robot"
 
 
+def _shown(text: str) -> str:
+    """A name as the test file's docstring shows it: safe characters only."""
+    return re.sub(r"[^A-Za-z0-9_.+-]+", "_", text)
+
+
 def _profile_literal(spec: str, prof: Profile, output: Path) -> str:
     """How the test file names the profile: a catalog name, or the file relative to the
     test file's folder."""
@@ -66,6 +71,7 @@ def write_suite(spec: str, output: Path, force: bool = False) -> Suite:
     from deltoctl.app import config
     from deltoctl.app.report import limits_of
     from deltoctl.app.robot import load, open_robot
+    from deltoctl.profile.catalog import catalog_names
 
     prof = load(spec)
     name = slug(prof.name)
@@ -74,9 +80,11 @@ def write_suite(spec: str, output: Path, force: bool = False) -> Suite:
     with open_robot(prof, sim=True) as robot:
         snapshot = config.snapshot(robot.system)[0] if _able(robot, "config") else None
         context = {
-            "name": re.sub(r"[^A-Za-z0-9_.+-]+", "_", prof.name),
+            "name": _shown(prof.name),
             "test_file": test_file.name,
             "profile": _profile_literal(spec, prof, output),
+            "option": _shown(spec) if spec in catalog_names() else "PROFILE",
+            "golden_file": f"{GOLDEN_DIR}/{golden.name}",
             "identify": repr(_able(robot, "identify")),
             "detect": bool(_able(robot, "detect")),
             "golden": repr(golden.name) if snapshot else None,
