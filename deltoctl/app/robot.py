@@ -183,6 +183,10 @@ class Robot:
         """One cycle's state of every block (a copy)."""
         return dict(self.system.read())
 
+    def link_stats(self) -> dict[str, dict[str, int]]:
+        """Each block's communication statistics so far: packets, errors, reconnects."""
+        return {m.name: dict(m.driver.stats) for m in self.system}
+
     # -- the lifecycle verbs -------------------------------------------------------------------
 
     def connect(self, count: int = 20) -> dict[str, Any]:
