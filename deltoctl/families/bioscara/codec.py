@@ -213,7 +213,7 @@ def _layout(command: int, count: int) -> struct.Struct | None:
                 None)
 
 
-# -- requests: what the host asks, checked before the wire ------------------------------------------
+# -- requests: what the host asks, checked before the wire -----------------------------------------
 def read(command: int) -> Request:
     return Request(command)
 

@@ -13,7 +13,7 @@ import math
 import random
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 from deltoctl.core.serving import ServeContext
 from deltoctl.errors import ProtocolError
@@ -173,7 +173,7 @@ class JointFirmware:
         self.homing = {"start": self.now + HOME_PAUSE, "rpm": rpm if direction else -rpm,
                        "sensitivity": sensitivity, "current": current, "drive": self.drive}
 
-    _HANDLERS: dict[int, Callable[..., float | None]] = {
+    _HANDLERS: ClassVar[dict[int, Callable[..., float | None]]] = {
         codec.PING: _nothing, codec.ANGLEMOVED: _angle_moved,
         codec.GETENCODERRPM: _encoder_rpm, codec.HOMEOFFSET: _home_offset,
         codec.SETUP: _setup, codec.SETRPM: _set_rpm, codec.MOVESTEPS: _move_steps,
