@@ -196,7 +196,7 @@ class Device:
         """The payload of the reply to ``request``: 'O' to a PING, a read's float32."""
         if request.command == PING:
             return bytes([ACK])
-        return FLOAT.pack(value or 0.0) if request.payload_size else b""
+        return FLOAT.pack(0.0 if value is None else value) if request.payload_size else b""
 
     @staticmethod
     def reply(payload: bytes, flags: int, length: int) -> bytes:
