@@ -82,6 +82,7 @@ class McapRecorder:
         ``FoxgloveWriter``). ``commands``: a /joint_commands topic too, each cycle's
         setpoints (``record.commands``: ``<joint>/position_command`` …)."""
         from deltoctl import __version__
+        from deltoctl.record.mcap_cycles import CycleAppender
 
         if gpio_type not in GPIO_TYPES:
             raise ValueError(f"gpio_type {gpio_type!r}: one of {', '.join(GPIO_TYPES)}")
@@ -91,6 +92,7 @@ class McapRecorder:
 
             writer = Writer(stream, compression=CompressionType.LZ4)
         self.writer = writer
+        self._appender = CycleAppender.of(writer)  # a cycle's messages at once, where it can
         self.writer.start(profile="ros2", library=f"deltoctl {__version__}")
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, int] = {}
@@ -209,6 +211,8 @@ class McapRecorder:
                 else:
                     picks.append(at.get(f, missing))
             self._rows.append((topic, template.layout.pack, itemgetter(*picks)))
+        self._row_topics = [topic for topic, _, _ in self._rows]
+        self._row_channels = [self.channels[topic] for topic in self._row_topics]
         self._constants = constants
         self._status_at = at.get("system/connection_status")
         self._block_status = [(key.rpartition("/")[0], i) for key, i in at.items()
@@ -229,8 +233,15 @@ class McapRecorder:
         self._watch_gap(t_ns)
         row += (NAN, t_ns // 1_000_000_000, t_ns % 1_000_000_000)
         row += self._constants
-        for topic, pack, pick in self._rows:
-            self._emit(topic, pack(*pick(row)), t_ns)
+        datas = [pack(*pick(row)) for _, pack, pick in self._rows]
+        topics, sequence = self._row_topics, self.sequence
+        seqs = [sequence[topic] for topic in topics]
+        if self._appender is not None:
+            self._appender.append(t_ns, self._row_channels, seqs, datas)
+            sequence.update(zip(topics, [s + 1 for s in seqs]))
+        else:
+            for topic, data in zip(topics, datas):
+                self._emit(topic, data, t_ns)
         if self._status_at is None:
             return
         status = row[self._status_at]
