@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import os
+from itertools import chain
 from operator import itemgetter
 from typing import Any, BinaryIO
 
@@ -196,23 +197,36 @@ class McapRecorder:
     def set_keys(self, keys: list[str]) -> None:
         """The interfaces, in the order ``write_row`` gets their values. Each topic's fields
         become positions in a row: the values, then NaN (for a name not among the keys), the
-        stamp, and the templates' constant bytes."""
+        stamp, the templates' constant bytes and, with mcap's Writer, the records' constant
+        head fields, the log time and each topic's sequence number."""
         at = {key: i for i, key in enumerate(keys)}
         missing = len(keys)
         at[SEC], at[NANOSEC] = missing + 1, missing + 2
-        constants: list[bytes] = []
-        self._rows = []
+        constants: list[bytes | int] = []
+
+        def constant(value: bytes | int) -> int:
+            constants.append(value)
+            return missing + 2 + len(constants)
+
+        self._rows, picks = [], []
         for topic, template in self.topics:
-            picks = []
-            for f in template.fields:
-                if isinstance(f, bytes):
-                    picks.append(missing + 3 + len(constants))
-                    constants.append(f)
-                else:
-                    picks.append(at.get(f, missing))
-            self._rows.append((topic, template.layout.pack, itemgetter(*picks)))
+            fields = [constant(f) if isinstance(f, bytes) else at.get(f, missing)
+                      for f in template.fields]
+            self._rows.append((topic, template.layout.pack, itemgetter(*fields)))
+            picks.append(fields)
         self._row_topics = [topic for topic, _, _ in self._rows]
-        self._row_channels = [self.channels[topic] for topic in self._row_topics]
+        self._cycle = None
+        if self._appender is not None and self.topics:
+            from deltoctl.record.mcap_cycles import cycle_layout, head_values
+
+            layout, self._cycle_starts = cycle_layout([t.layout for _, t in self.topics])
+            heads = [[constant(v) for v in head_values(t.layout, self.channels[topic])]
+                     for topic, t in self.topics]
+            stamp = missing + 3 + len(constants)  # then the sequence numbers, topic by topic
+            self._cycle = (layout.pack, itemgetter(*chain.from_iterable(
+                [*head, stamp + 1 + k, stamp, stamp, *fields]
+                for k, (head, fields) in enumerate(zip(heads, picks)))))
+            self._row_channels = [self.channels[topic] for topic in self._row_topics]
         self._constants = constants
         self._status_at = at.get("system/connection_status")
         self._block_status = [(key.rpartition("/")[0], i) for key, i in at.items()
@@ -233,15 +247,18 @@ class McapRecorder:
         self._watch_gap(t_ns)
         row += (NAN, t_ns // 1_000_000_000, t_ns % 1_000_000_000)
         row += self._constants
-        datas = [pack(*pick(row)) for _, pack, pick in self._rows]
-        topics, sequence = self._row_topics, self.sequence
-        seqs = [sequence[topic] for topic in topics]
-        if self._appender is not None:
-            self._appender.append(t_ns, self._row_channels, seqs, datas)
+        if self._cycle is not None:  # every record of the cycle in one pack and one write
+            topics, sequence = self._row_topics, self.sequence
+            seqs = [sequence[topic] for topic in topics]
+            row.append(t_ns)
+            row += seqs
+            pack, pick = self._cycle
+            self._appender.append(t_ns, self._row_channels, self._cycle_starts,
+                                  pack(*pick(row)))
             sequence.update(zip(topics, [s + 1 for s in seqs]))
         else:
-            for topic, data in zip(topics, datas):
-                self._emit(topic, data, t_ns)
+            for topic, pack, pick in self._rows:
+                self._emit(topic, pack(*pick(row)), t_ns)
         if self._status_at is None:
             return
         status = row[self._status_at]
