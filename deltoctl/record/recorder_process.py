@@ -123,6 +123,7 @@ class RecorderProcess:
         self.counts: dict[str, int] = {}
         self.link_losses = 0
         self.cpu_seconds = 0.0  # the child's, once closed
+        self.setup_cpu_seconds = 0.0  # of which starting and finishing the file
         self.error: str | None = None
         self.closed = False
 
@@ -199,6 +200,7 @@ class RecorderProcess:
         self.counts = result.get("counts", {})
         self.link_losses = result.get("link_losses", 0)
         self.cpu_seconds = result.get("cpu_seconds", 0.0)
+        self.setup_cpu_seconds = result.get("setup_cpu_seconds", 0.0)
         self.error = result.get("error")
         self._results.close()
         self.proc.join()
@@ -222,12 +224,15 @@ def _record(pipe: Connection, parent_end: Connection, results: Connection, path:
     from deltoctl.record.mcap_recorder import McapFile, McapRecorder
 
     error = recorder = out = None
+    cycles_cpu = 0.0  # the CPU time of the cycles, between starting and finishing the file
     summary = None
     try:
         out = McapFile(path)
         recorder = McapRecorder(out, profile, metadata, extra_states, gpio_type,
                                 commands=commands)
+        cycles_cpu = -time.process_time()
         summary = _receive(pipe, recorder, out, parent_pid)
+        cycles_cpu += time.process_time()
     except Exception as exc:  # the file failed (OSError), or a bug: finish what was recorded
         error = exc
     pipe.close()  # the parent's next hand-over fails at once: its loop stops
@@ -243,6 +248,7 @@ def _record(pipe: Connection, parent_end: Connection, results: Connection, path:
         with contextlib.suppress(OSError):
             out.close()
     report["cpu_seconds"] = time.process_time()
+    report["setup_cpu_seconds"] = report["cpu_seconds"] - max(cycles_cpu, 0.0)
     with contextlib.suppress(OSError):  # a parent killed cannot hear it
         results.send(report)
 
