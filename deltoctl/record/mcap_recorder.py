@@ -248,14 +248,15 @@ class McapRecorder:
         row += (NAN, t_ns // 1_000_000_000, t_ns % 1_000_000_000)
         row += self._constants
         if self._cycle is not None:  # every record of the cycle in one pack and one write
-            topics, sequence = self._row_topics, self.sequence
-            seqs = [sequence[topic] for topic in topics]
+            sequence = self.sequence
             row.append(t_ns)
-            row += seqs
+            for topic in self._row_topics:  # (two blocks' sensors may share a topic)
+                seq = sequence[topic]
+                row.append(seq)
+                sequence[topic] = seq + 1
             pack, pick = self._cycle
             self._appender.append(t_ns, self._row_channels, self._cycle_starts,
                                   pack(*pick(row)))
-            sequence.update(zip(topics, [s + 1 for s in seqs]))
         else:
             for topic, pack, pick in self._rows:
                 self._emit(topic, pack(*pick(row)), t_ns)
