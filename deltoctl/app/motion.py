@@ -123,18 +123,26 @@ def _joint_step(profile: Profile, name: str, step: str | float | None,
     return joint_quantity(text, _joint(profile, name).joint_type, what, name)
 
 
+def joints_quantity(profile: Profile, joints: Sequence[str], text: str | float | None,
+                    what: str, speed: bool = False) -> float | None:
+    """One quantity for every joint in ``joints`` (a speed, a tolerance) in SI, its unit
+    that of each of them (a bare number is SI for each); None when none is given."""
+    from deltoctl.units import joint_quantity, quantity
+
+    if text is None or text == "":
+        return None
+    value = quantity(text, what)
+    for name in joints:
+        joint_quantity(text, _joint(profile, name).joint_type, what, name, speed=speed)
+    return value
+
+
 def joint_speed(profile: Profile, joints: Sequence[str], velocity: str | float | None,
                 what: str = "--velocity") -> float | None:
     """A move's speed (``20deg/s``, ``10mm/s``, a bare number in rad/s or m/s) in SI, its
     unit that of every joint in ``joints``; None when none is given. Not positive: exit 2."""
-    from deltoctl.units import joint_quantity, quantity
-
-    if velocity is None or velocity == "":
-        return None
-    speed = quantity(velocity, what)
-    for name in joints:
-        joint_quantity(velocity, _joint(profile, name).joint_type, what, name, speed=True)
-    if not speed > 0:
+    speed = joints_quantity(profile, joints, velocity, what, speed=True)
+    if speed is not None and not speed > 0:
         raise InvalidInput(f"{what} must be positive")
     return speed
 

@@ -119,3 +119,16 @@ def test_a_home_pose_in_mm_on_a_revolute_joint_is_a_profile_error(cli, tmp_path)
     result = cli("-p", str(bad), "profile", "validate")
     assert result.exit_code == 2
     assert f"{bad}:{at + 1}:" in result.stderr and "max_jog_step" in result.stderr
+
+
+def test_replay_tolerances_are_in_the_unit_of_the_replayed_joints(cli, tmp_path):
+    out = tmp_path / "jog.mcap"
+    assert cli("-p", "dg-3f-m", "--sim", "--yes", "jog", "j_dg_1_2", "10deg", "--record",
+               str(out)).exit_code == 0
+    for option in ("--tolerance", "--max-deviation"):
+        result = cli("replay", str(out), option, "1mm")
+        assert result.exit_code == 2, result.output
+        assert "j_dg_1_2 is a revolute joint" in result.stderr and option in result.stderr
+    result = cli("replay", str(out), "--tolerance", "3deg")
+    assert result.exit_code == 0, result.stderr
+    assert "°" in result.stdout  # the differences in the unit of --tolerance
