@@ -396,6 +396,11 @@ class Robot:
 
     # -- data ----------------------------------------------------------------------------------
 
+    def joint_types(self) -> dict[str, str]:
+        """Each joint's ros2_control type (revolute, continuous, prismatic …): what its
+        position is, an angle or a length."""
+        return {j.name: j.joint_type for j in self.profile.joints()}
+
     def interfaces(self, patterns: Sequence[str] = ()) -> list[str]:
         """The state interfaces whose names match the globs (every one without globs)."""
         import fnmatch

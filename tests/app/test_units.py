@@ -132,3 +132,26 @@ def test_replay_tolerances_are_in_the_unit_of_the_replayed_joints(cli, tmp_path)
     result = cli("replay", str(out), "--tolerance", "3deg")
     assert result.exit_code == 0, result.stderr
     assert "°" in result.stdout  # the differences in the unit of --tolerance
+
+
+def test_the_stream_tables_headers_carry_units(cli):
+    from rich.console import Console
+
+    from deltoctl.render.stream import live_tables
+
+    result = cli("--sim", "-p", "bioscara-dg-3f-m", "--json", "stream", "-d", "0.05")
+    sample = json.loads(result.stdout.splitlines()[-1])["values"]
+    sample["j1/position"], sample["j2/position"] = 0.5, 0.0123
+    types = {j.name: j.joint_type for j in load_profile("bioscara-dg-3f-m").joints()}
+    console = Console(record=True, width=200)
+    console.print(live_tables(sample, "units", types))
+    lines = console.export_text().splitlines()
+    headers = [(name, unit) for above, below in zip(lines, lines[1:])
+               for name, unit in zip(above.split(), below.split()) if unit.startswith("(")]
+    assert ("position", "(deg)") in headers and ("position", "(mm)") in headers
+    assert ("velocity", "(deg/s)") in headers and ("velocity", "(mm/s)") in headers
+    assert ("force.x", "(N)") in headers and ("torque.z", "(N·m)") in headers
+    rows = {line.split()[0]: line.split()[1:] for line in lines if line.strip()}
+    assert rows["j1"][0] == "28.65"  # 0.5 rad in degrees, two decimals
+    assert rows["j2"][0] == "12.30"  # 0.0123 m in millimetres
+    assert rows["j3"][0] == "0.00"
