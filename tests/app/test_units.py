@@ -155,3 +155,11 @@ def test_the_stream_tables_headers_carry_units(cli):
     assert rows["j1"][0] == "28.65"  # 0.5 rad in degrees, two decimals
     assert rows["j2"][0] == "12.30"  # 0.0123 m in millimetres
     assert rows["j3"][0] == "0.00"
+
+
+def test_a_refused_jog_says_its_values_in_degrees_too(cli):
+    result = cli("--sim", "-p", "dg-5f-right", "--yes", "jog", "rj_dg_2_2", "--", "-10deg")
+    assert result.exit_code == 5
+    assert "rad (-10.00° outside [0.00°, 115.00°])" in result.stderr
+    result = cli("--sim", "-p", "dg-5f-right", "--yes", "jog", "rj_dg_2_2", "40deg")
+    assert result.exit_code == 5 and "(40.00° > 30.00°)" in result.stderr
