@@ -5,6 +5,7 @@ moves are echoed in the unit typed (else degrees or millimetres)."""
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 
 import pytest
@@ -146,7 +147,7 @@ def test_the_stream_tables_headers_carry_units(cli):
     console = Console(record=True, width=200)
     console.print(live_tables(sample, "units", types))
     lines = console.export_text().splitlines()
-    headers = [(name, unit) for above, below in zip(lines, lines[1:])
+    headers = [(name, unit) for above, below in itertools.pairwise(lines)
                for name, unit in zip(above.split(), below.split()) if unit.startswith("(")]
     assert ("position", "(deg)") in headers and ("position", "(mm)") in headers
     assert ("velocity", "(deg/s)") in headers and ("velocity", "(mm/s)") in headers
