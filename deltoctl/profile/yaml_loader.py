@@ -502,16 +502,17 @@ def profile_from_data(data: Any, source: str) -> Profile:
 
 def _check_safety_units(r: _Reader, profile: Profile, safety: LineDict) -> None:
     """A home pose in its joint's unit (no ``5mm`` on a revolute joint); ``max_jog_step``
-    in the unit of every joint it bounds (a bare number is SI for each)."""
+    and ``home_tolerance`` in the unit of every joint they bound (a bare number is SI for
+    each)."""
     joints = {j.name: j for j in profile.joints()}
     pose = safety.get("home_pose") or LineDict()
     for name, value in pose.items():
         if str(name) in joints:
             _fits(r, value, joints[str(name)], f"safety.home_pose of {name}", pose.lines[name])
-    if safety.get("max_jog_step") is not None:
-        for joint in joints.values():
-            _fits(r, safety["max_jog_step"], joint, "safety.max_jog_step",
-                  safety.lines["max_jog_step"])
+    for key in ("max_jog_step", "home_tolerance"):
+        if safety.get(key) is not None:
+            for joint in joints.values():
+                _fits(r, safety[key], joint, f"safety.{key}", safety.lines[key])
 
 
 def _fits(r: _Reader, value: Any, joint: Component, what: str, line: int | None) -> None:

@@ -120,6 +120,13 @@ def test_a_home_pose_in_mm_on_a_revolute_joint_is_a_profile_error(cli, tmp_path)
     result = cli("-p", str(bad), "profile", "validate")
     assert result.exit_code == 2
     assert f"{bad}:{at + 1}:" in result.stderr and "max_jog_step" in result.stderr
+    assert "j1 is a revolute joint" in result.stderr
+    lines[at] = "  home_tolerance: 2deg"  # j2 is prismatic
+    bad.write_text("\n".join(lines).replace("{j1: 5mm}", "{j2: 5mm}") + "\n",
+                   encoding="utf-8")
+    result = cli("-p", str(bad), "profile", "validate")
+    assert result.exit_code == 2
+    assert f"{bad}:{at + 1}:" in result.stderr and "j2 is a prismatic joint" in result.stderr
 
 
 def test_replay_tolerances_are_in_the_unit_of_the_replayed_joints(cli, tmp_path):
