@@ -228,7 +228,7 @@ def stream(
         system = robot.system
         names = robot.interfaces(interfaces or [])
         sink: Any = (LinesSink(names, emit_json_line) if opts.json or not stdout_is_terminal()
-                     else LiveSink(names, rate))
+                     else LiveSink(names, rate, robot.joint_types()))
         links = LinkWatch(system)
         stats = run_cycles(system, rate, duration, [sink, links, *start_foxglove(live, system)])
     info(f"{sink.samples} samples of {len(names)} interfaces")

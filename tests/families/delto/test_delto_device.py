@@ -93,10 +93,11 @@ def test_the_live_table_has_a_row_per_part(cli):
     lines = [line for line in console.export_text().splitlines() if line.strip()]
     assert "3 samples at 50 Hz · links up" in lines[0]
     assert lines[1].split() == ["position", "velocity", "effort", "temperature"]
+    assert lines[2].split() == ["(°C)"]  # the joints' types not given: no unit for position
     rows = {line.split()[0]: line.split()[1:] for line in lines if line.strip()[:3] in
             ("rj_", "rig", "gpi")}
     assert len(rows) == 20 + 5 + 1  # joints, fingertips, the GPIO block
-    assert rows["rj_dg_1_1"][3] == f"{sample['rj_dg_1_1/temperature']:.4g}"
+    assert rows["rj_dg_1_1"][3] == f"{sample['rj_dg_1_1/temperature']:.1f}"
     assert len(rows["right_fingertip_finger_3"]) == 6 and len(rows["gpio"]) == 4
 
 
