@@ -10,10 +10,14 @@ from __future__ import annotations
 
 import contextlib
 import os
-from typing import Any
+import re
+from typing import TYPE_CHECKING, Any
 
-from deltoctl.errors import UNREACHABLE, USAGE
+from deltoctl.errors import FAILED, UNREACHABLE, USAGE, WARNINGS
 from deltoctl.transport import Check, Target
+
+if TYPE_CHECKING:
+    from deltoctl.transport.adapters import SerialAdapter
 
 LINK_LOCAL = "169.254."
 
@@ -156,3 +160,52 @@ def present_nodes(globs: tuple[str, ...], kind: str, none: str, fix: str,
         return [check("present", kind, False, none, fix)]
     return [c for node in nodes
             for c in device_checks(os.path.basename(node), node, kind, missing_fix, exclusive)]
+
+
+# -- a serial adapter -------------------------------------------------------------------------
+
+_ENUMERATED = re.compile(r"^tty(USB|ACM)\d+$")  # names the kernel hands out in plug-in order
+
+
+def adapter_checks(target: Target, path: str, adapter: SerialAdapter,
+                   baud: int | None) -> list[Check]:
+    """What the adapter behind a serial port tells: a name a reboot cannot swap, a rate its
+    driver sets, and a latency timer that lets a loop at the asked rate run."""
+    results = [_stable(target, path, adapter)]
+    if baud is not None:
+        why = adapter.refuses(baud)
+        results.append(check("baud", target.bus, why is None,
+                             why or f"{adapter.driver or 'its driver'} sets {baud} baud",
+                             "give the bus a rate the adapter sets, or change the adapter",
+                             FAILED))
+    if adapter.latency_timer_ms is not None:
+        results.append(_latency(target, adapter))
+    return results
+
+
+def _stable(target: Target, path: str, a: SerialAdapter) -> Check:
+    if not _ENUMERATED.match(os.path.basename(path)) or not (a.by_id or a.usb):
+        return check("stable name", target.bus, True, f"{path}")
+    query = target.url.partition("?")[2]
+    tail = f"?{query}" if query else ""
+    choices = [f"serial://{p}{tail}" for p in a.by_id[:1]] + ([a.usb + tail] if a.usb else [])
+    return check("stable name", target.bus, False,
+                 f"{path} is named in plug-in order: after a reboot it may be another adapter",
+                 "name the adapter instead: " + " or ".join(choices), WARNINGS)
+
+
+def _latency(target: Target, a: SerialAdapter) -> Check:
+    from deltoctl.transport.adapters import SYNC_LATENCY_MS, latency_fix
+
+    ms = a.latency_timer_ms or 0
+    if ms <= SYNC_LATENCY_MS:
+        return check("latency timer", target.bus, True, f"{ms} ms")
+    limit = (f"the adapter holds each short reply up to {ms} ms: a loop that waits for one "
+             f"reply a cycle runs at most ~{1000 / ms:.0f} Hz")
+    if not target.rate_hz:
+        return check("latency timer", target.bus, True, f"{ms} ms: {limit} (a sync loop "
+                     f"needs {SYNC_LATENCY_MS} ms: deltoctl doctor --udev-rule)")
+    share = min(ms * target.rate_hz / 1000, 1.0)
+    return check("latency timer", target.bus, False,
+                 f"{ms} ms: {limit}, and waits up to {share:.0%} of each cycle of the "
+                 f"{target.rate_hz:g} Hz loop on this bus", latency_fix(a), FAILED)
