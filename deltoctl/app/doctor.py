@@ -150,6 +150,20 @@ def host_checks() -> list[dict[str, Any]]:
 
 # -- the udev rule ----------------------------------------------------------------------------
 
+def udev_rule_text(profile: str | None, load: Callable[[], Profile],
+                   targets: Sequence[str] = (), hardware: Sequence[str] = ()) -> str:
+    """The udev rule of the profile's serial adapters (every USB one without a profile);
+    Unreachable when there is none to name."""
+    from deltoctl.errors import Unreachable
+    from deltoctl.transport.adapters import udev_rule
+
+    chosen = rule_adapters(profile, load, targets, hardware)
+    if not chosen:
+        raise Unreachable("no USB serial adapter to name",
+                          hint="plug it in; deltoctl ports lists the adapters")
+    return udev_rule(chosen)
+
+
 def rule_adapters(profile: str | None, load: Callable[[], Profile],
                   targets: Sequence[str] = (),
                   hardware: Sequence[str] = ()) -> list[tuple[str, SerialAdapter]]:
@@ -185,7 +199,7 @@ def _adapter_of_url(url: str) -> SerialAdapter | None:
         return None  # doctor's own checks say what is wrong with it
 
 
-def write_udev_rule(text: str) -> list[str]:
+def install_udev_rule(text: str) -> list[str]:
     """Install the rule (root only), then have udev read it and apply it to the adapters
     plugged in now. What was done, one line each; Refused when this is not root."""
     import subprocess

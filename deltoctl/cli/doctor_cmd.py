@@ -8,8 +8,8 @@ from typing import Annotated
 
 import typer
 
-from deltoctl.app.doctor import diagnose, exit_code
-from deltoctl.cli.context import Options, options
+from deltoctl.app.doctor import diagnose, exit_code, install_udev_rule, udev_rule_text
+from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, info, say
 from deltoctl.render.doctor import doctor_lines
 
@@ -35,7 +35,9 @@ def doctor(
     -t URLs, or what each transport finds on this host (its ports and buses)."""
     opts = options(ctx)
     if udev_rule or write_udev_rule:
-        _udev(opts, write_udev_rule)
+        text = udev_rule_text(opts.profile, opts.load_profile, opts.target, opts.hardware)
+        for line in install_udev_rule(text) if write_udev_rule else [text.rstrip("\n")]:
+            (info if write_udev_rule else say)(line)
         return
     result = diagnose(opts.profile, opts.load_profile, opts.target, opts.hardware, opts.sim,
                       timeout)
@@ -48,20 +50,3 @@ def doctor(
     if code:
         raise typer.Exit(code)
 
-
-def _udev(opts: Options, write: bool) -> None:
-    """Print, or install, the udev rule of the profile's serial adapters (all, without -p)."""
-    from deltoctl.app.doctor import rule_adapters, write_udev_rule
-    from deltoctl.errors import Unreachable
-    from deltoctl.transport.adapters import udev_rule
-
-    chosen = rule_adapters(opts.profile, opts.load_profile, opts.target, opts.hardware)
-    if not chosen:
-        raise Unreachable("no USB serial adapter to name", hint="plug it in; deltoctl ports "
-                                                                "lists the adapters")
-    text = udev_rule(chosen)
-    if not write:
-        say(text.rstrip("\n"))
-        return
-    for line in write_udev_rule(text):
-        info(line)

@@ -329,7 +329,8 @@ def can_interface(name: str, base: str | None = None) -> CanInterface | None:
 
 
 def _ip_details() -> dict[str, dict[str, Any]]:
-    """ifname → its ``ip -details -statistics -json link show`` record; empty where there is no ip."""
+    """ifname → its ``ip -details -statistics -json link show`` record; empty where there is
+    no ip command."""
     import json
     import shutil
     import subprocess
@@ -338,8 +339,8 @@ def _ip_details() -> dict[str, dict[str, Any]]:
     if ip is None:
         return {}
     try:
-        out = subprocess.run([ip, "-details", "-statistics", "-json", "link", "show"], capture_output=True,
-                             text=True, timeout=2, check=False).stdout
+        out = subprocess.run([ip, "-details", "-statistics", "-json", "link", "show"],
+                             capture_output=True, text=True, timeout=2, check=False).stdout
         records = json.loads(out or "[]")
     except (OSError, ValueError, subprocess.SubprocessError):
         return {}

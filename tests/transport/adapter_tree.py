@@ -96,8 +96,8 @@ class Tree:
         """A PC's 8250 UART, which is no adapter."""
         port = f"sys/devices/platform/serial8250/{name}"
         (self.root / "sys/bus/platform/drivers/serial8250").mkdir(parents=True, exist_ok=True)
-        self._write(f"sys/devices/platform/serial8250/uevent", "")
-        self._link(f"sys/devices/platform/serial8250/driver",
+        self._write("sys/devices/platform/serial8250/uevent", "")
+        self._link("sys/devices/platform/serial8250/driver",
                    _up("sys/devices/platform/serial8250", "sys/bus/platform/drivers/serial8250"))
         self._write(f"{port}/dev", "4:64")
         self._link(f"{port}/device", _up(port, "sys/devices/platform/serial8250"))
@@ -132,7 +132,7 @@ class Tree:
 def _up(link_dir: str, target: str) -> str:
     """The relative path from the directory holding a link to ``target`` (both under root),
     as sysfs writes its links."""
-    return os.path.relpath(target, link_dir if not link_dir.endswith("/") else link_dir)
+    return os.path.relpath(target, link_dir)
 
 
 U2D2 = Usb("1-2", "0403", "6014", "FTDI", "USB <-> Serial Converter", "FT6Z5XYZ", "ftdi_sio")
