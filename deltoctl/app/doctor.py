@@ -169,7 +169,7 @@ def rule_adapters(profile: str | None, load: Callable[[], Profile],
                   hardware: Sequence[str] = ()) -> list[tuple[str, SerialAdapter]]:
     """(the /dev name to give, the adapter) of each serial bus of the profile, named
     PROFILE-BUS; without a profile, of every USB serial adapter, named deltoctl-SERIAL."""
-    from deltoctl.transport.adapters import serial_adapters
+    from deltoctl.transport.adapters import adapter_of_target, serial_adapters
 
     if not profile:
         return [(f"deltoctl-{a.serial or a.name}", a) for a in serial_adapters(holders=False)
@@ -180,23 +180,10 @@ def rule_adapters(profile: str | None, load: Callable[[], Profile],
         found = _targets(prof, targets, hardware, False, stack, results)
     chosen = []
     for bus, (url, _, _) in found.items():
-        adapter = _adapter_of_url(url)
+        adapter = adapter_of_target(url)
         if adapter is not None and adapter.vid:
             chosen.append((f"{prof.name}-{bus}", adapter))
     return chosen
-
-
-def _adapter_of_url(url: str) -> SerialAdapter | None:
-    from deltoctl import registry
-    from deltoctl.transport.adapters import adapter_of
-    from deltoctl.transport.serial_port import parse_serial_url, port_path
-
-    if registry.scheme_of(url) not in ("serial", "usb"):
-        return None
-    try:
-        return adapter_of(port_path(parse_serial_url(url)[0]))
-    except DeltoctlError:
-        return None  # doctor's own checks say what is wrong with it
 
 
 def install_udev_rule(text: str) -> list[str]:

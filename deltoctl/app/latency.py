@@ -6,8 +6,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from deltoctl.errors import DeltoctlError
-
 SHORTFALL = 0.9  # a loop below this share of its asked rate is looked into
 
 
@@ -16,18 +14,11 @@ def loop_warnings(urls: Iterable[str], asked_hz: float, real_hz: float) -> list[
     asked rate; none when the loop kept up or no timer is to blame."""
     if not asked_hz or real_hz >= SHORTFALL * asked_hz:
         return []
-    from deltoctl import registry
-    from deltoctl.transport.adapters import SYNC_LATENCY_MS, adapter_of, latency_fix
-    from deltoctl.transport.serial_port import parse_serial_url, port_path
+    from deltoctl.transport.adapters import SYNC_LATENCY_MS, adapter_of_target, latency_fix
 
     found = []
     for url in sorted(set(urls)):
-        if registry.scheme_of(url) not in ("serial", "usb"):
-            continue
-        try:
-            adapter = adapter_of(port_path(parse_serial_url(url)[0]))
-        except DeltoctlError:
-            continue
+        adapter = adapter_of_target(url)
         ms = adapter.latency_timer_ms if adapter is not None else None
         if adapter is None or ms is None or ms <= SYNC_LATENCY_MS or 1000 / ms >= asked_hz:
             continue

@@ -233,6 +233,48 @@ def adapter_of(path: str, base: str | None = None) -> SerialAdapter | None:
     return next((adapters[n] for n in _chain(path) if n in adapters), None)
 
 
+def adapter_of_target(url: str) -> SerialAdapter | None:
+    """The serial adapter a target URL reaches; None for a URL of another transport, or one
+    that reaches no adapter (doctor's checks say why)."""
+    from deltoctl.errors import DeltoctlError
+    from deltoctl.transport.serial_port import parse_serial_url, port_path
+
+    try:
+        return adapter_of(port_path(parse_serial_url(url)[0]))
+    except DeltoctlError:
+        return None
+
+
+ENUMERATED = re.compile(r"^tty(USB|ACM)\d+$")  # names the kernel hands out in plug-in order
+
+
+def stable_targets(url: str, a: SerialAdapter) -> list[str]:
+    """The target URLs that name the adapter itself, with the URL's query: its by-id link,
+    its usb:VID:PID[:SERIAL]."""
+    query = url.partition("?")[2]
+    tail = f"?{query}" if query else ""
+    return [f"serial://{p}{tail}" for p in a.by_id[:1]] + ([a.usb + tail] if a.usb else [])
+
+
+def stable_hint(url: str) -> str | None:
+    """For a target named in plug-in order (/dev/ttyUSB0, /dev/ttyACM0), what names its
+    adapter instead; None for any other target."""
+    from deltoctl.errors import DeltoctlError
+    from deltoctl.transport.serial_port import parse_serial_url
+
+    try:
+        path = parse_serial_url(url)[0]
+    except DeltoctlError:
+        return None
+    if not ENUMERATED.match(os.path.basename(path)):
+        return None
+    adapter = adapter_of(path)
+    choices = stable_targets(url, adapter) if adapter is not None else []
+    return (f"{path} is named in plug-in order (a reboot may swap it): name the adapter by "
+            + (" or ".join(choices) if choices else "its /dev/serial/by-id/ link or "
+               "usb:VID:PID[:SERIAL] (deltoctl ports lists them)"))
+
+
 # -- usb:VID:PID[:SERIAL] ---------------------------------------------------------------------
 
 _HEX4 = re.compile(r"^[0-9a-fA-F]{4}$")

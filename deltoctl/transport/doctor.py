@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import re
 from typing import TYPE_CHECKING, Any
 
 from deltoctl.errors import FAILED, UNREACHABLE, USAGE, WARNINGS
@@ -164,9 +163,6 @@ def present_nodes(globs: tuple[str, ...], kind: str, none: str, fix: str,
 
 # -- a serial adapter -------------------------------------------------------------------------
 
-_ENUMERATED = re.compile(r"^tty(USB|ACM)\d+$")  # names the kernel hands out in plug-in order
-
-
 def adapter_checks(target: Target, path: str, adapter: SerialAdapter,
                    baud: int | None) -> list[Check]:
     """What the adapter behind a serial port tells: a name a reboot cannot swap, a rate its
@@ -184,11 +180,11 @@ def adapter_checks(target: Target, path: str, adapter: SerialAdapter,
 
 
 def _stable(target: Target, path: str, a: SerialAdapter) -> Check:
-    if not _ENUMERATED.match(os.path.basename(path)) or not (a.by_id or a.usb):
+    from deltoctl.transport.adapters import ENUMERATED, stable_targets
+
+    choices = stable_targets(target.url, a)
+    if not ENUMERATED.match(os.path.basename(path)) or not choices:
         return check("stable name", target.bus, True, f"{path}")
-    query = target.url.partition("?")[2]
-    tail = f"?{query}" if query else ""
-    choices = [f"serial://{p}{tail}" for p in a.by_id[:1]] + ([a.usb + tail] if a.usb else [])
     return check("stable name", target.bus, False,
                  f"{path} is named in plug-in order: after a reboot it may be another adapter",
                  "name the adapter instead: " + " or ".join(choices), WARNINGS)

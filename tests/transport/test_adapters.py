@@ -279,3 +279,22 @@ def test_stream_blames_no_latency_timer_set_to_1_ms(cli, tree, koch_bus):
     result = cli("-p", "koch-arm", "-t", "dxl=usb:0403:6014?baud=1000000", "stream",
                  "--rate", "200", "--duration", "0.3", "--json")
     assert "latency timer" not in result.stderr, result.stderr
+
+
+def test_profile_show_and_validate_suggest_the_stable_name_of_a_ttyusb_bus(cli, tree):
+    by_id = tree.serial("ttyUSB0", U2D2, latency_ms=1)
+    shown = cli("profile", "show", "koch-arm").stdout
+    assert "note: /dev/ttyUSB0 is named in plug-in order" in shown
+    assert f"serial://{by_id}?baud=1000000 or usb:0403:6014:FT6Z5XYZ" in shown
+    text = (REPO / "profiles" / "koch-arm.yaml").read_text()
+    mine = tree.root / "koch.yaml"
+    mine.write_text(text.replace("/dev/ttyUSB0", str(tree.root / "dev/ttyUSB0")))
+    result = cli("profile", "validate", str(mine))
+    assert result.exit_code == 0  # advice, not a warning
+    assert f"serial://{by_id}?baud=1000000 or usb:0403:6014:FT6Z5XYZ?baud=1000000" in \
+        result.stderr
+    notes = json.loads(cli("profile", "validate", str(mine), "--json").stdout)["result"]
+    assert "plug-in order" in notes[0]["notes"][0]
+    (tree.root / "sys/class/tty/ttyUSB0").unlink()  # unplugged: what would name one
+    shown = cli("profile", "show", "koch-arm").stdout
+    assert "its /dev/serial/by-id/ link or usb:VID:PID[:SERIAL] (deltoctl ports" in shown
