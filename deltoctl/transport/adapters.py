@@ -10,7 +10,6 @@ but sysfs files and directory links; no byte reaches a device.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import re
 from dataclasses import asdict, dataclass, field
@@ -181,12 +180,18 @@ def serial_adapters(base: str | None = None, holders: bool = True) -> list[Seria
         if usb is None and (driver in (None, "serial8250", "port") or name.startswith("ttyS")):
             continue  # the PC's legacy UARTs: none is an adapter
         found.append(_adapter(base, name, real, usb, driver, by_id.get(name, []),
-                              by_path.get(name, []), holders))
+                              by_path.get(name, [])))
+    if holders and found:
+        from deltoctl.transport.doctor import holders_of_each
+
+        held = holders_of_each([a.device for a in found])
+        for a in found:
+            a.holders = held[a.device]
     return found
 
 
 def _adapter(base: str, name: str, real: str, usb: str | None, driver: str | None,
-             by_id: list[str], by_path: list[str], holders: bool) -> SerialAdapter:
+             by_id: list[str], by_path: list[str]) -> SerialAdapter:
     attr = (lambda key: _read(os.path.join(usb, key))) if usb else (lambda key: None)
     a = SerialAdapter(device=under(base, f"/dev/{name}"), name=name, by_id=by_id,
                       by_path=by_path, vid=attr("idVendor"), pid=attr("idProduct"),
@@ -199,11 +204,6 @@ def _adapter(base: str, name: str, real: str, usb: str | None, driver: str | Non
     if driver == "ftdi_sio":
         a.max_baud = 12_000_000 if a.pid in FTDI_HIGH_SPEED else 3_000_000
     _access(a)
-    if holders:
-        from deltoctl.transport.doctor import holders_of
-
-        with contextlib.suppress(OSError):
-            a.holders = holders_of(a.device)
     return a
 
 

@@ -10,8 +10,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import jsonschema
 import pytest
 
+from deltoctl.schemas_lookup import schema_file
 from deltoctl.transport.adapters import ROOT_ENV
 from tests.transport.adapter_tree import CANDLE, CH340, CH343, U2D2, U2D2_B, Tree
 
@@ -70,6 +72,7 @@ def test_ports_lists_each_adapter_as_the_kernel_lays_it_out(cli, tree):
     tree.i2c(1, "bcm2835 (i2c@7e804000)")
     result = cli("ports", "--json")
     assert result.exit_code == 0, result.output
+    jsonschema.validate(json.loads(result.stdout), json.loads(schema_file("ports").read_text()))
     found = _doc(result)
     serial = {a["name"]: a for a in found["serial"]}
     assert sorted(serial) == ["ttyACM0", "ttyUSB0", "ttyUSB1"]  # the 8250 UART is no adapter
