@@ -15,7 +15,7 @@ import pytest
 
 from deltoctl.schemas_lookup import schema_file
 from deltoctl.transport.adapters import ROOT_ENV
-from tests.transport.adapter_tree import CANDLE, CH340, CH343, U2D2, U2D2_B, Tree
+from tests.transport.adapter_tree import CANDLE, CH340, CH343, U2D2, U2D2_B, Tree, Usb
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -41,10 +41,11 @@ def koch_bus():
     profile = load_profile("koch-arm")
     servers = []
 
-    def serve(latency: float = 0.0):
+    def serve(latency: float = 0.0, missing: frozenset[int] = frozenset()):
         hw = profile.hardware[0]
         bus = DynamixelBus([Servo(i, model=model_of(hw, j))
                             for i, j in servo_ids(profile, hw).items()])
+        bus.faults.missing |= missing
         servers.append(DynamixelPtyServer(bus, latency=latency).start())
         return servers[-1].port
 
@@ -178,6 +179,18 @@ def test_a_profile_may_name_its_adapter_by_usb_id(tmp_path, cli, tree, koch_bus)
                                  "usb:0403:6014:FT6Z5XYZ?baud=1000000"))
     assert cli("profile", "validate", str(mine)).exit_code == 0
     assert cli("-p", str(mine), "identify").exit_code == 0
+
+
+def test_a_baud_scan_leaves_out_the_rates_its_adapter_cannot_set(cli, tree, koch_bus):
+    ft232r = Usb("1-7", "0403", "6001", "FTDI", "FT232R USB UART", "A50285BI", "ftdi_sio")
+    tree.serial("ttyUSB0", ft232r, latency_ms=1, node=koch_bus(missing=frozenset({6})))
+    result = cli("-p", "koch-arm", "-t", "dxl=usb:0403:6001?baud=1000000", "detect", "--json")
+    assert result.exit_code == 3, result.output  # the gripper's servo is missing
+    block = json.loads(result.stdout)["blocks"][0]
+    unscanned = block["details"]["unscanned"]
+    assert sorted(map(int, unscanned)) == [4_000_000, 4_500_000]  # an FT232R's limit: 3 Mbaud
+    assert "ftdi_sio on this chip sets at most 3000000 baud" in unscanned["4000000"]
+    assert "not scanned: 4000000" in block["summary"]
 
 
 # -- doctor: each check failing, and its fix --------------------------------------------------
