@@ -163,6 +163,9 @@ def _links(base: str, folder: str) -> dict[str, list[str]]:
     return found
 
 
+_LEGACY = re.compile(r"^ttyS\d+$")
+
+
 def serial_adapters(base: str | None = None, holders: bool = True) -> list[SerialAdapter]:
     """Every USB serial adapter (and on-board UART with a driver of its own, ttySC/ttyAMA) the
     kernel has, with what sysfs and udev tell of it."""
@@ -177,7 +180,7 @@ def serial_adapters(base: str | None = None, holders: bool = True) -> list[Seria
         real = os.path.realpath(dev)
         interface, usb = _usb_ancestor(real)
         driver = _driver(interface) or _driver(real)
-        if usb is None and (driver in (None, "serial8250", "port") or name.startswith("ttyS")):
+        if usb is None and (driver in (None, "serial8250", "port") or _LEGACY.match(name)):
             continue  # the PC's legacy UARTs: none is an adapter
         found.append(_adapter(base, name, real, usb, driver, by_id.get(name, []),
                               by_path.get(name, [])))

@@ -92,16 +92,19 @@ class Tree:
                    + ("-port0" if name.startswith("ttyUSB") else ""), f"../../{name}")
         return str(self.root / f"dev/serial/by-id/{by_id}")
 
-    def legacy_uart(self, name: str = "ttyS0") -> None:
-        """A PC's 8250 UART, which is no adapter."""
-        port = f"sys/devices/platform/serial8250/{name}"
-        (self.root / "sys/bus/platform/drivers/serial8250").mkdir(parents=True, exist_ok=True)
-        self._write("sys/devices/platform/serial8250/uevent", "")
-        self._link("sys/devices/platform/serial8250/driver",
-                   _up("sys/devices/platform/serial8250", "sys/bus/platform/drivers/serial8250"))
+    def platform_uart(self, name: str = "ttyS0", driver: str = "serial8250",
+                      device: str = "serial8250") -> None:
+        """A UART that is no USB device: a PC's 8250 (no adapter), or an on-board one with a
+        driver of its own (an SC16IS752 on SPI: ttySC0, sc16is7xx)."""
+        parent = f"sys/devices/platform/{device}"
+        port = f"{parent}/tty/{name}"
+        (self.root / f"sys/bus/platform/drivers/{driver}").mkdir(parents=True, exist_ok=True)
+        if not (self.root / parent / "driver").exists():
+            self._link(f"{parent}/driver", _up(parent, f"sys/bus/platform/drivers/{driver}"))
         self._write(f"{port}/dev", "4:64")
-        self._link(f"{port}/device", _up(port, "sys/devices/platform/serial8250"))
+        self._link(f"{port}/device", _up(port, parent))
         self._link(f"sys/class/tty/{name}", _up("sys/class/tty", port))
+        self._link(f"dev/{name}", self._pty(name))
 
     def can(self, name: str, up: bool, usb: Usb | None = None) -> None:
         """A CAN network interface (type 280), on a USB adapter when ``usb``."""

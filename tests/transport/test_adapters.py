@@ -68,7 +68,8 @@ def test_ports_lists_each_adapter_as_the_kernel_lays_it_out(cli, tree):
     u2d2 = tree.serial("ttyUSB0", U2D2, latency_ms=16)
     ch343 = tree.serial("ttyACM0", CH343)
     tree.serial("ttyUSB1", CH340)
-    tree.legacy_uart("ttyS0")
+    tree.platform_uart("ttyS0")
+    tree.platform_uart("ttySC0", driver="sc16is7xx", device="spi0.0")
     tree.can("can0", up=False, usb=CANDLE)
     tree.i2c(1, "bcm2835 (i2c@7e804000)")
     result = cli("ports", "--json")
@@ -76,7 +77,9 @@ def test_ports_lists_each_adapter_as_the_kernel_lays_it_out(cli, tree):
     jsonschema.validate(json.loads(result.stdout), json.loads(schema_file("ports").read_text()))
     found = _doc(result)
     serial = {a["name"]: a for a in found["serial"]}
-    assert sorted(serial) == ["ttyACM0", "ttyUSB0", "ttyUSB1"]  # the 8250 UART is no adapter
+    # the 8250 UART is no adapter; the SC16IS752 on SPI (the MH5's buses) is one
+    assert sorted(serial) == ["ttyACM0", "ttySC0", "ttyUSB0", "ttyUSB1"]
+    assert serial["ttySC0"]["driver"] == "sc16is7xx" and serial["ttySC0"]["usb"] is None
     a = serial["ttyUSB0"]
     assert (a["vid"], a["pid"], a["serial"], a["driver"]) == ("0403", "6014", "FT6Z5XYZ",
                                                               "ftdi_sio")
