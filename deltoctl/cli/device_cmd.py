@@ -216,6 +216,7 @@ def stream(
     """Stream every block's state interfaces: a live table on a terminal, NDJSON with --json
     or when piped; with --foxglove, to Foxglove as well (every interface, whatever -i picks).
     Exit 4 when a link is down at the end, 3 when one was lost and came back."""
+    from deltoctl.app.latency import loop_warnings
     from deltoctl.app.sinks import LinesSink
     from deltoctl.cli.record_cmd import foxglove_live, start_foxglove
     from deltoctl.core.runner import run_cycles
@@ -236,4 +237,5 @@ def stream(
         emit_json({"samples": sink.samples, "interfaces": len(names),
                    "loop": stats.summary()}, err=True)
     links.finish()
-    finish(system)
+    finish(system, loop_warnings([m.url for m in system.members], rate,
+                                 stats.summary()["real_rate"]))
