@@ -477,3 +477,27 @@ def test_a_refused_jog_on_the_cli_reaches_no_mock(cli, monkeypatch):
         result = cli("-p", "rrbot-gpio", *args, "--yes")
         assert result.exit_code == 5, result.output + result.stderr
     assert calls == []
+
+
+def test_a_replay_of_the_arm_leaves_the_gripper_holding(cli, tmp_path):
+    """A replay stops the blocks it commands on the way out, no others."""
+    from deltoctl.app.robot import Robot
+
+    profile = load_profile("bioscara-dg-3f-m")
+    firmware = firmware_for_block(profile.hardware[1])
+    hand = Received({delto.SET_DUTY})
+    hand.spy(firmware, "handle", lambda data: data[2])
+    out = tmp_path / "arm.mcap"
+    with I2CSocketServer(sim_i2c_bus(profile)) as i2c, DeltoServer(firmware) as tcp:
+        targets = [f"i2c={i2c.url}", f"gripper={tcp.endpoint}"]
+        cell = ["-p", "bioscara-dg-3f-m", *(a for t in targets for a in ("-t", t)), "--yes"]
+        assert cli(*cell, "home", "-j", "j4").exit_code == 0
+        result = cli(*cell, "jog", "j4", "-0.2", "--record", str(out))
+        assert result.exit_code == 0, result.stderr
+        with System(profile, targets) as system:
+            system.set_command("j_dg_1_2/effort", 0.1)
+            system.read()
+            grasp = hand.count()
+            assert set(Robot(system).replay(out)["joints"]) == {"j4"}
+            system.read()
+            assert hand.count() == grasp
