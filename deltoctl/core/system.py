@@ -334,6 +334,13 @@ class System:
             if blocks is None or m.name in blocks:
                 m.driver.stop()
 
+    def make_safe(self) -> None:
+        """Every block's safe state, whatever this session sent: what the fleet's agent does
+        after killing a motion verb that had no time for its own stop."""
+        self._followed.clear()
+        for m in self.members:
+            m.driver.make_safe()
+
     # -- motion ----------------------------------------------------------------------------
     def by_block(self, joints: list[str] | dict[str, float]) -> dict[str, list[str]]:
         """Joint names grouped by their block, in the profile's order of blocks."""

@@ -501,3 +501,16 @@ def test_a_replay_of_the_arm_leaves_the_gripper_holding(cli, tmp_path):
             assert set(Robot(system).replay(out)["joints"]) == {"j4"}
             system.read()
             assert hand.count() == grasp
+
+
+def test_a_gripper_never_driven_is_left_as_it_is_unless_set_safe(hand):
+    """Closing a session that sent no duty sends none; setting the blocks safe (what the
+    fleet's agent does after killing a motion verb) sends duty 0 all the same."""
+    system, received = hand
+    system.read()
+    system.stop()
+    system.read()
+    assert received.codes.count(delto.SET_DUTY) == 0
+    system.make_safe()
+    system.read()
+    assert received.codes.count(delto.SET_DUTY) == 1

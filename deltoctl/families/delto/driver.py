@@ -484,6 +484,12 @@ class DeltoDriver(Driver):
         self._send(codec.encode_duty([0] * self.model.motors))
         self._driving = self.link is None  # not sent: the next stop (closing) tries again
 
+    def make_safe(self) -> None:
+        """Duty 0 on every motor, though this session sent none (a gripper keeps the last
+        duty of a process that was killed)."""
+        self._driving = True
+        self.stop()
+
     def set_gpio(self, outputs: tuple[bool, bool, bool]) -> None:
         if self.model is None or not self.model.gpio:
             raise DeviceError(f"{self.model.name if self.model else 'this gripper'} has no GPIO")
