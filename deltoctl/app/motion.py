@@ -159,16 +159,20 @@ def joint_positions(profile: Profile, targets: Mapping[str, str | float],
 
 def move(system: System, targets: Mapping[str, float], velocity: float | None = None,
          progress: Progress | None = None, *, jog: bool = True) -> dict[str, Any]:
-    """Move joints to ``targets``, the blocks on several links at once, and stop every block
-    on the way out; the report a ``jog --json`` prints."""
+    """Move joints to ``targets``, the blocks on several links at once, and stop the blocks
+    that moved on the way out; the report a ``jog --json`` prints. A move the envelope or a
+    block's motion rules refuse has no effect on any block: checked before anything is sent,
+    it stops nothing either."""
     from deltoctl.core.runner import interrupted_by_signals
 
     targets = dict(targets)
+    system.check_move(targets, velocity, jog=jog)
+    system.check_ready(targets)
     try:
         with interrupted_by_signals():
             result = system.move(targets, velocity, progress, jog=jog)
     finally:
-        system.stop()
+        system.stop(system.by_block(targets))
     values = system.read()
     return {
         "settled": result.settled,
@@ -264,6 +268,8 @@ def home(system: System, plan: HomePlan, force: bool = False, velocity: float | 
     if unable:
         system.notes.append(f"{', '.join(unable)}: cannot home")
     targets = {j: t for j, t in plan.targets.items() if system.member(j).can("home")}
+    if targets:  # the home pose at this speed, before any routine runs
+        system.check_move(targets, velocity, jog=False)
     started = time.monotonic()
     report: dict[str, Any] = {"blocks": []}
     if plan.routine:

@@ -283,10 +283,11 @@ class Robot:
     def move(self, targets: Mapping[str, float | str], velocity: float | str | None = None,
              progress: Callable[[float], None] | None = None) -> dict[str, Any]:
         """Move joints to absolute targets (``30deg``, ``12mm``, or a bare number in radians
-        or metres), the blocks on several links at once; every block is stopped on the way
-        out. A unit that is not the joint's is ``InvalidInput``; a target outside the
-        envelope is refused (``Refused``) before anything is sent. Returns the report a
-        ``jog --json`` prints."""
+        or metres), the blocks on several links at once; the blocks that moved are stopped on
+        the way out. A unit that is not the joint's is ``InvalidInput``; a target outside the
+        envelope is refused (``Refused``) before anything is sent, with no effect at all (no
+        stop either). Returns the report a ``jog --json`` prints (its data, the blocks and
+        ``settled``, ``seconds``, ``unsettled``, in one dict)."""
         from deltoctl.app.motion import joint_positions, joint_speed, move
 
         positions = joint_positions(self.profile, targets)
@@ -451,8 +452,8 @@ class Robot:
         """Play a recording's commands (``jog --record``) back on this robot under its own
         profile's limits (a looser recorded profile is refused; differences are warnings):
         first to the recorded start pose, then at the recorded timing. A joint outside its
-        limits or further than ``max_deviation`` from the recording stops every block
-        (``Deviated``, exit 5). Returns the per-joint comparison."""
+        limits or further than ``max_deviation`` from the recording stops every block it
+        commands (``Deviated``, exit 5). Returns the per-joint comparison."""
         from deltoctl.app.replay import plan_replay, replay_report, run_replay
 
         path = Path(recording)

@@ -128,8 +128,12 @@ def _served_simulated() -> None:
 
 def _run(argv: list[str]) -> int:
     """One command line, as ``deltoctl`` runs it; its exit code."""
+    from deltoctl.cli import device_cmd
     from deltoctl.cli import main as cli
+    from deltoctl.fleet import SET_SAFE
 
+    if argv[:1] == [SET_SAFE]:  # the agent's own, after it killed a motion verb
+        device_cmd.SET_SAFE, argv = True, argv[1:]
     sys.argv = ["deltoctl", *argv]
     try:
         cli.main()

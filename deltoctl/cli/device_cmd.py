@@ -29,6 +29,9 @@ AllowMismatch = Annotated[bool, typer.Option(
 # why every block runs on a simulator that -t names like a device: set by 'deltoctl agent
 # --sim' in the processes that run its verbs, so that their JSON and recordings say simulated
 SERVED_SIMULATED: str | None = None
+# every block set safe on the way out, whatever the verb sent: set by the agent's verb process
+# that runs the connect after a motion verb was killed (deltoctl.fleet.SET_SAFE)
+SET_SAFE = False
 
 
 @contextlib.contextmanager
@@ -47,7 +50,11 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
     with open_app_robot(profile or opts.load_profile(), opts.target, sim=sim,
                         hardware=opts.hardware, allow_model_mismatch=allow_model_mismatch,
                         probe=probe, notice=info, served_by=SERVED_SIMULATED) as robot:
-        yield robot
+        try:
+            yield robot
+        finally:
+            if SET_SAFE:
+                robot.system.make_safe()
 
 
 def finish(system: Any, extra: list[str] | None = None) -> None:

@@ -191,7 +191,7 @@ def _remote_record(opts: Options, robot: str, argv: list[str], err: Any) -> int:
                                                             params["force"]))
     if done.result:
         if opts.json:
-            emit_json(done.result)
+            emit_json(done.result, profile=done.profile)
         else:
             info(recorded_text(robot, done.result))
         if done.result["link_losses"]:

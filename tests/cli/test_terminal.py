@@ -112,7 +112,7 @@ def test_yq_after_the_verb_runs(cli):
     result = cli("-p", "rrbot-gpio", "jog", "joint1", "--to", "0.1", "-yq")
     assert result.exit_code == 0, result.output
     result = cli("-p", "rrbot-gpio", "jog", "joint1", "--to", "0.2", "-yq", "--json")
-    assert json.loads(result.stdout)["settled"] is True
+    assert json.loads(result.stdout)["result"]["settled"] is True
 
 
 # -- one JSON shape ---------------------------------------------------------------------------

@@ -191,7 +191,7 @@ def test_remote_motion_needs_yes_and_the_robot_keeps_its_state(bench):
     moved = bench.remote("jog", JOINT, "5deg", "--yes", "--json")
     assert moved.returncode == 0, moved.stderr
     report = json.loads(moved.stdout)
-    assert report["settled"]
+    assert report["result"]["settled"]
     probe = bench.probe()
     try:  # the same simulator: the joint stays where the remote jog left it
         assert probe.position() == pytest.approx(report["blocks"][0]["joints"][JOINT]["position"],

@@ -96,6 +96,7 @@ class DeltoDriver(Driver):
         self._reconnecting = False
         self._connecting = threading.Lock()  # one connection attempt at a time
         self._closed = False
+        self._driving = False  # a duty was sent since the last stop: only then is there one
         self._last_read = 0.0
         joints = [j.name for j in hw.joints]
         self._effort_keys = frozenset(f"{j}/effort" for j in joints)
@@ -450,6 +451,7 @@ class DeltoDriver(Driver):
             duty = int(effort_to_duty_percent(limited) * 10)
             duties.append(max(-DUTY_WIRE_LIMIT, min(DUTY_WIRE_LIMIT, duty)) * direction)
         duties += [0] * (model.motors - len(duties))
+        self._driving = True
         if duties != self._last_duty[0]:  # a command held from cycle to cycle: encoded once
             self._last_duty = (duties, codec.encode_duty(duties))
         self._send(self._last_duty[1])
@@ -475,9 +477,10 @@ class DeltoDriver(Driver):
                             if isfinite(sp[2])})
 
     def stop(self) -> None:
-        """The safe state: duty 0 on every motor. With the link down (a gripper keeps its
+        """The safe state: duty 0 on every motor, once this session sent a duty (a gripper
+        it never drove keeps what holds it, a grasp). With the link down (a gripper keeps its
         last duty), one immediate reconnection is tried first: a stop must reach it."""
-        if self.model is None:
+        if self.model is None or not self._driving:
             return
         if self.link is None and not self._closed and self._connecting.acquire(timeout=1.0):
             try:
@@ -489,6 +492,13 @@ class DeltoDriver(Driver):
             finally:
                 self._connecting.release()
         self._send(codec.encode_duty([0] * self.model.motors))
+        self._driving = self.link is None  # not sent: the next stop (closing) tries again
+
+    def make_safe(self) -> None:
+        """Duty 0 on every motor, though this session sent none (a gripper keeps the last
+        duty of a process that was killed)."""
+        self._driving = True
+        self.stop()
 
     def set_gpio(self, outputs: tuple[bool, bool, bool]) -> None:
         if self.model is None or not self.model.gpio:

@@ -34,7 +34,7 @@ def test_verify_and_watch_report_each_check(cli, gripper, tmp_path):
     result = cli("-p", "dg-4f", "-t", gripper.endpoint, "calibrate", "ft", "--json", "-n", "20",
                  "--watch", "0.3", "-o", str(tmp_path))
     assert result.exit_code == 0, result.stderr
-    checks = by_id(json.loads(result.stdout)["checks"])
+    checks = by_id(json.loads(result.stdout)["result"]["checks"])
     residual = checks["fingertip_finger_1.residual_force"]
     assert residual["verdict"] == "pass" and residual["limit"] == {"min": None, "max": 0.3}
     assert residual["unit"] == "N"
