@@ -194,8 +194,8 @@ def fail_unsettled(report: Mapping[str, Any]) -> None:
 
 @dataclass
 class HomePlan:
-    """What ``home`` will do: joints with a homing routine (into their hard stops, one at a
-    time), and the others' home poses."""
+    """What ``home`` will do: joints with a homing routine (into a hard stop, or a drive's own
+    homing mode; one at a time), and the others' home poses."""
 
     profile: str
     routine: list[str] = field(default_factory=list)
@@ -204,8 +204,8 @@ class HomePlan:
     def describe(self) -> str:
         what = []
         if self.routine:
-            what.append(f"home {', '.join(self.routine)} one at a time, each running into its "
-                        "hard stop")
+            what.append(f"home {', '.join(self.routine)} one at a time, each by its own "
+                        "routine (into its hard stop, or the drive's homing mode)")
         if self.targets:
             what.append(f"move {len(self.targets)} joints to the home pose")
         return f"{self.profile}: " + "; then ".join(what)
