@@ -19,7 +19,7 @@ from deltoctl.cli.output import (
     table,
     warn,
 )
-from deltoctl.errors import WARNINGS, InvalidInput
+from deltoctl.errors import WARNINGS, InvalidInput, NotHomed
 
 AllowMismatch = Annotated[bool, typer.Option(
     "--allow-model-mismatch",
@@ -35,19 +35,45 @@ SERVED_SIMULATED: str | None = None
 def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any = None,
                probe: bool = False) -> Iterator[Any]:
     """The robot of the selected profile's blocks (``--hardware``), configured and active;
-    with ``--sim``, each block's simulator is started first. Pass ``profile`` when the verb
-    loaded it already; ``probe`` for a verb that looks at a bus where nothing may answer."""
+    with ``--sim``, on the ``sim serve`` of this profile running for the user, else on
+    simulators started first. Pass ``profile`` when the verb loaded it already; ``probe`` for
+    a verb that looks at a bus where nothing may answer."""
     from deltoctl.app.robot import open_robot as open_app_robot
 
+    prof = profile or opts.load_profile()
     sim: Any = opts.sim
     if opts.sim and opts.sim_options:
         from deltoctl.sim.serve import options_given
 
         sim = options_given(opts.sim_options, "--sim-option")
-    with open_app_robot(profile or opts.load_profile(), opts.target, sim=sim,
-                        hardware=opts.hardware, allow_model_mismatch=allow_model_mismatch,
-                        probe=probe, notice=info, served_by=SERVED_SIMULATED) as robot:
-        yield robot
+    targets, served_by = opts.target, SERVED_SIMULATED
+    running = _running_sim(opts, prof, sim) if opts.sim and not opts.sim_fresh else None
+    if running is not None:
+        info(f"using sim serve (pid {running.pid}) of {running.profile}; --sim-fresh starts "
+             "a simulator of its own")
+        targets, sim, served_by = [*opts.target, *running.targets], False, \
+            f"sim serve (pid {running.pid})"
+    try:
+        with open_app_robot(prof, targets, sim=sim, hardware=opts.hardware,
+                            allow_model_mismatch=allow_model_mismatch, probe=probe,
+                            notice=info, served_by=served_by) as robot:
+            yield robot
+    except NotHomed as exc:
+        if opts.sim and running is None:
+            exc.hint = (f"each --sim starts a fresh simulator, which no earlier command homed: "
+                        f"run 'deltoctl sim serve {prof.name}' in another terminal, and --sim "
+                        "uses it (home once, then jog)")
+        raise
+
+
+def _running_sim(opts: Options, prof: Any, sim: Any) -> Any:
+    """The ``sim serve`` running for this user that serves the selected blocks of ``prof``
+    with the faults asked (``sim``: True or them), or None."""
+    from deltoctl.core.system import select_blocks
+    from deltoctl.sim.running import find
+
+    blocks = [hw.name for hw in select_blocks(prof, opts.hardware)]
+    return find(prof, sim if isinstance(sim, dict) else {}, blocks, warn)
 
 
 def finish(system: Any, extra: list[str] | None = None) -> None:
