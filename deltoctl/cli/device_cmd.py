@@ -39,6 +39,7 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
     simulators started first. Pass ``profile`` when the verb loaded it already; ``probe`` for
     a verb that looks at a bus where nothing may answer."""
     from deltoctl.app.robot import open_robot as open_app_robot
+    from deltoctl.sim import running
 
     prof = profile or opts.load_profile()
     sim: Any = opts.sim
@@ -46,34 +47,20 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
         from deltoctl.sim.serve import options_given
 
         sim = options_given(opts.sim_options, "--sim-option")
-    targets, served_by = opts.target, SERVED_SIMULATED
-    running = _running_sim(opts, prof, sim) if opts.sim and not opts.sim_fresh else None
-    if running is not None:
-        info(f"using sim serve (pid {running.pid}) of {running.profile}; --sim-fresh starts "
-             "a simulator of its own")
-        targets, sim, served_by = [*opts.target, *running.targets], False, \
-            f"sim serve (pid {running.pid})"
+    found = (running.find(prof, sim if isinstance(sim, dict) else {}, opts.hardware, warn)
+             if opts.sim and not opts.sim_fresh else None)
+    if found is not None:
+        info(f"using {found.name} of {found.profile}; --sim-fresh starts one of its own")
     try:
-        with open_app_robot(prof, targets, sim=sim, hardware=opts.hardware,
-                            allow_model_mismatch=allow_model_mismatch, probe=probe,
-                            notice=info, served_by=served_by) as robot:
+        with open_app_robot(prof, [*opts.target, *found.targets] if found else opts.target,
+                            sim=False if found else sim, hardware=opts.hardware,
+                            allow_model_mismatch=allow_model_mismatch, probe=probe, notice=info,
+                            served_by=found.name if found else SERVED_SIMULATED) as robot:
             yield robot
     except NotHomed as exc:
-        if opts.sim and running is None:
-            exc.hint = (f"each --sim starts a fresh simulator, which no earlier command homed: "
-                        f"run 'deltoctl sim serve {prof.name}' in another terminal, and --sim "
-                        "uses it (home once, then jog)")
+        if opts.sim and found is None:
+            exc.hint = running.fresh_hint(prof.name)
         raise
-
-
-def _running_sim(opts: Options, prof: Any, sim: Any) -> Any:
-    """The ``sim serve`` running for this user that serves the selected blocks of ``prof``
-    with the faults asked (``sim``: True or them), or None."""
-    from deltoctl.core.system import select_blocks
-    from deltoctl.sim.running import find
-
-    blocks = [hw.name for hw in select_blocks(prof, opts.hardware)]
-    return find(prof, sim if isinstance(sim, dict) else {}, blocks, warn)
 
 
 def finish(system: Any, extra: list[str] | None = None) -> None:
@@ -239,9 +226,10 @@ def stream(
     foxglove_host: FoxgloveHostOpt = "127.0.0.1",
     foxglove_origin: StreamOriginOpt = None,
 ) -> None:
-    """Stream every block's state interfaces: a live table on a terminal, NDJSON with --json
-    or when piped; with --foxglove, to Foxglove as well (every interface, whatever -i picks).
-    Exit 4 when a link is down at the end, 3 when one was lost and came back."""
+    """Stream every block's state interfaces: a live table on a terminal (fitted to it; the
+    rows that do not fit are counted, -i picks fewer), NDJSON with --json or when piped; with
+    --foxglove, to Foxglove as well (every interface, whatever -i picks). Exit 4 when a link
+    is down at the end, 3 when one was lost and came back."""
     from deltoctl.app.sinks import LinesSink
     from deltoctl.cli.record_cmd import foxglove_live, start_foxglove
     from deltoctl.core.runner import run_cycles

@@ -31,6 +31,14 @@ class Served:
 
     def __init__(self, pid: int, profile: str, targets: list[str]) -> None:
         self.pid, self.profile, self.targets = pid, profile, targets
+        self.name = f"sim serve (pid {pid})"
+
+
+def fresh_hint(profile: str) -> str:
+    """What to do when a simulator ``--sim`` started refuses a joint that is not homed."""
+    return (f"each --sim starts a fresh simulator, which no earlier command homed: run "
+            f"'deltoctl sim serve {profile}' in another terminal, and --sim uses it (home once, "
+            "then jog)")
 
 
 def sims_dir() -> Path:
@@ -107,11 +115,15 @@ def registered(profile: Any, faults: Mapping[str, Any], blocks: Sequence[str],
                 os.unlink(leftover)
 
 
-def find(profile: Any, faults: Mapping[str, Any], blocks: Sequence[str],
+def find(profile: Any, faults: Mapping[str, Any], hardware: Sequence[str],
          warn: Callable[[str], None]) -> Served | None:
     """A running server of this content of ``profile`` with these ``faults`` that serves every
-    one of ``blocks``, with the targets of their buses; None when there is none. A file that
-    cannot be trusted is warned about and skipped; one of a process that is gone is removed."""
+    block ``hardware`` selects, with the targets of their buses; None when there is none. A
+    file that cannot be trusted is warned about and skipped; one of a process that is gone is
+    removed."""
+    from deltoctl.core.system import select_blocks
+
+    blocks = [hw.name for hw in select_blocks(profile, hardware)]
     try:
         folder = _private_dir(create=False)
     except FileNotFoundError:
@@ -119,13 +131,16 @@ def find(profile: Any, faults: Mapping[str, Any], blocks: Sequence[str],
     except OSError as exc:
         warn(f"not looking for a running 'sim serve': {exc}")
         return None
-    wanted = (profile.name, profile_hash(profile), normal_faults(faults))
+    wanted = normal_faults(faults)
+    digest = ""  # the profile's hash, once a server of its name is found
     buses = {hw.bus for hw in profile.hardware if hw.name in blocks and hw.bus}
     for path in sorted(folder.glob("*.json")):
         entry = _read(path, warn)
-        if entry is None or (entry["profile"], entry["hash"], entry["faults"]) != wanted:
+        if entry is None or (entry["profile"], entry["faults"]) != (profile.name, wanted):
             continue
-        if not set(blocks) <= set(entry["blocks"]) or not buses <= set(entry["buses"]):
+        digest = digest or profile_hash(profile)
+        if entry["hash"] != digest or not set(blocks) <= set(entry["blocks"]) \
+                or not buses <= set(entry["buses"]):
             continue
         targets = [f"{bus}={url}" for bus, url in entry["buses"].items() if bus in buses]
         return Served(entry["pid"], entry["profile"], targets)
