@@ -93,7 +93,11 @@ def registered(profile: Any, faults: Mapping[str, Any], blocks: Sequence[str],
                buses: Mapping[str, str], warn: Callable[[str], None]) -> Iterator[Path | None]:
     """Say that this process serves ``buses`` for ``blocks`` of ``profile`` with ``faults``,
     until the block ends. A directory that cannot be made private is warned about, and the
-    server goes on unregistered."""
+    server goes on unregistered; so does one listening beyond loopback (``--host``), which
+    ``--sim`` would not trust."""
+    if not all(is_local_simulator(url) for url in buses.values()):
+        yield None
+        return
     try:
         folder = _private_dir(create=True)
     except OSError as exc:

@@ -171,3 +171,8 @@ def test_a_malformed_server_file_is_a_warning():
     ("tcp://127.0.0.1.example.com:1", False), ("nonsense", False)])
 def test_only_loopback_hosts_and_pseudo_terminals_are_simulators(url, local):
     assert is_local_simulator(url) is local
+
+
+def test_a_sim_serve_beyond_loopback_is_not_offered_to_sim(serve):
+    _, line = serve("bioscara-arm", "--host", "0.0.0.0")
+    assert "0.0.0.0" in line and not list(sims_dir().glob("*.json"))
