@@ -138,6 +138,8 @@ def validate_cmd(
             f"{result['gpios']} gpios)")
         for note in result["warnings"]:
             info(f"warning: {note}")
+        for note in result.get("notes", []):
+            info(f"note: {note}")
     if opts.json:
         emit_json([result for result, _ in checked])
     failed = [code for result, code in checked if not result["ok"]]

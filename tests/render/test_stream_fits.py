@@ -80,11 +80,12 @@ def test_printed_for_a_file_nothing_is_left_out(samples):
 
 
 @pytest.mark.parametrize(("spans", "height", "plan"), [
-    ([(22, 1, 1), (1, 3, 1)], 40, [(1, 22), (1, 1)]),  # fits: as it is
-    ([(22, 1, 2), (1, 1, 1)], 20, [(2, 22), (1, 1)]),  # side by side: 2 + 11, 3
-    ([(22, 1, 1), (5, 2, 1), (1, 1, 1)], 22, [(1, 2), (1, 5), (1, 1)]),  # the joints cut
-    ([(20, 1, 3), (5, 1, 3)], 9, [(3, 6), (3, 5)]),  # cut a line per group: 6 rows of 20
-    ([(3, 1, 1), (3, 1, 1)], 2, [(1, 1), (1, 1)]),  # a row per group at least
+    ([(22, 1, 1, 2), (1, 3, 1, 2)], 40, [(1, 22), (1, 1)]),  # fits: as it is
+    ([(22, 1, 2, 2), (1, 1, 1, 2)], 20, [(2, 22), (1, 1)]),  # side by side: 2 + 11, 3
+    ([(22, 1, 1, 2), (5, 2, 1, 2), (1, 1, 1, 2)], 22, [(1, 2), (1, 5), (1, 1)]),  # joints cut
+    ([(20, 1, 3, 2), (5, 1, 3, 2)], 9, [(3, 6), (3, 5)]),  # cut a line per group: 6 of 20
+    ([(3, 1, 1, 2), (3, 1, 1, 2)], 2, [(1, 1), (1, 1)]),  # a row per group at least
+    ([(20, 1, 1, 3), (1, 1, 1, 2)], 12, [(1, 6), (1, 1)]),  # units under the names: 3 + 6 + 1
 ])
 def test_fit_rows(spans, height, plan):
     assert fit_rows(spans, height) == plan
