@@ -203,7 +203,7 @@ def live_tables(sample: dict[str, Any], title: str,
                 fixed = 2 + (len(console.render_lines(heat, options)) if heat else 0)
                 plan = fit_rows(spans, options.size.height - fixed)
             for (columns, rows), (groups, shown) in zip(sets.items(), plan, strict=True):
-                for chunk in chunks(columns, rows, width):
+                for chunk in chunks(columns, rows, width) if shown else ():
                     tables = []
                     for group in _split(rows[:shown], groups):
                         t = Table(box=box.SIMPLE_HEAD, show_edge=False)
@@ -215,7 +215,7 @@ def live_tables(sample: dict[str, Any], title: str,
                         tables.append(t)
                     yield _beside(tables)
                 if shown < len(rows):
-                    yield _hidden([part for part, _ in rows[shown:]])
+                    yield _hidden([part for part, _ in rows[shown:]], not shown)
             if heat is not None:
                 yield heat
             if live:
@@ -238,13 +238,15 @@ def _split(rows: list, groups: int) -> list[list]:
     return [rows[i:i + size] for i in range(0, len(rows), size)] if size else [rows]
 
 
-def _hidden(parts: list[str]) -> Any:
+def _hidden(parts: list[str], every: bool) -> Any:
     """The line that counts the rows left out and says how to pick fewer."""
     from rich.text import Text
 
     which = parts[0] if len(parts) == 1 else f"{parts[0]} … {parts[-1]}"
-    line = Text(f"{len(parts)} more row{'s' if len(parts) > 1 else ''} ({which}): narrow "
-                "with -i 'PATTERN'", style="yellow", overflow="ellipsis")
+    plural = "s" if len(parts) > 1 else ""
+    rows = f"{len(parts)} row{plural} hidden" if every else f"{len(parts)} more row{plural}"
+    line = Text(f"{rows} ({which}): narrow with -i 'PATTERN'", style="yellow",
+                overflow="ellipsis")
     line.no_wrap = True
     return line
 
@@ -263,12 +265,14 @@ def fit_rows(spans: list[tuple[int, int, int, int]], height: int) -> list[tuple[
     """For each set of rows — ``(rows, tables its columns span, tables the width allows side
     by side, lines of a table's head)`` — the groups of its rows side by side and the rows
     shown, so that the tables take ``height`` lines at most (a table takes its rows and its
-    head, a set whose rows are cut a line more): the longest tables are put side by side first, then the last rows of the
-    set with the most rows cut (the next one's once it is down to a row per group)."""
+    head, a set whose rows are cut a line more): the longest tables are put side by side
+    first, then the last rows of the set with the most rows (the joints) cut, all of them if
+    need be, so that the sensors and GPIOs stay in view; only then the others' last rows, to
+    a row per group."""
     plan = [[1, rows] for rows, _, _, _ in spans]
 
     def lines() -> int:
-        return sum(tables * (head + -(-shown // groups)) + (shown < rows)
+        return sum(tables * (head + -(-shown // groups)) * (shown > 0) + (shown < rows)
                    for (rows, tables, _, head), (groups, shown) in zip(spans, plan, strict=True))
 
     def longest(candidates: list[int]) -> int:
@@ -280,11 +284,12 @@ def fit_rows(spans: list[tuple[int, int, int, int]], height: int) -> list[tuple[
         if not wider:
             break
         plan[longest(wider)][0] += 1
-    while lines() > height:
-        cut = [i for i, (groups, shown) in enumerate(plan) if shown > groups]
+    most = max(range(len(spans)), key=lambda i: spans[i][0], default=0)
+    while lines() > height:  # the set with the most rows may go; the others keep a row
+        cut = [i for i, (groups, shown) in enumerate(plan) if shown > (0 if i == most else groups)]
         if not cut:
             break
-        i = max(cut, key=lambda i: spans[i][0])
+        i = max(cut, key=lambda i: (i == most, spans[i][0]))
         groups, shown = plan[i]
         plan[i][1] = groups * (-(-shown // groups) - 1)
     return [(groups, shown) for groups, shown in plan]
@@ -330,7 +335,7 @@ class LiveLines:
         numbers = {str(n): v if isinstance(v, int | float) and not isinstance(v, bool) else None
                    for n, v in values.items()}
         if self.sink is None:
-            self.sink = LiveSink(list(numbers), 0.0, self.source)
+            self.sink = LiveSink(list(numbers), 0.0, source=self.source)
         self.sink.frame(t_ns, numbers)
 
 

@@ -16,8 +16,15 @@ from typing import Any
 from deltoctl import registry
 from deltoctl.core.driver import Block, Driver, HomeProgress, MoveResult, Progress
 from deltoctl.core.exchange import ExchangePolicy
-from deltoctl.errors import DeltoctlError, DeviceError, DeviceFault, InvalidInput, NoAnswer,
-                            NotHomed, Refused
+from deltoctl.errors import (
+    DeltoctlError,
+    DeviceError,
+    DeviceFault,
+    InvalidInput,
+    NoAnswer,
+    NotHomed,
+    Refused,
+)
 from deltoctl.families.bioscara import codec
 from deltoctl.profile.model import Component
 from deltoctl.transport.i2c import I2CBus  # what every I2C link gives
