@@ -195,7 +195,8 @@ ProfileOpt = Annotated[str | None, typer.Option(
     help="Device profile: a catalog name or a YAML/URDF/xacro file.")]
 TargetOpt = Annotated[list[str] | None, typer.Option(
     "--target", "-t", envvar="DELTOCTL_TARGET", metavar="[BUS=]URL",
-    help="Where the device is, e.g. tcp://169.254.186.72:502 (repeatable).")]
+    help="Where the device is, e.g. tcp://169.254.186.72:502 (repeatable; in the variable, "
+         "several apart by spaces).")]
 SimOpt = Annotated[bool, typer.Option(
     "--sim", help="Run against a simulated device: the 'sim serve' of this profile running "
                   "for you, else one started for this command only (it forgets, e.g. homing, "

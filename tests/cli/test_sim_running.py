@@ -176,3 +176,13 @@ def test_only_loopback_hosts_and_pseudo_terminals_are_simulators(url, local):
 def test_a_sim_serve_beyond_loopback_is_not_offered_to_sim(serve):
     _, line = serve("bioscara-arm", "--host", "0.0.0.0")
     assert "0.0.0.0" in line and not list(sims_dir().glob("*.json"))
+
+
+def test_deltoctl_target_holds_several_targets_and_t_wins(cli, serve):
+    _, line = serve("bioscara-arm")
+    target = shlex.split(line)[1]
+    two = {"DELTOCTL_TARGET": f"{target} nope=tcp://127.0.0.1:1"}
+    result = cli("-p", "bioscara-arm", "connect", "-n", "1", env=two)
+    assert result.exit_code == 2 and "unknown bus 'nope'" in result.stderr
+    result = cli("-p", "bioscara-arm", "-t", target, "connect", "-n", "1", env=two)
+    assert result.exit_code == 0, result.stderr
