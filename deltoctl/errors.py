@@ -57,6 +57,10 @@ class Refused(DeltoctlError):
     exit_code = REFUSED
 
 
+class NotHomed(Refused):
+    """Refused for safety because a joint is not homed (exit 5)."""
+
+
 class ProtocolError(DeviceError):
     """Bytes on the wire that do not follow the protocol."""
 

@@ -174,6 +174,19 @@ def test_tables_fit_80_columns_without_cutting_a_value():
         assert joint in text
 
 
+def test_a_stream_on_an_80x24_terminal_fits_it():
+    pexpect = pytest.importorskip("pexpect")
+    child = pexpect.spawn(DELTOCTL, ["-p", "mh5", "--sim", "stream", "-d", "0.5"],
+                          dimensions=(24, 80), encoding="utf-8", timeout=60,
+                          env=dict(os.environ, TERM="xterm"))
+    child.expect(pexpect.EOF)
+    lines = ANSI.sub("", child.before).replace("\r", "").splitlines()
+    text = "\n".join(lines)
+    assert "linear_acceleration.z" in text and "Ctrl-C to stop" in text  # the IMU in view
+    assert "more rows (" in text and "narrow with -i 'PATTERN'" in text
+    assert "..." not in lines  # nothing cut at the bottom of the screen
+
+
 def test_piped_tables_are_never_cut(cli):
     lines = cli("profile", "show", "dg-5f-right").stdout.splitlines()
     assert any("position, velocity, effort, temperature" in line for line in lines)
