@@ -1,5 +1,5 @@
-"""The exit codes and their meanings (README: Exit codes; ``deltoctl help exit-codes``), and the
-errors that carry their exit code."""
+"""The exit codes and their meanings (``deltoctl help exit-codes``), and the errors that carry
+their exit code."""
 
 from __future__ import annotations
 

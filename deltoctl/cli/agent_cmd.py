@@ -70,7 +70,7 @@ def agent(
     Ctrl-C or SIGTERM: every verb as a queryable, a liveliness token, a deadman on motion.
 
     Motion and outputs are served only to authenticated callers: when every link of the
-    agent is mutual TLS (see the README, Remote robots)."""
+    agent is mutual TLS (`deltoctl help security`)."""
     from deltoctl.cli.fleet_cmd import agent_checks
     from deltoctl.fleet import check_robot, host
     from deltoctl.fleet.agent import Agent

@@ -219,7 +219,7 @@ def tests_cmd(
 ) -> None:
     """Write a starting pytest suite for a robot: identify, detect, its configuration against
     a golden snapshot (taken of the simulators), link quality and homing. It passes on the
-    simulators as written, and runs on the robot with --deltoctl-target (README: pytest)."""
+    simulators as written, and runs on the robot with --deltoctl-target (`deltoctl help pytest`)."""
     from deltoctl.app.suite import write_suite
 
     opts = options(ctx)

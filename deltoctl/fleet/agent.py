@@ -495,7 +495,7 @@ class Agent:
             what = ("a command deltoctl cannot classify (it counts as motion)"
                     if verb == UNRESOLVED else f"'{verb}'")
             raise Refused(f"{what} refused: {self.why_not}",
-                          "see the README (Remote robots: security)")
+                          "`deltoctl help security` says how")
         fits(self.links, argv)  # before any bookkeeping: the zygote takes it in one message
         with self.lock:
             if rid in self.running:
