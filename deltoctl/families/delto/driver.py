@@ -605,19 +605,20 @@ class DeltoDriver(Driver):
 
 
 def receive(link: TcpLink, session: Session, timeout: float) -> Reply:
-    """The reply ``session`` expects next, received over ``link``: NoAnswer when it is not
-    whole within ``timeout`` seconds, ProtocolError (from then on) when the bytes break the
-    protocol."""
+    """The reply ``session`` expects next, received over ``link``: NoAnswer when none
+    arrives within ``timeout`` seconds (nor the rest of one within ``timeout`` of its first
+    bytes); ProtocolError, from then on, when the bytes break the protocol."""
     event = session.next_event()
-    if event is NEED_DATA:
-        deadline = time.monotonic() + timeout
-        while event is NEED_DATA:
-            count = link.recv_into(session.room(), timeout)
-            if not count:
-                raise NoAnswer(f"no complete reply from {link.host}:{link.port} within "
-                               f"{timeout:g} s ({session.buffered} bytes received)")
-            session.received(count)
-            event = session.next_event()
+    deadline = 0.0
+    while event is NEED_DATA:
+        count = link.recv_into(session.room(), timeout)
+        if not count:
+            raise NoAnswer(f"no complete reply from {link.host}:{link.port} within "
+                           f"{timeout:g} s ({session.buffered} bytes received)")
+        session.received(count)
+        event = session.next_event()
+        if event is NEED_DATA:  # a reply in pieces (rare): the rest within what is left
+            deadline = deadline or time.monotonic() + timeout
             timeout = deadline - time.monotonic()
     return event  # type: ignore[return-value]  # a host's session gives replies
 

@@ -68,6 +68,7 @@ class Session:
         if max_frame < 3:
             raise ValueError(f"a frame is at least 3 bytes, not {max_frame}")
         self.role, self.max_frame = role, max_frame
+        self._host = role is Role.HOST
         self._buf = bytearray(4 * max_frame)  # received, not yet taken: [_start:_end]
         self._view = memoryview(self._buf)
         self._start = self._end = 0
@@ -88,9 +89,10 @@ class Session:
     def send(self, frame: bytes) -> bytes:
         """The frame to write, once checked against the conversation: any request from the
         host (an answered one opens a reply), only the reply due next from the device."""
-        self._check_broken()
+        if self._broken is not None:
+            raise ProtocolError(self._broken)
         cmd = frame[2]  # the codec's frames: the conversation is what is checked here
-        if self.role is Role.HOST:
+        if self._host:
             if cmd in ANSWERED:
                 self._open.append(cmd)
         elif not self._open or self._open[0] != cmd:
@@ -145,24 +147,21 @@ class Session:
         else:
             self._start = start
         cmd = frame[2]
-        if self.role is Role.DEVICE:
+        if not self._host:
             if cmd in ANSWERED:
                 self._open.append(cmd)
             return Request(cmd, frame)
-        if not self._open or self._open[0] != cmd:
-            due = _name(self._open[0]) if self._open else "no reply"
+        open_ = self._open
+        if not open_ or open_[0] != cmd:
+            due = _name(open_[0]) if open_ else "no reply"
             self._fail(f"a {_name(cmd)} reply arrived, {due} was due")
-        self._open.popleft()
+        open_.popleft()
         return Reply(cmd, frame)
 
     def _fail(self, message: str) -> NoReturn:
         self._start = self._end = 0
         self._broken = message
         raise ProtocolError(message)
-
-    def _check_broken(self) -> None:
-        if self._broken is not None:
-            raise ProtocolError(self._broken)
 
 
 def _name(cmd: int) -> str:

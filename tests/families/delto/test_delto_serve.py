@@ -10,11 +10,11 @@ import pytest
 
 from deltoctl.core.system import System
 from deltoctl.families.delto import codec
+from deltoctl.families.delto.driver import receive
 from deltoctl.families.delto.emulator import DeltoHub, DeltoServer, firmware_for_profile
+from deltoctl.families.delto.session import Role, Session
 from deltoctl.profile.catalog import load_profile
 from deltoctl.sim.serve import ServeOptions, serve_profile
-from deltoctl.families.delto.driver import receive
-from deltoctl.families.delto.session import Role, Session
 from deltoctl.transport.tcp import LinkLost, TcpLink, parse_tcp_url
 
 
