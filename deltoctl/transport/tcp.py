@@ -13,7 +13,7 @@ from deltoctl import trace
 from deltoctl.errors import InvalidInput, LinkLost, Unreachable
 from deltoctl.transport import Check, Target, Transport, split_url
 
-__all__ = ["TRANSPORT", "LinkLost", "TcpLink", "parse_tcp_url"]
+__all__ = ["TRANSPORT", "LinkLost", "TcpLink", "parse_tcp_url", "tcp_transport"]
 
 
 def parse_tcp_url(url: str, default_port: int | None = None) -> tuple[str, int]:
@@ -140,24 +140,33 @@ class TcpLink:
             self.sock.close()
 
 
-def _open(url: str, timeout: float = 3.0) -> TcpLink:
-    host, port = parse_tcp_url(url)
-    return TcpLink(host, port, connect_timeout=timeout)
+def tcp_transport(default_port: int | None = None) -> Transport:
+    """The ``tcp://`` transport, a URL without a port meaning ``default_port`` (its caller's
+    device's; None: the port is required)."""
+
+    def parse(url: str) -> tuple[str, int]:
+        return parse_tcp_url(url, default_port)
+
+    def open_link(url: str, timeout: float = 3.0) -> TcpLink:
+        host, port = parse(url)
+        return TcpLink(host, port, connect_timeout=timeout)
+
+    def checks(target: Target) -> list[Check]:
+        """A route from this host (a link-local device needs a link-local address here
+        too), and a connection the device accepts."""
+        from deltoctl.transport.doctor import reach, route
+
+        host, port = parse(target.url)
+        return [route(target.bus, host, port), reach(target, host, port)]
+
+    def trace_label(url: str, address: int | None) -> str:
+        host, port = parse(url)
+        return f"{host}:{port}"
+
+    return Transport("tcp", "tcp://HOST:PORT", parse, open_link, checks,
+                     trace_label=trace_label)
 
 
-def _checks(target: Target) -> list[Check]:
-    """A route from this host (a link-local device needs a link-local address here too),
-    and a connection the device accepts."""
-    from deltoctl.transport.doctor import reach, route
-
-    host, port = parse_tcp_url(target.url)
-    return [route(target.bus, host, port), reach(target, host, port)]
-
-
-def _trace_label(url: str, address: int | None) -> str:
-    host, port = parse_tcp_url(url)
-    return f"{host}:{port}"
-
-
-TRANSPORT = Transport("tcp", "tcp://HOST:PORT", parse_tcp_url, _open, _checks,
-                      trace_label=_trace_label)
+# doctor's and the trace's, by scheme: a URL without a port means Modbus TCP's registered
+# port, as it does to a device driver on plain TCP (which passes its own default)
+TRANSPORT = tcp_transport(502)
