@@ -54,7 +54,7 @@ STOP_TIMEOUT = 0.3  # s: the one quick reconnection a stop tries on a lost link
 # one try of a GET_DATA (a link that misses a reply is reopened); a lost link tried again
 # every second, 10 tries a round, rounds repeating until it is back
 POLICY = ExchangePolicy(tries=1, timeout=0.5, reopen_period=1.0, reopen_tries=10)
-DEVELOPER_MODE = "developer mode, DIP switches 2 and 4"
+DIP_SWITCHES = "DIP switches 2 and 4"  # developer mode's
 
 
 @dataclass
@@ -152,7 +152,7 @@ class DeltoDriver(Driver):
         try:
             link = TcpLink(self.host, self.port, connect_timeout=timeout)
         except Unreachable as exc:
-            exc.hint = f"{exc.hint} (Delto: {DEVELOPER_MODE})"
+            exc.hint = f"{exc.hint} (Delto: developer mode, {DIP_SWITCHES})"
             raise
         session = Session(Role.HOST)
         try:
@@ -161,7 +161,7 @@ class DeltoDriver(Driver):
         except (LinkLost, NoAnswer, ProtocolError) as exc:  # something listens there, but
             link.close()  # it is not a gripper answering
             raise Unreachable(f"no version reply: {exc}", hint="check that the gripper is in "
-                              f"developer mode ({DEVELOPER_MODE.split(', ')[1]}): in operator "
+                              f"developer mode ({DIP_SWITCHES}): in operator "
                               "mode it speaks Modbus TCP on the same port") from None
         try:
             info = codec.decode_version_reply(reply.frame)
