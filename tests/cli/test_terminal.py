@@ -229,11 +229,12 @@ def test_tcp_urls_are_strict():
     from deltoctl.transport.tcp import parse_tcp_url
 
     assert parse_tcp_url("tcp://169.254.186.72:502") == ("169.254.186.72", 502)
-    assert parse_tcp_url("tcp://gripper") == ("gripper", 502)
+    assert parse_tcp_url("tcp://gripper", 502) == ("gripper", 502)  # the caller's default
     for url, what in (("tcp://h:502?baud=9600", "unknown key 'baud'"),
                       ("tcp://h:70000", "1 to 65535"), ("tcp://h:0", "1 to 65535"),
                       ("tcp://169.254.186.720:502", "not an IPv4 address"),
-                      ("tcp://h:502/x", "nothing else"), ("udp://h:1", "not a TCP target")):
+                      ("tcp://h:502/x", "nothing else"), ("udp://h:1", "not a TCP target"),
+                      ("tcp://gripper", "no port")):
         with pytest.raises(InvalidInput, match=re.escape(what)):
             parse_tcp_url(url)
 

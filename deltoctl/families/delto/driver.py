@@ -1,9 +1,11 @@
-"""The Delto driver: the codec over a TCP link, mapped to ros2_control interface names.
+"""The Delto driver: the host side of the protocol session over a TCP link, mapped to
+ros2_control interface names.
 
 Packet sizes come from the model the gripper *reports* (a configured model that differs is an
 error unless allowed). A lost link sets ``system/connection_status`` to 0 and starts a
-background reconnect (1 s apart, 10 tries a round, rounds repeating); reads meanwhile return
-the last values and writes are skipped, so a loop keeps its rate and a recording goes on.
+background reconnect, timed by the exchange policy's reopener (1 s apart, 10 tries a round,
+rounds repeating); reads meanwhile return the last values and writes are skipped, so a loop
+keeps its rate and a recording goes on. A reopened link gets duty 0 before anything else.
 """
 
 from __future__ import annotations
@@ -18,7 +20,16 @@ from operator import itemgetter, mul
 from typing import Any
 
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
-from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Unreachable
+from deltoctl.core.exchange import ExchangePolicy, Reopener
+from deltoctl.errors import (
+    DeltoctlError,
+    DeviceError,
+    InvalidInput,
+    LinkLost,
+    NoAnswer,
+    ProtocolError,
+    Unreachable,
+)
 from deltoctl.families.delto import codec
 from deltoctl.families.delto.models import (
     DUTY_WIRE_LIMIT,
@@ -34,13 +45,16 @@ from deltoctl.families.delto.models import (
     model_label,
     sensor_label,
 )
-from deltoctl.transport.tcp import LinkLost, TcpLink, parse_tcp_url
+from deltoctl.families.delto.motion import effort_cap, move_to
+from deltoctl.families.delto.session import NEED_DATA, Reply, Role, Session
+from deltoctl.transport.tcp import TcpLink, parse_tcp_url
 
 VERSION_TIMEOUT = 3.0
 STOP_TIMEOUT = 0.3  # s: the one quick reconnection a stop tries on a lost link
-DATA_TIMEOUT = 0.5
-RECONNECT_PERIOD = 1.0
-RECONNECT_TRIES = 10
+# one try of a GET_DATA (a link that misses a reply is reopened); a lost link tried again
+# every second, 10 tries a round, rounds repeating until it is back
+POLICY = ExchangePolicy(tries=1, timeout=0.5, reopen_period=1.0, reopen_tries=10)
+DIP_SWITCHES = "DIP switches 2 and 4"  # developer mode's
 
 
 @dataclass
@@ -73,7 +87,7 @@ class DeltoDriver(Driver):
     def __init__(self, block: Block) -> None:
         super().__init__(block)
         hw = block.hw
-        self.host, self.port = parse_tcp_url(block.url)
+        self.host, self.port = parse_tcp_url(block.url, codec.DEFAULT_PORT)
         try:
             self.configured_model = int(hw.params.get("delto_model", "0"), 0)
         except ValueError:
@@ -83,6 +97,7 @@ class DeltoDriver(Driver):
         self.io = hw.params.get("IO") == "true"
         self.allow_model_mismatch = block.allow_model_mismatch
         self.link: TcpLink | None = None
+        self.session: Session | None = None  # the link's conversation
         self.identity: Identity | None = None
         self.model = MODELS.get(self.configured_model)
         self.codes: tuple[int, ...] = ()
@@ -93,10 +108,13 @@ class DeltoDriver(Driver):
         self._reply_plan: tuple = ()
         self._pending: TcpLink | None = None  # a GET_DATA sent by start_read, reply not yet read
         self._lock = threading.RLock()
+        self.policy = POLICY
+        self.reopener = Reopener(POLICY)
         self._reconnecting = False
         self._connecting = threading.Lock()  # one connection attempt at a time
         self._closed = False
         self._driving = False  # a duty was sent since the last stop: only then is there one
+        self._closing = threading.Event()  # wakes the reconnect thread to end it
         self._last_read = 0.0
         joints = [j.name for j in hw.joints]
         self._effort_keys = frozenset(f"{j}/effort" for j in joints)
@@ -129,16 +147,25 @@ class DeltoDriver(Driver):
         assert self.identity is not None
         return self.identity.as_dict()
 
-    def _connect(self, timeout: float = VERSION_TIMEOUT) -> None:
-        link = TcpLink(self.host, self.port, connect_timeout=timeout)
+    def _connect(self, timeout: float = VERSION_TIMEOUT, reopening: bool = False) -> None:
+        """A link, its GET_VERSION exchange and what it says; ``reopening`` a lost link: duty 0
+        goes out and the reconnect is counted before the link is anyone else's."""
         try:
-            link.send(codec.encode_version_request())
-            info = codec.decode_version_reply(link.recv_frame(timeout))
-        except LinkLost as exc:  # something listens there, but it is not a gripper answering
-            link.close()
+            link = TcpLink(self.host, self.port, connect_timeout=timeout)
+        except Unreachable as exc:
+            exc.hint = f"{exc.hint} (Delto: developer mode, {DIP_SWITCHES})"
+            raise
+        session = Session(Role.HOST)
+        try:
+            link.send(session.send(codec.encode_version_request()))
+            reply = receive(link, session, timeout)
+        except (LinkLost, NoAnswer, ProtocolError) as exc:  # something listens there, but
+            link.close()  # it is not a gripper answering
             raise Unreachable(f"no version reply: {exc}", hint="check that the gripper is in "
-                              "developer mode (DIP switches 2 and 4): in operator mode it "
-                              "speaks Modbus TCP on the same port") from None
+                              f"developer mode ({DIP_SWITCHES}): in operator "
+                              "mode it speaks Modbus TCP on the same port") from None
+        try:
+            info = codec.decode_version_reply(reply.frame)
         except DeviceError:
             link.close()
             raise
@@ -165,8 +192,16 @@ class DeltoDriver(Driver):
             mask = (1 << actual.fingers) - 1 if self.fingertip_sensor else 0
         direction = actual.direction(info.firmware)
         revised = all(d == 1 for d in direction) or actual.revised_from is None
+        if reopening:  # motion never resumes by itself after a loss
+            try:
+                link.send(session.send(codec.encode_duty([0] * actual.motors)))
+            except DeviceError:
+                link.close()
+                raise
         with self._lock:
-            self.link = link
+            if reopening:
+                self._count_reopened()
+            self.link, self.session = link, session
             self.model = actual
             self.codes = codec.data_codes(actual, self.fingertip_sensor, self.io and actual.gpio)
             self._request = codec.encode_data_request(self.codes)
@@ -312,10 +347,11 @@ class DeltoDriver(Driver):
 
     def cleanup(self) -> None:
         self._closed = True
+        self._closing.set()
         with self._lock:
             if self.link:
                 self.link.close()
-                self.link = None
+                self.link, self.session = None, None
 
     # -- cyclic I/O ------------------------------------------------------------------------------
     def _plan_reply(self, model: DeltoModel, sensor_type: int) -> None:
@@ -347,11 +383,11 @@ class DeltoDriver(Driver):
     def start_read(self) -> None:
         """Send GET_DATA; ``read`` takes the reply (another gripper's request goes out
         meanwhile)."""
-        link = self.link
-        if link is None or self._pending is not None:
+        link, session = self.link, self.session
+        if link is None or session is None or self._pending is not None:
             return
         try:
-            link.send(self._request)
+            link.send(session.send(self._request))
         except DeviceError as exc:
             self.stats["errors"] += 1
             self._lost(exc)
@@ -361,9 +397,9 @@ class DeltoDriver(Driver):
     def read(self) -> dict[str, float]:
         """One GET_DATA exchange; on a lost link, the last values (``connected`` false)."""
         with self._lock:
-            link, identity = self.link, self.identity
+            link, session, identity = self.link, self.session, self.identity
         pending, self._pending = self._pending, None
-        if link is None or identity is None:
+        if link is None or session is None or identity is None:
             self._start_reconnect()
             return self.values
         self.stats["packets"] += 1
@@ -372,10 +408,10 @@ class DeltoDriver(Driver):
         try:
             t0 = time.perf_counter()
             if pending is not link:
-                link.send(self._request)
-            reply = link.recv_frame(DATA_TIMEOUT)
+                link.send(session.send(self._request))
+            reply = receive(link, session, self.policy.timeout)
             t1 = time.perf_counter()
-            raw = unpack(reply)
+            raw = unpack(reply.frame)
         except DeviceError as exc:
             self.stats["errors"] += 1
             self._lost(exc)
@@ -459,15 +495,11 @@ class DeltoDriver(Driver):
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:
         """A current-bounded position loop on the effort interface (motion.py)."""
-        from deltoctl.families.delto.motion import move_to
-
         return move_to(self, targets, velocity=velocity, progress=progress)
 
     def effort_cap(self) -> float:
         """The profile's current cap as an effort: what a move commands at most."""
-        from deltoctl.families.delto.motion import effort_cap
-
-        return effort_cap(self)
+        return effort_cap(self.profile)
 
     def follow(self, setpoints: dict[str, tuple[float, float, float]]) -> None:
         """Recorded efforts (``replay``), clamped to the current cap as a move's are; a joint
@@ -530,11 +562,11 @@ class DeltoDriver(Driver):
 
     def _send(self, data: bytes) -> None:
         with self._lock:
-            link = self.link
-        if link is None:
+            link, session = self.link, self.session
+        if link is None or session is None:
             return
         try:
-            link.send(data)
+            link.send(session.send(data))
         except DeviceError as exc:
             self._lost(exc)
 
@@ -543,7 +575,7 @@ class DeltoDriver(Driver):
         with self._lock:
             if self.link is not None:
                 self.link.close()
-                self.link = None
+                self.link, self.session = None, None
             self.connected = False
         self._start_reconnect()
 
@@ -552,26 +584,53 @@ class DeltoDriver(Driver):
             if self._reconnecting or self._closed:
                 return
             self._reconnecting = True
+            self.reopener.lost()
         threading.Thread(target=self._reconnect_loop, name="delto-reconnect", daemon=True).start()
 
     def _reconnect_loop(self) -> None:
+        """Reopen the link when the reopener says, until it is back or the driver closes."""
+        reopener, closing = self.reopener, self._closing
         try:
-            while not self._closed:
-                for _ in range(RECONNECT_TRIES):
-                    time.sleep(RECONNECT_PERIOD)
-                    if self._closed:
+            while not closing.wait(self.policy.reopen_period):
+                while not reopener.due():  # a period is over; the clock may say not quite
+                    if closing.wait(0.01):
                         return
-                    with self._connecting:
-                        try:
-                            if self.link is None:
-                                self._connect()
-                        except DeltoctlError:
-                            continue
-                    self.stop()  # duty 0 first: motion never resumes by itself after a loss
-                    self.stats["reconnects"] += 1
-                    return
+                with self._connecting:
+                    try:
+                        if self.link is None:
+                            self._connect(reopening=True)
+                        else:  # a stop reopened it meanwhile
+                            with self._lock:
+                                self._count_reopened()
+                    except DeltoctlError:
+                        reopener.failed()  # the next round starts as the last one did
+                        continue
+                return
         finally:
             self._reconnecting = False
+
+    def _count_reopened(self) -> None:
+        self.reopener.reopened()
+        self.stats["reconnects"] += 1
+
+
+def receive(link: TcpLink, session: Session, timeout: float) -> Reply:
+    """The reply ``session`` expects next, received over ``link``: NoAnswer when none
+    arrives within ``timeout`` seconds (nor the rest of one within ``timeout`` of its first
+    bytes); ProtocolError, from then on, when the bytes break the protocol."""
+    event = session.next_event()
+    deadline = 0.0
+    while event is NEED_DATA:
+        count = link.recv_into(session.room(), timeout)
+        if not count:
+            raise NoAnswer(f"no complete reply from {link.host}:{link.port} within "
+                           f"{timeout:g} s ({session.buffered} bytes received)")
+        session.received(count)
+        event = session.next_event()
+        if event is NEED_DATA:  # a reply in pieces (rare): the rest within what is left
+            deadline = deadline or time.monotonic() + timeout
+            timeout = deadline - time.monotonic()
+    return event  # type: ignore[return-value]  # a host's session gives replies
 
 
 def _picker(indices: list[int]) -> Callable[[tuple[int, ...]], tuple[int, ...]]:

@@ -110,19 +110,8 @@ def test_bad_bytes_raise_protocol_error():
         codec.decode_version_reply(bytes.fromhex("0009015f220300011f"))
     with pytest.raises(ProtocolError, match="LEN says"):
         codec.decode_version_reply(bytes.fromhex("0010085f220300011f"))
-    with pytest.raises(ProtocolError, match="not possible"):
-        codec.FrameReader().feed(b"\x00\x01")
     with pytest.raises(ProtocolError, match="multiple of 3"):
         codec.decode_duty(bytes.fromhex("00050501ff"))
-
-
-def test_frame_reader_reassembles_split_and_joined_frames():
-    reader = codec.FrameReader()
-    a, b = codec.encode_version_request(), codec.encode_gpio((True, True, False))
-    stream = a + b
-    assert reader.feed(stream[:2]) == []
-    assert reader.feed(stream[2:5]) == [a]
-    assert reader.feed(stream[5:]) == [b]
 
 
 def test_direction_maps_follow_firmware():

@@ -208,6 +208,39 @@ def test_reconnect_after_the_link_drops(gripper):
     assert driver.stats["reconnects"] == 1
 
 
+def test_a_reopened_link_is_stopped_and_counted_before_it_is_used(gripper, monkeypatch):
+    """The moment a read sees the link back, its reconnect is counted and duty 0 has
+    reached the gripper (however slowly the stop is built): motion never resumes by itself,
+    and nothing reads a link whose reconnect is not yet counted."""
+    from deltoctl.families.delto import codec
+
+    server = gripper("dg-5f-right")
+    with System(load_profile("dg-5f-right"), [server.endpoint]) as system:
+        driver = system.members[0].driver
+        driver.write_efforts({"rj_dg_2_2": 0.5})
+        system.read()
+        assert server.firmware.duty[5] != 0
+        encode_duty = codec.encode_duty
+
+        def slow_encode_duty(duties: list[int]) -> bytes:
+            time.sleep(0.3)
+            return encode_duty(duties)
+
+        monkeypatch.setattr(codec, "encode_duty", slow_encode_duty)
+        server.drop_connections()
+        deadline = time.monotonic() + 10
+        seen_down = False
+        while time.monotonic() < deadline:
+            status = system.read()["system/connection_status"]
+            seen_down = seen_down or status == 0.0
+            if seen_down and status == 1.0:
+                break
+            time.sleep(0.02)
+        assert seen_down and status == 1.0
+        assert driver.stats["reconnects"] == 1
+        assert server.firmware.duty == [0] * 20  # a reply on the new link: its stop came first
+
+
 def test_leaving_a_system_sets_duty_zero(gripper):
     server = gripper("dg-5f-right")
     with System(load_profile("dg-5f-right"), [server.endpoint]) as system:

@@ -59,7 +59,7 @@ def test_one_creeping_axis_fails_and_the_others_pass(deltoctl_sim, cli, tmp_path
             "--drift-limit", "tz=0.05", "-o", str(tmp_path))
     result = cli(*args, "--json")
     assert result.exit_code == 1, result.stderr
-    checks = by_id(json.loads(result.stdout)["checks"])
+    checks = by_id(json.loads(result.stdout)["result"]["checks"])
     for finger in range(1, 5):
         verdicts = {a: checks[f"fingertip_finger_{finger}.drift.{a}"]["verdict"] for a in AXES}
         assert verdicts == {a: "fail" if a == "fz" else "pass" for a in AXES}
