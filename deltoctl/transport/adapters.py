@@ -22,7 +22,7 @@ ARPHRD_CAN = "280"  # /sys/class/net/*/type of a CAN interface
 SYNC_LATENCY_MS = 1  # what ROBOTIS and LeRobot tell users to set an FTDI's latency timer to
 
 # USB IDs of the adapters robot builders hang servo and CAN buses on, each with where it was
-# confirmed (the README's table says the same)
+# confirmed (the manual's docs/guides/adapters.md lists the same)
 KNOWN: dict[tuple[str, str], tuple[str, str]] = {
     ("0403", "6014"): ("FTDI FT232H (ROBOTIS U2D2)", "robot projects' udev rules for the U2D2"),
     ("0403", "6001"): ("FTDI FT232R USB-serial", "public udev rules for FT232R adapters"),
