@@ -154,6 +154,13 @@ def select_joints(profile: Profile, target: str, capability: str) -> list[str]:
     return chosen
 
 
+def servo_named(system: System, joint: str) -> str:
+    """``head_y (ID 52)``: a joint and the address of its servo on the bus."""
+    hw = system.member(joint).hw
+    address = next((j.address for j in hw.joints if j.name == joint), None)
+    return joint if address is None else f"{joint} (ID {address})"
+
+
 def _cannot(system: System, capability: str, what: str) -> None:
     unable = [m.name for m in system if not m.can(capability)]
     if unable:

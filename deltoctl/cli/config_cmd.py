@@ -151,7 +151,7 @@ def restore(
     not named by --allow), 3 when some items could not be written (read-only)."""
     from deltoctl.app import config
     from deltoctl.cli.device_cmd import open_robot
-    from deltoctl.cli.motion_cmd import confirm_motion
+    from deltoctl.cli.confirm import confirm
 
     opts = options(ctx)
     permitted = frozenset(config.permission(a) for a in allow or ())
@@ -164,7 +164,7 @@ def restore(
             _report(opts, snapshot_file, rows, notes)
             raise config.refusal(refused, permitted)
         if writes:
-            confirm_motion(opts, config.description(writes))
+            confirm(ctx, config.description(writes))
             config.write_changes(robot.system, rows, permitted)
         notes = robot.warnings() + notes
     _report(opts, snapshot_file, rows, notes)

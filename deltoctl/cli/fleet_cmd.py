@@ -24,15 +24,18 @@ def register(root: typer.Typer) -> None:
 # -- --robot ---------------------------------------------------------------------------------
 
 def _asked(opts: Options, what: str) -> bool:
-    """Whether motion was confirmed on this terminal (``WHAT. Move?``); False without asking
-    with --yes (the command line carries it) or without a terminal (the robot refuses, exit 5,
-    as a local run would); a no refuses it here."""
+    """Whether a remote command that actuates or moves was confirmed on this terminal
+    (``WHAT. Go on?``); False without asking with --yes (the command line carries it) or
+    without a terminal (the robot refuses, exit 5, as a local run would); a no refuses it
+    here."""
+    from deltoctl.cli.confirm import asked
+
     if opts.yes or not sys.stdin.isatty():
         return False
-    if not typer.confirm(f"{what}. Move?", default=False, err=True):
+    if not asked(f"{what}. Go on?"):
         from deltoctl.errors import Refused
 
-        raise Refused("not confirmed; nothing moved")
+        raise Refused("not confirmed; nothing was done")
     return True
 
 
@@ -56,7 +59,7 @@ def forward(ctx: typer.Context) -> NoReturn:
     """Run the command line on ``--robot``'s agent: its stdout, stderr (errors naming the
     robot) and exit code, as if run there."""
     from deltoctl.cli.main import ARGV
-    from deltoctl.fleet import MOTION, check_robot
+    from deltoctl.fleet import ACTUATING, check_robot
     from deltoctl.fleet.client import ErrorLines, RemoteCall, caller_session
     from deltoctl.fleet.run import strip_remote, verb_of
 
@@ -68,7 +71,7 @@ def forward(ctx: typer.Context) -> NoReturn:
         verb = verb_of(_record_file_dropped(argv), robot)
         if verb == "record" and not {"--help", "-h"} & set(argv):
             raise typer.Exit(_remote_record(opts, robot, argv, errors.feed))
-        if verb in MOTION and _asked(opts, f"robot {robot}: {' '.join(argv)}"):
+        if verb in ACTUATING and _asked(opts, f"robot {robot}: {' '.join(argv)}"):
             argv = ["--yes", *argv]
         with caller_session(opts.zenoh_config, f"robot {robot}") as session:
             code = RemoteCall(session, robot, argv, _write_out, errors.feed).run()
@@ -265,7 +268,7 @@ def run_cmd(
         if one_verb:  # checked once the robots are known, to name them
             verb_of(lines[0], ", ".join(sorted(chosen)))
         lines = confirmed(lines, lambda: _asked(
-            opts, f"motion on {len(chosen)} robots ({', '.join(sorted(chosen))})"))
+            opts, f"actuate or move {len(chosen)} robots ({', '.join(sorted(chosen))})"))
         report = len(lines) == 1 and verb_of(lines[0]) == "report"
         if report and "--json" not in lines[0]:  # each robot's JSON, gathered below
             lines = [[*lines[0], "--json"]]

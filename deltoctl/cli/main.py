@@ -307,7 +307,7 @@ def command_path(args: Sequence[str]) -> tuple[tuple[str, ...], frozenset[str]]:
     try:
         ctx = _command_tree().make_context("deltoctl", list(args), resilient_parsing=True)
         path: list[str] = []
-        given = set(_given(ctx))
+        given = set(given_options(ctx))
         rest = [*ctx._protected_args, *ctx.args]
         while rest and hasattr(ctx.command, "resolve_command"):
             word = rest[0]
@@ -319,7 +319,7 @@ def command_path(args: Sequence[str]) -> tuple[tuple[str, ...], frozenset[str]]:
                                    + did_you_mean(word, ctx.command.list_commands(ctx)))
             path.append(name)
             ctx = command.make_context(name, rest, parent=ctx, resilient_parsing=True)
-            given.update(_given(ctx))
+            given.update(given_options(ctx))
             rest = [*ctx._protected_args, *ctx.args]
         return tuple(path), frozenset(given)
     except click_exceptions.UsageError as exc:
@@ -328,7 +328,7 @@ def command_path(args: Sequence[str]) -> tuple[tuple[str, ...], frozenset[str]]:
         return (verbs.UNRESOLVED,), frozenset()
 
 
-def _given(ctx: Any) -> list[str]:
+def given_options(ctx: Any) -> list[str]:
     """The spellings of the options a context's command line (or environment) gave: not
     their defaults, nor a flag given as off."""
     from typer._click.core import ParameterSource

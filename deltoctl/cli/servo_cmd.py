@@ -5,9 +5,10 @@ from typing import Annotated, Any
 
 import typer
 
+from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import options
 from deltoctl.cli.device_cmd import finish, open_robot
-from deltoctl.cli.motion_cmd import complete_joint, confirm_motion
+from deltoctl.cli.motion_cmd import complete_joint
 from deltoctl.cli.output import emit_json, say, table
 from deltoctl.errors import DeviceError, InvalidInput
 
@@ -79,9 +80,11 @@ def register_set(
     value: Annotated[int, typer.Argument(help="The raw value.")],
 ) -> None:
     """Write one control table item and read it back (asks first: a write can move)."""
+    from deltoctl.app.robot import servo_named
+
     opts = options(ctx)
-    confirm_motion(opts, f"write {item} = {value} to {joint}")
     with open_robot(opts) as robot:
+        confirm(ctx, f"write {item} = {value} to {servo_named(robot.system, joint)}")
         after = robot.write_register(joint, item, value)
     _report(opts, {"joint": joint, "item": item, "value": after}, f"{joint}: {item} = {after}")
     finish(robot.system)
@@ -99,8 +102,9 @@ def torque(
         raise InvalidInput(f"state must be on or off, got {state!r}")
     profile = opts.load_profile()
     joints = select_joints(profile, target, "torque")
-    if state == "on":
-        confirm_motion(opts, f"torque on for {len(joints)} joint(s): they hold their position")
+    confirm(ctx, f"torque {state} for {_named(target, joints)}: " + (
+        "they hold their position" if state == "on"
+        else "they go limp, and an arm under gravity falls"))
     with open_robot(opts, profile=profile) as robot:
         done = robot.torque(joints, state == "on")
     _report(opts, {"torque": state, "joints": done}, f"torque {state}: {len(done)} joint(s)")
@@ -114,6 +118,8 @@ def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
     opts = options(ctx)
     profile = opts.load_profile()
     joints = select_joints(profile, target, "reboot")
+    confirm(ctx, f"reboot the servos of {_named(target, joints)}: their torque goes off, an "
+                 "arm under gravity falls")
     with open_robot(opts, profile=profile) as robot:
         done = robot.reboot(joints)
     _report(opts, {"rebooted": done}, f"rebooted {len(done)} of {len(joints)} joint(s)")
@@ -121,6 +127,15 @@ def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
     if missing:
         raise DeviceError(f"no reboot acknowledgement from {', '.join(missing)}")
     finish(robot.system)
+
+
+def _named(target: str, joints: list[str]) -> str:
+    """``5 joints (left_arm)``, ``head_y``: what a servo verb is about to act on."""
+    if [target] == joints:
+        return target
+    shown = ", ".join(joints[:6]) + (f" and {len(joints) - 6} more" if len(joints) > 6 else "")
+    which = "" if target == "all" else f" of {target}"
+    return f"{len(joints)} joint(s){which} ({shown})"
 
 
 def _report(opts: Any, data: dict, text: str) -> None:
