@@ -36,12 +36,17 @@ def confirm(ctx: Any, what: str) -> None:
     effect = verbs.effect(running(ctx))
     if effect == verbs.READS or options(ctx).yes:
         return
-    if not sys.stdin.isatty():
-        raise Refused(f"needs --yes: no terminal to ask for confirmation to {what}",
+    if not on_terminal():
+        raise Refused(f"needs confirmation, and no terminal to ask on (pass --yes): {what}",
                       "pass --yes (-y) to go ahead without asking")
     if not asked(f"{what}. {_QUESTION.get(effect, _QUESTION[verbs.MOVES])}"):
         raise Refused("not confirmed; nothing was done",
                       "answer y to go ahead, or pass --yes (-y) to go ahead without asking")
+
+
+def on_terminal() -> bool:
+    """Whether there is a person to ask: standard input is a terminal."""
+    return sys.stdin.isatty()
 
 
 def asked(question: str) -> bool:

@@ -101,8 +101,8 @@ def torque(
     if state not in ("on", "off"):
         raise InvalidInput(f"state must be on or off, got {state!r}")
     profile = opts.load_profile()
-    joints = select_joints(profile, target, "torque")
-    confirm(ctx, f"torque {state} for {_named(target, joints)}: " + (
+    joints = _driven(opts, profile, select_joints(profile, target, "torque"))
+    confirm(ctx, f"switch torque {state} for {_named(target, joints)}: " + (
         "they hold their position" if state == "on"
         else "they go limp, and an arm under gravity falls"))
     with open_robot(opts, profile=profile) as robot:
@@ -117,7 +117,7 @@ def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
 
     opts = options(ctx)
     profile = opts.load_profile()
-    joints = select_joints(profile, target, "reboot")
+    joints = _driven(opts, profile, select_joints(profile, target, "reboot"))
     confirm(ctx, f"reboot the servos of {_named(target, joints)}: their torque goes off, an "
                  "arm under gravity falls")
     with open_robot(opts, profile=profile) as robot:
@@ -127,6 +127,14 @@ def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
     if missing:
         raise DeviceError(f"no reboot acknowledgement from {', '.join(missing)}")
     finish(robot.system)
+
+
+def _driven(opts: Any, profile: Any, joints: list[str]) -> list[str]:
+    """The joints of the blocks --hardware selects (all without it)."""
+    if not opts.hardware:
+        return joints
+    driven = {j.name for hw in profile.hardware if hw.name in opts.hardware for j in hw.joints}
+    return [j for j in joints if j in driven]
 
 
 def _named(target: str, joints: list[str]) -> str:
