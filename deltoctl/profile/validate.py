@@ -164,7 +164,7 @@ def _check_profile(profile: Profile, fail: Fail) -> None:
     known = registry.families()
     if profile.family is not None and profile.family not in known:
         raise fail(f"unknown driver family {profile.family!r} "
-                   f"(known: {', '.join(known)})", None)
+                   f"(known: {', '.join(known)}){registry.install_hint(profile.family)}", None)
     schemes = {s for f in known.values() for s in f.schemes}
     for bus, url in profile.buses.items():
         try:
@@ -173,7 +173,8 @@ def _check_profile(profile: Profile, fail: Fail) -> None:
             scheme = ""
         if scheme not in schemes:
             raise fail(f"bus {bus!r}: {url!r} is not a target URL "
-                       "(expected tcp://HOST:PORT, serial:///dev/PORT or i2c:///dev/i2c-N)", None)
+                       "(expected tcp://HOST:PORT, serial:///dev/PORT or i2c:///dev/i2c-N)"
+                       + registry.install_hint(scheme=scheme), None)
 
 
 def _check_block(profile: Profile, hw: Hardware, fail: Fail, doubt: Doubt) -> None:
@@ -195,7 +196,8 @@ def _check_block(profile: Profile, hw: Hardware, fail: Fail, doubt: Doubt) -> No
     family_name = profile.family_of(hw)
     if family_name is not None and family_name not in known:
         raise fail(f"unknown driver family {family_name!r} in {hw.name!r} "
-                   f"(known: {', '.join(known)})", hw.line)
+                   f"(known: {', '.join(known)})"
+                   + registry.install_hint(family_name, hw.plugin), hw.line)
     if hw.bus is not None and hw.bus not in profile.buses:
         raise fail(f"{hw.name!r} names unknown bus {hw.bus!r} "
                    f"(the profile's buses: {', '.join(profile.buses) or 'none'})", hw.line)

@@ -9,7 +9,7 @@ import time
 
 from deltoctl import trace
 from deltoctl.errors import DeviceError, InvalidInput, Unreachable
-from deltoctl.transport import Check, Target, Transport, split_url
+from deltoctl.transport import Check, Target, Transport, split_url, url_hint
 
 DEFAULT_PORT = 502  # Modbus TCP's, which a Delto's developer mode keeps
 RECV_ROOM = 65536  # free bytes a receive asks for: any frame fits (its length is 2 bytes)
@@ -22,7 +22,8 @@ def parse_tcp_url(url: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]
 
     parts = split_url(url)
     if parts.scheme != "tcp" or not parts.hostname:
-        raise InvalidInput(f"{url!r} is not a TCP target (expected tcp://HOST:PORT)")
+        raise InvalidInput(f"{url!r} is not a TCP target (expected tcp://HOST:PORT)"
+                           + url_hint(url, "tcp"))
     keys = [key for key, _ in parse_qsl(parts.query, keep_blank_values=True)]
     if keys:
         raise InvalidInput(f"{url!r}: unknown key {keys[0]!r} (a tcp:// target takes no keys)")
