@@ -32,6 +32,7 @@ from deltoctl.profile.model import (
     parse_rw_rate,
     parse_thread_priority,
 )
+from deltoctl.suggest import one_letter_off
 
 URDF_SUFFIXES = (".urdf", ".xacro", ".xml")
 Fail = Callable[[str, "int | None"], ProfileError]
@@ -136,6 +137,7 @@ def validate(profile: Profile, strict: bool = False) -> Profile:
             if comp.kind == "joint":
                 _check_joint(hw, comp, fail, doubt)
             _check_interfaces(hw, comp, interfaces, fail, doubt)
+            warnings += _near_standard(comp, src, where)
             if comp.kind == "joint":
                 _check_limits(comp, where, fail)
             _check_params(comp.params, f"{comp.kind} {comp.name!r}", where, fail, travel=True)
@@ -285,6 +287,26 @@ def _check_interfaces(hw: Hardware, comp: Component, seen: dict[tuple[str, str],
                            "hardware component)", line)
             seen[(which, full)] = hw.name
             _check_interface(comp, itf, line, fail, doubt)
+
+
+# ros2_control's standard interface names (hardware_interface_type_values.hpp)
+STANDARD_INTERFACES = ("position", "velocity", "acceleration", "effort", "torque", "force",
+                       "current", "temperature")
+
+
+def _near_standard(comp: Component, src: str | None,
+                   where: int | None) -> list[ProfileWarning]:
+    """A warning for each interface name one letter off a standard one (``positon``): a
+    controller that claims ``position`` would never find it."""
+    found = []
+    for itf in [*comp.command_interfaces, *comp.state_interfaces]:
+        near = [n for n in STANDARD_INTERFACES if one_letter_off(itf.name, n)]
+        if near:
+            found.append(ProfileWarning(
+                f"{comp.name}/{itf.name}: did you mean {comp.name}/{near[0]}? ({itf.name!r} is "
+                "one letter off a standard interface name of ros2_control)",
+                src, itf.line or where))
+    return found
 
 
 def _check_interface(comp: Component, itf: Interface, line: int | None, fail: Fail,
