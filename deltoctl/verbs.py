@@ -225,9 +225,14 @@ def modules() -> dict[str, str]:
     return {name: entry.module for name, entry in TABLE.items()}
 
 
-def stages() -> dict[str, str]:
-    """verb → its stage of a bring-up (STAGES)."""
-    return {name: entry.stage for name, entry in TABLE.items()}
+def by_stage() -> list[str]:
+    """The verbs in the order of their stages of a bring-up (STAGES), table order within
+    one; a verb of no stage last."""
+    def rank(name: str) -> int:
+        stage = TABLE[name].stage
+        return STAGES.index(stage) if stage in STAGES else len(STAGES)
+
+    return sorted(TABLE, key=rank)
 
 
 def examples() -> dict[str, str]:

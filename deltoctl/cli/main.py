@@ -37,7 +37,7 @@ class DeltoctlGroup(TyperGroup):
     into one line (one JSON object with --json) and its exit code."""
 
     def list_commands(self, ctx: Any) -> list[str]:
-        return list(VERBS)
+        return verbs.by_stage()  # the root's help shows them by stage, in this order
 
     def get_command(self, ctx: Any, cmd_name: str) -> Any:
         if cmd_name not in self.commands and cmd_name in VERBS:
