@@ -120,7 +120,7 @@ def _exit_status(exit_codes: tuple[tuple[int, str], ...]) -> list[str]:
 
 
 def _first_line(text: str | None) -> str:
-    return (text or "").strip().split("\n\n")[0].replace("\n", " ")
+    return (text or "").strip().split("\n\n")[0].replace("\n", " ").replace("\\[", "[")
 
 
 def _text(text: str) -> str:
