@@ -150,8 +150,8 @@ def restore(
     verification fails, 5 when refused for safety (EEPROM with torque on, a safety setting
     not named by --allow), 3 when some items could not be written (read-only)."""
     from deltoctl.app import config
-    from deltoctl.cli.device_cmd import open_robot
     from deltoctl.cli.confirm import confirm
+    from deltoctl.cli.device_cmd import open_robot
 
     opts = options(ctx)
     permitted = frozenset(config.permission(a) for a in allow or ())

@@ -206,7 +206,8 @@ JsonOpt = Annotated[bool, typer.Option(
     "--json", help="Write one JSON document (NDJSON for streams) on stdout; an error is "
                    "one JSON object on stderr.")]
 YesOpt = Annotated[bool, typer.Option(
-    "--yes", "-y", help="Do not ask for confirmation before motion.")]
+    "--yes", "-y", help="Do not ask for confirmation before a command that actuates or "
+                        "moves (needed without a terminal).")]
 VerboseOpt = Annotated[int, typer.Option(
     "--verbose", "-v", count=True, metavar="", show_default=False,
     help="More diagnostics on stderr: -v each link, -vv every packet too.")]

@@ -108,7 +108,7 @@ def test_a_known_mass_reads_its_weight(gripper, tmp_path):
 def test_the_terminal_asks_for_the_mass(gripper, tmp_path):
     pexpect = pytest.importorskip("pexpect")
     child = pexpect.spawn(DELTOCTL, ["-p", "dg-4f", "-t", gripper.endpoint, "calibrate", "ft",
-                                     "-n", "20", "--mass", "0.5", "-o", str(tmp_path)],
+                                     "-n", "20", "--mass", "0.5", "-o", str(tmp_path), "--yes"],
                           encoding="utf-8", timeout=60)
     try:
         child.expect(r"put 0\.5 kg on fingertip_finger_1 and let it rest")
