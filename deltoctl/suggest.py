@@ -48,14 +48,3 @@ def did_you_mean(typed: str, names: Iterable[str], n: int = 4) -> str:
     close = close_matches(typed, names, n)
     return f" (did you mean {', '.join(close)}?)" if close else ""
 
-
-def one_letter_off(typed: str, name: str) -> bool:
-    """Whether ``typed`` is ``name`` with one letter left out, added, changed, or swapped with
-    its neighbour (``positon``, ``postion``, ``velocty``)."""
-    if typed == name or abs(len(typed) - len(name)) > 1:
-        return False
-    start = next((i for i, (a, b) in enumerate(zip(typed, name)) if a != b),
-                 min(len(typed), len(name)))
-    rest_t, rest_n = typed[start:], name[start:]
-    return (rest_t[1:] == rest_n[1:] or rest_t == rest_n[1:] or rest_t[1:] == rest_n
-            or (len(rest_t) > 1 and rest_t[:2] == rest_n[1::-1] and rest_t[2:] == rest_n[2:]))

@@ -57,6 +57,10 @@ YES = ("--yes", "-y")  # the global option that confirms motion without asking
 LIFECYCLE, DATA, CONFIGURATION, TOOLS, REMOTE = (
     "lifecycle", "data", "configuration", "tools", "remote")
 STAGES = (LIFECYCLE, DATA, CONFIGURATION, TOOLS, REMOTE)
+TITLES = {LIFECYCLE: "Lifecycle: reach, identify, move and actuate a device",
+          DATA: "Data: stream, record, replay and read recordings",
+          CONFIGURATION: "Configuration: profiles, device settings and registers",
+          TOOLS: "Tools", REMOTE: "Remote: robots over Zenoh"}
 
 
 TABLE: dict[str, Verb] = {

@@ -49,13 +49,8 @@ def calibrate_ft(
     calibration-<model>-<address>-<time>.json. --verify reports each check (id, value,
     limit, verdict); --watch S the drift of each axis over S seconds; --mass KG a known
     mass's weight."""
-    from deltoctl.app.calibrate import (
-        check_tare,
-        check_verify,
-        fail_ft,
-        tare_description,
-        verify_ft,
-    )
+    from deltoctl.app import calibrate
+    from deltoctl.app.calibrate import check_tare, check_verify, fail_ft, verify_ft
 
     opts = options(ctx)
     drift = _drift_limits(drift_limit or [])
@@ -63,7 +58,7 @@ def calibrate_ft(
     check_verify(mass, watch, timeout, drift)
     verify = verify or mass is not None or watch is not None
     with open_robot(opts, allow_model_mismatch) as robot:
-        confirm(ctx, tare_description(robot.system))
+        confirm(ctx, calibrate.tare_description(robot.system))
         result = robot.calibrate_ft(samples, force_tolerance, torque_tolerance, output_dir)
         if verify:
             result["checks"] = verify_ft(robot.system, result, mass, sensor, watch, _ask,

@@ -1,9 +1,7 @@
 """Asking before a command acts on the robot, by one rule derived from the verb table
-(``deltoctl.verbs``): a command whose effect, with the options its command line gives, is to
-actuate or to move asks on a terminal and needs ``--yes`` without one; a command that reads
-never asks. Each verb says what it is about to do; none decides whether to ask."""
-
-from __future__ import annotations
+(deltoctl.verbs): a command that actuates or moves, with the options its command line gives,
+asks on a terminal and needs --yes without one; a command that reads never asks. Each verb
+says what it is about to do; none decides whether to ask."""
 
 import sys
 from typing import Any
@@ -13,45 +11,47 @@ from deltoctl.cli.context import options
 from deltoctl.errors import Refused
 
 _QUESTION = {verbs.MOVES: "Move?", verbs.ACTUATES: "Go on?"}
+_NOT_CONFIRMED = "not confirmed; nothing was done"
 
 
-def running(ctx: Any) -> verbs.Command:
-    """The command a context runs (``gpio set``) and the options its command line gives,
-    the global ones too."""
+def confirm(ctx: Any, what: str) -> None:
+    """Go on when the command reads, with --yes, or on a yes at ``WHAT. Move?``; else Refused
+    (exit 5) naming --yes. Ctrl-C at the question raises KeyboardInterrupt (exit 130)."""
     from deltoctl.cli.main import given_options
 
     chain = []
     while ctx is not None:
         chain.append(ctx)
         ctx = ctx.parent
-    chain.reverse()
-    path = " ".join(c.info_name for c in chain[1:])
-    return verbs.Command(path, {o for c in chain for o in given_options(c)})
-
-
-def confirm(ctx: Any, what: str) -> None:
-    """Go on when the command only reads, when --yes was given, or when the user says yes at
-    ``WHAT. Move?`` on a terminal; otherwise Refused (exit 5) naming --yes. Ctrl-C at the
-    question interrupts (exit 130)."""
-    effect = verbs.effect(running(ctx))
-    if effect == verbs.READS or options(ctx).yes:
+    command = verbs.Command(" ".join(c.info_name for c in reversed(chain[:-1])),
+                            {o for c in chain for o in given_options(c)})
+    effect = verbs.effect(command)
+    if effect == verbs.READS or options(chain[0]).yes:
         return
     if not on_terminal():
         raise Refused(f"needs confirmation, and no terminal to ask on (pass --yes): {what}",
                       "pass --yes (-y) to go ahead without asking")
-    if not asked(f"{what}. {_QUESTION.get(effect, _QUESTION[verbs.MOVES])}"):
-        raise Refused("not confirmed; nothing was done",
-                      "answer y to go ahead, or pass --yes (-y) to go ahead without asking")
+    if not asked(f"{what}. {_QUESTION.get(effect, 'Move?')}"):
+        raise Refused(_NOT_CONFIRMED, "answer y, or pass --yes (-y) to go ahead without asking")
+
+
+def confirmed_remotely(opts: Any, what: str) -> bool:
+    """For a command another computer runs: True on a yes at ``WHAT. Go on?`` (the command
+    line then carries --yes); False without asking with --yes or without a terminal (the robot
+    refuses as a local run would); a no is Refused here."""
+    if opts.yes or not on_terminal():
+        return False
+    if not asked(f"{what}. Go on?"):
+        raise Refused(_NOT_CONFIRMED)
+    return True
 
 
 def on_terminal() -> bool:
-    """Whether there is a person to ask: standard input is a terminal."""
     return sys.stdin.isatty()
 
 
 def asked(question: str) -> bool:
-    """Whether the user answers y (or yes) to ``question`` on the terminal; anything else,
-    an empty line or the end of input is no. Ctrl-C raises KeyboardInterrupt."""
+    """Whether the answer to ``question`` on the terminal is y or yes."""
     sys.stderr.write(f"{question} [y/N]: ")
     sys.stderr.flush()
     return sys.stdin.readline().strip().lower() in ("y", "yes")

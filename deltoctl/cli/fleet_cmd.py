@@ -8,6 +8,7 @@ from typing import Annotated, Any, NoReturn
 
 import typer
 
+from deltoctl.cli.confirm import confirmed_remotely
 from deltoctl.cli.context import Options, options
 from deltoctl.errors import DeltoctlError, InvalidInput
 
@@ -22,22 +23,6 @@ def register(root: typer.Typer) -> None:
 
 
 # -- --robot ---------------------------------------------------------------------------------
-
-def _asked(opts: Options, what: str) -> bool:
-    """Whether a remote command that actuates or moves was confirmed on this terminal
-    (``WHAT. Go on?``); False without asking with --yes (the command line carries it) or
-    without a terminal (the robot refuses, exit 5, as a local run would); a no refuses it
-    here."""
-    from deltoctl.cli.confirm import asked
-
-    if opts.yes or not sys.stdin.isatty():
-        return False
-    if not asked(f"{what}. Go on?"):
-        from deltoctl.errors import Refused
-
-        raise Refused("not confirmed; nothing was done")
-    return True
-
 
 def _write_out(data: bytes) -> None:
     buffer = getattr(sys.stdout, "buffer", None)
@@ -71,7 +56,7 @@ def forward(ctx: typer.Context) -> NoReturn:
         verb = verb_of(_record_file_dropped(argv), robot)
         if verb == "record" and not {"--help", "-h"} & set(argv):
             raise typer.Exit(_remote_record(opts, robot, argv, errors.feed))
-        if verb in ACTUATING and _asked(opts, f"robot {robot}: {' '.join(argv)}"):
+        if verb in ACTUATING and confirmed_remotely(opts, f"robot {robot}: {' '.join(argv)}"):
             argv = ["--yes", *argv]
         with caller_session(opts.zenoh_config, f"robot {robot}") as session:
             code = RemoteCall(session, robot, argv, _write_out, errors.feed).run()
@@ -267,7 +252,7 @@ def run_cmd(
         chosen = choose(agents(session, wait=wait), robots)
         if one_verb:  # checked once the robots are known, to name them
             verb_of(lines[0], ", ".join(sorted(chosen)))
-        lines = confirmed(lines, lambda: _asked(
+        lines = confirmed(lines, lambda: confirmed_remotely(
             opts, f"actuate or move {len(chosen)} robots ({', '.join(sorted(chosen))})"))
         report = len(lines) == 1 and verb_of(lines[0]) == "report"
         if report and "--json" not in lines[0]:  # each robot's JSON, gathered below

@@ -33,31 +33,16 @@ def _documented(param: Any) -> Any:
     return doc
 
 
-# the root's help: a panel of verbs per stage of a bring-up (deltoctl.verbs.STAGES)
-PANELS = {verbs.LIFECYCLE: "Lifecycle: reach, identify, move and actuate a device",
-          verbs.DATA: "Data: stream, record, replay and read recordings",
-          verbs.CONFIGURATION: "Configuration: profiles, device settings and registers",
-          verbs.TOOLS: "Tools", verbs.REMOTE: "Remote: robots over Zenoh"}
-
-
 def teach_verbs(root: Any, loaded: dict[str, Any]) -> None:
-    """Teach the verbs just loaded by the root group: their panel and line in its help."""
+    """Teach the verbs just loaded by the root group: their panel (their stage) and line in
+    its help."""
+    from deltoctl.render.manpages import summary
+
     globals_ = [_documented(p) for p in root.params if p.name not in _NOT_GLOBAL]
     for name, command in loaded.items():
         teach(command, name, globals_)
-        entry = verbs.TABLE.get(name)
-        if entry is not None and entry.stage in PANELS:
-            command.rich_help_panel = PANELS[entry.stage]
-        command.short_help = one_line(command.help or "")
-
-
-def one_line(text: str) -> str:
-    """A verb's help in one line: the first sentence of its first paragraph, up to the
-    first colon, semicolon or bracket (``What a recording holds``)."""
-    import re
-
-    first = " ".join(text.split("\n\n")[0].split())
-    return re.split(r"\. |: |; | \(", first, maxsplit=1)[0].rstrip(".")
+        command.rich_help_panel = verbs.TITLES.get(verbs.TABLE[name].stage)
+        command.short_help = summary(command.help)
 
 
 def teach(command: Any, path: str, globals_: list[Any]) -> None:

@@ -96,13 +96,14 @@ def torque(
     target: TargetArg = "all",
 ) -> None:
     """Switch servo torque on or off for a joint or a group."""
-    from deltoctl.app.robot import select_joints
+    from deltoctl.app.robot import joints_named, select_joints
+
     opts = options(ctx)
     if state not in ("on", "off"):
         raise InvalidInput(f"state must be on or off, got {state!r}")
     profile = opts.load_profile()
-    joints = _driven(opts, profile, select_joints(profile, target, "torque"))
-    confirm(ctx, f"switch torque {state} for {_named(target, joints)}: " + (
+    joints = select_joints(profile, target, "torque", opts.hardware)
+    confirm(ctx, f"switch torque {state} for {joints_named(target, joints)}: " + (
         "they hold their position" if state == "on"
         else "they go limp, and an arm under gravity falls"))
     with open_robot(opts, profile=profile) as robot:
@@ -113,13 +114,13 @@ def torque(
 
 def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
     """Reboot servos (clears a shutdown after a hardware error; torque comes back off)."""
-    from deltoctl.app.robot import select_joints
+    from deltoctl.app.robot import joints_named, select_joints
 
     opts = options(ctx)
     profile = opts.load_profile()
-    joints = _driven(opts, profile, select_joints(profile, target, "reboot"))
-    confirm(ctx, f"reboot the servos of {_named(target, joints)}: their torque goes off, an "
-                 "arm under gravity falls")
+    joints = select_joints(profile, target, "reboot", opts.hardware)
+    confirm(ctx, f"reboot the servos of {joints_named(target, joints)}: their torque goes off, "
+                 "an arm under gravity falls")
     with open_robot(opts, profile=profile) as robot:
         done = robot.reboot(joints)
     _report(opts, {"rebooted": done}, f"rebooted {len(done)} of {len(joints)} joint(s)")
@@ -127,23 +128,6 @@ def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
     if missing:
         raise DeviceError(f"no reboot acknowledgement from {', '.join(missing)}")
     finish(robot.system)
-
-
-def _driven(opts: Any, profile: Any, joints: list[str]) -> list[str]:
-    """The joints of the blocks --hardware selects (all without it)."""
-    if not opts.hardware:
-        return joints
-    driven = {j.name for hw in profile.hardware if hw.name in opts.hardware for j in hw.joints}
-    return [j for j in joints if j in driven]
-
-
-def _named(target: str, joints: list[str]) -> str:
-    """``5 joints (left_arm)``, ``head_y``: what a servo verb is about to act on."""
-    if [target] == joints:
-        return target
-    shown = ", ".join(joints[:6]) + (f" and {len(joints) - 6} more" if len(joints) > 6 else "")
-    which = "" if target == "all" else f" of {target}"
-    return f"{len(joints)} joint(s){which} ({shown})"
 
 
 def _report(opts: Any, data: dict, text: str) -> None:

@@ -32,7 +32,6 @@ from deltoctl.profile.model import (
     parse_rw_rate,
     parse_thread_priority,
 )
-from deltoctl.suggest import one_letter_off
 
 URDF_SUFFIXES = (".urdf", ".xacro", ".xml")
 Fail = Callable[[str, "int | None"], ProfileError]
@@ -307,6 +306,18 @@ def _near_standard(comp: Component, src: str | None,
                 "one letter off a standard interface name of ros2_control)",
                 src, itf.line or where))
     return found
+
+
+def one_letter_off(typed: str, name: str) -> bool:
+    """Whether ``typed`` is ``name`` with one letter left out, added, changed, or swapped with
+    its neighbour (``positon``, ``postion``, ``velocty``)."""
+    if typed == name or abs(len(typed) - len(name)) > 1:
+        return False
+    start = next((i for i, (a, b) in enumerate(zip(typed, name)) if a != b),
+                 min(len(typed), len(name)))
+    rest_t, rest_n = typed[start:], name[start:]
+    return (rest_t[1:] == rest_n[1:] or rest_t == rest_n[1:] or rest_t[1:] == rest_n
+            or (len(rest_t) > 1 and rest_t[:2] == rest_n[1::-1] and rest_t[2:] == rest_n[2:]))
 
 
 def _check_interface(comp: Component, itf: Interface, line: int | None, fail: Fail,

@@ -9,7 +9,6 @@ import re
 import pytest
 
 from deltoctl import registry, verbs
-from deltoctl.cli.help_cmd import PANELS
 from tests.conftest import REPO
 
 CANOPEN = REPO / "plugins" / "deltoctl-canopen" / "deltoctl_canopen" / "profiles"
@@ -75,7 +74,7 @@ def test_an_interface_one_letter_off_a_standard_name_is_a_warning(cli, tmp_path)
 
 
 def test_one_letter_off():
-    from deltoctl.suggest import one_letter_off
+    from deltoctl.profile.validate import one_letter_off
 
     for typed in ("positon", "postion", "psoition", "positionn", "efort", "velocty"):
         assert any(one_letter_off(typed, n) for n in ("position", "effort", "velocity")), typed
@@ -100,10 +99,10 @@ def _panels(text: str) -> dict[str, list[str]]:
 def test_the_root_help_shows_the_verbs_by_stage(cli):
     panels = _panels(cli("--help").stdout)
     for stage in verbs.STAGES:
-        assert panels[PANELS[stage]] == [
+        assert panels[verbs.TITLES[stage]] == [
             name for name, entry in verbs.TABLE.items() if entry.stage == stage]
     assert "Commands" not in panels  # every verb has its stage
-    assert list(panels)[-5:] == [PANELS[s] for s in verbs.STAGES]
+    assert list(panels)[-5:] == [verbs.TITLES[s] for s in verbs.STAGES]
 
 
 def test_square_brackets_in_a_help_are_kept(cli):
