@@ -55,7 +55,7 @@ def imu_server():
 
 
 def run(cli, server, profile, *args):
-    return cli("-p", profile, "-t", f"i2c={server.url}", *args)
+    return cli("-p", profile, "-t", f"i2c={server.url}", "--yes", *args)
 
 
 def checks_of(result):
