@@ -80,6 +80,7 @@ TABLE: dict[str, Verb] = {
         "validate": Verb(READS, "deltoctl profile validate my_robot.yaml --strict"),
         "import": Verb(READS, "deltoctl profile import robot.urdf.xacro -o robot.yaml"),
         "export": Verb(READS, "deltoctl profile export dg-5f-right --format xacro -o dg5f.xacro"),
+        "tests": Verb(READS, "deltoctl profile tests mh5 -o tests/"),
     }),
     "connect": Verb(READS, "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 connect",
                     "device_cmd", stage=LIFECYCLE),
@@ -127,6 +128,7 @@ TABLE: dict[str, Verb] = {
                   remote=False, subs={
         "loop": Verb(READS), "dynamixel": Verb(READS), "i2c": Verb(READS),
     }),
+    "ports": Verb(READS, "deltoctl ports --json", "ports_cmd", stage=TOOLS),
     "doctor": Verb(READS, "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 doctor",
                    "doctor_cmd", stage=TOOLS),
     "completion": Verb(READS, "deltoctl completion bash > "

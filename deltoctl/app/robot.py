@@ -201,6 +201,10 @@ class Robot:
         """One cycle's state of every block (a copy)."""
         return dict(self.system.read())
 
+    def link_stats(self) -> dict[str, dict[str, int]]:
+        """Each block's communication statistics so far: packets, errors, reconnects."""
+        return {m.name: dict(m.driver.stats) for m in self.system}
+
     # -- the lifecycle verbs -------------------------------------------------------------------
 
     def connect(self, count: int = 20) -> dict[str, Any]:
@@ -294,34 +298,40 @@ class Robot:
 
     # -- motion --------------------------------------------------------------------------------
 
-    def move(self, targets: Mapping[str, float], velocity: float | None = None,
+    def move(self, targets: Mapping[str, float | str], velocity: float | str | None = None,
              progress: Callable[[float], None] | None = None) -> dict[str, Any]:
-        """Move joints to absolute targets (radians or metres), the blocks on several links
-        at once; every block is stopped on the way out. A target outside the envelope is
-        refused (``Refused``) before anything is sent. Returns the report a ``jog --json``
-        prints."""
-        from deltoctl.app.motion import move
+        """Move joints to absolute targets (``30deg``, ``12mm``, or a bare number in radians
+        or metres), the blocks on several links at once; every block is stopped on the way
+        out. A unit that is not the joint's is ``InvalidInput``; a target outside the
+        envelope is refused (``Refused``) before anything is sent. Returns the report a
+        ``jog --json`` prints."""
+        from deltoctl.app.motion import joint_positions, joint_speed, move
 
-        return move(self.system, targets, velocity, progress)
+        positions = joint_positions(self.profile, targets)
+        speed = joint_speed(self.profile, list(positions), velocity, "velocity")
+        return move(self.system, positions, speed, progress)
 
     def home(self, joints: Sequence[str] = (), force: bool = False,
-             velocity: float | None = None) -> dict[str, Any]:
+             velocity: float | str | None = None) -> dict[str, Any]:
         """Home the robot's joints (or ``joints``): homing routines into their hard stops,
-        the others to the profile's home pose."""
-        from deltoctl.app.motion import home, plan_home
+        the others to the profile's home pose (at ``velocity``: ``20deg/s``, a bare number
+        in rad/s or m/s)."""
+        from deltoctl.app.motion import home, joint_speed, plan_home
 
         hardware = [m.name for m in self.system]
-        return home(self.system, plan_home(self.profile, hardware, joints), force, velocity)
+        plan = plan_home(self.profile, hardware, joints)
+        speed = joint_speed(self.profile, list(plan.targets), velocity, "velocity")
+        return home(self.system, plan, force, speed)
 
     def jog_targets(self, deltas: Mapping[str, float | str]) -> dict[str, float]:
-        """Each joint's target ``delta`` (a number, or a quantity such as ``5deg``) from
-        where it is now."""
+        """Each joint's target ``delta`` (a number in rad or m, or a quantity such as
+        ``5deg``, in the joint's unit) from where it is now."""
         from deltoctl.app.motion import jog_targets, moving_joints
 
         moving_joints(self.profile, list(deltas))
         return jog_targets(self.system, list(deltas.items()))[0]
 
-    def jog(self, deltas: Mapping[str, float | str], velocity: float | None = None,
+    def jog(self, deltas: Mapping[str, float | str], velocity: float | str | None = None,
             progress: Callable[[float], None] | None = None) -> dict[str, Any]:
         """Move joints by ``deltas`` from where they are (``max_jog_step`` bounds each)."""
         return self.move(self.jog_targets(deltas), velocity, progress)
@@ -407,6 +417,11 @@ class Robot:
         return rows
 
     # -- data ----------------------------------------------------------------------------------
+
+    def joint_types(self) -> dict[str, str]:
+        """Each joint's ros2_control type (revolute, continuous, prismatic …): what its
+        position is, an angle or a length."""
+        return {j.name: j.joint_type for j in self.profile.joints()}
 
     def interfaces(self, patterns: Sequence[str] = ()) -> list[str]:
         """The state interfaces whose names match the globs (every one without globs)."""

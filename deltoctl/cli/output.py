@@ -26,7 +26,7 @@ WARNINGS = "deltoctl.warnings"  # root ctx.meta key: the warnings said so far
 # verbs that report each block of the robot: their document's keys stay, beside the envelope's
 BLOCK_VERBS = ("connect", "identify", "detect", "home", "jog", "calibrate ft", "calibrate imu")
 # verbs that read no profile (a file, the fleet, this computer): their envelope's is null
-NO_PROFILE = ("info", "plot", "help", "completion", "bench", "fleet")
+NO_PROFILE = ("info", "plot", "help", "completion", "bench", "fleet", "ports")
 
 
 def emit_json(data: Any, err: bool = False) -> None:

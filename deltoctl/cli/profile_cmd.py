@@ -1,4 +1,4 @@
-"""``deltoctl profile list|show|validate|import|export``."""
+"""``deltoctl profile list|show|validate|import|export|tests``."""
 
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
@@ -138,6 +138,8 @@ def validate_cmd(
             f"{result['gpios']} gpios)")
         for note in result["warnings"]:
             info(f"warning: {note}")
+        for note in result.get("notes", []):
+            info(f"note: {note}")
     if opts.json:
         emit_json([result for result, _ in checked])
     failed = [code for result, code in checked if not result["ok"]]
@@ -205,6 +207,33 @@ def export_cmd(
     prof = options(ctx).load_profile(profile)
     text = to_yaml(prof) if fmt == "yaml" else to_urdf(prof, macro=fmt == "xacro")
     _written(ctx, prof, fmt, text, output)
+
+
+@app.command("tests")
+def tests_cmd(
+    ctx: typer.Context,
+    profile: ProfileArg = None,
+    output: Annotated[Path, typer.Option(
+        "--output", "-o", help="The folder of the tests (made if missing).")] = Path("tests"),
+    force: Annotated[bool, typer.Option("--force", help="Overwrite the files.")] = False,
+) -> None:
+    """Write a starting pytest suite for a robot: identify, detect, its configuration against
+    a golden snapshot (taken of the simulators), link quality and homing. It passes on the
+    simulators as written, and runs on the robot with --deltoctl-target (README: pytest)."""
+    from deltoctl.app.suite import write_suite
+
+    opts = options(ctx)
+    spec = profile or opts.profile
+    if not spec:
+        raise InvalidInput("no profile given: name one, or pass --profile")
+    suite = write_suite(spec, output, force)
+    if opts.json:
+        emit_json(suite.data())
+        return
+    for path in (suite.test_file, suite.golden):
+        if path is not None:
+            info(f"wrote {path}")
+    say(f"{len(suite.tests)} tests: {', '.join(suite.tests)}")
 
 
 def register(root: typer.Typer) -> None:

@@ -88,7 +88,7 @@ def parse_targets(profile: Profile, targets: list[str] | tuple[str, ...]) -> tup
     bare: list[str] = []
     for item in targets:
         name, found, url = item.partition("=")
-        if found and "://" not in name:
+        if found and (":" not in name or name in profile.buses):
             if name not in profile.buses:
                 from deltoctl.suggest import did_you_mean
 

@@ -2,30 +2,25 @@
 (a simulated bus that ``deltoctl sim serve`` shares over loopback).
 
 Both give an object with smbus2's ``SMBus`` methods; ``I2CBus`` adds what the drivers need:
-combined transactions (write, repeated start, read), 3 tries 50 µs apart, counters, and one
-clear message for a missing bus, a device that does not answer, or a permission problem.
+combined transactions (write, repeated start, read), one try each (a driver's exchange policy
+tries again), the bus's counters, and one clear message for a missing bus, a device that does
+not answer, or a permission problem.
 """
 
 from __future__ import annotations
 
 import errno
-import time
 from typing import Any
 from urllib.parse import parse_qsl
 
 from smbus2 import i2c_msg
 
 from deltoctl import trace
-from deltoctl.errors import DeviceError, InvalidInput, Unreachable
+from deltoctl.errors import DeviceError, InvalidInput, NoAnswer, Unreachable
 from deltoctl.transport import Check, Target, Transport, split_url, url_hint
 
-TRIES = 3
-RETRY_PAUSE = 50e-6  # s between tries
+# errnos of a device that did not acknowledge: NoAnswer (also importable from here)
 NO_ANSWER = (errno.ENXIO, errno.EREMOTEIO, errno.EIO, errno.ETIMEDOUT, errno.EAGAIN)
-
-
-class NoAnswer(DeviceError):
-    """A device did not acknowledge its address (after every try)."""
 
 
 def parse_i2c_url(url: str) -> tuple[str, str, int]:
@@ -82,7 +77,9 @@ def open_smbus(url: str) -> Any:
 
 
 class I2CBus:
-    """Transactions on one bus, with retries and counters (``stats``)."""
+    """Transactions on one bus, one try each. ``stats`` are the bus's counters, shared by the
+    drivers on it: ``bytes`` moved (counted here), ``packets`` and ``errors`` (counted by the
+    exchange that runs the tries: a transaction once, each failed try)."""
 
     def __init__(self, smbus: Any, url: str) -> None:
         self.smbus = smbus
@@ -104,21 +101,17 @@ class I2CBus:
         return msg
 
     def _run(self, address: int, *msgs: Any) -> None:
-        self.stats["packets"] += 1
+        """One transaction: NoAnswer when the device does not acknowledge, DeviceError for
+        any other failure of the adapter."""
         self.stats["bytes"] += sum(len(m) + 1 for m in msgs)  # payload + address byte
-        for attempt in range(TRIES):
-            try:
-                self.smbus.i2c_rdwr(*msgs)
-                return
-            except OSError as exc:
-                self.stats["errors"] += 1
-                if exc.errno not in NO_ANSWER:
-                    raise DeviceError(f"I2C transfer to {address:#04x} on {self.url} failed: "
-                                      f"{exc.strerror or exc}") from None
-                if attempt + 1 < TRIES:
-                    time.sleep(RETRY_PAUSE)
-        raise NoAnswer(f"no answer from {address:#04x} on {self.url} ({TRIES} tries)",
-                       hint="check the device's power, wiring and address")
+        try:
+            self.smbus.i2c_rdwr(*msgs)
+        except OSError as exc:
+            if exc.errno not in NO_ANSWER:
+                raise DeviceError(f"I2C transfer to {address:#04x} on {self.url} failed: "
+                                  f"{exc.strerror or exc}") from None
+            raise NoAnswer(f"no answer from {address:#04x} on {self.url}",
+                           hint="check the device's power, wiring and address") from None
 
     def transfer(self, address: int, write: bytes, read: int) -> bytes:
         """Write ``write``, repeated start, read ``read`` bytes: one combined transaction."""
@@ -172,10 +165,11 @@ def _simulated_checks(target: Target) -> list[Check]:
 
 
 def _host_checks() -> list[Check]:
-    """The host's I2C buses, each checked."""
+    """The host's I2C buses (under DELTOCTL_SYSFS_ROOT when it is set), each checked."""
+    from deltoctl.transport.adapters import root, under
     from deltoctl.transport.doctor import present_nodes
 
-    return present_nodes(("/dev/i2c-*",), "i2c", "no I2C bus (/dev/i2c-*)",
+    return present_nodes((under(root(), "/dev/i2c-*"),), "i2c", "no I2C bus (/dev/i2c-*)",
                          "sudo modprobe i2c-dev   (Raspberry Pi: dtparam=i2c_arm=on)",
                          _MODPROBE)
 

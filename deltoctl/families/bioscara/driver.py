@@ -15,16 +15,40 @@ from typing import Any
 
 from deltoctl import registry
 from deltoctl.core.driver import Block, Driver, HomeProgress, MoveResult, Progress
-from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Refused
+from deltoctl.core.exchange import ExchangePolicy
+from deltoctl.errors import DeltoctlError, DeviceError, DeviceFault, InvalidInput, NoAnswer, Refused
 from deltoctl.families.bioscara import codec
 from deltoctl.profile.model import Component
-from deltoctl.transport.i2c import I2CBus, NoAnswer  # what every I2C link gives
+from deltoctl.transport.i2c import I2CBus  # what every I2C link gives
 
 POLL_HOMING = 0.1  # s between flag polls while homing, as the Bioscara driver does
 POLL_MOVE = 0.02
 TOLERANCE = 1e-3  # rad or m: the closed-loop steppers settle far closer than this
 SCAN = range(0x08, 0x78)  # the addresses i2cdetect scans
 NAN = float("nan")
+POLICY = ExchangePolicy(tries=3, pause=50e-6)  # as the Bioscara driver's I2C layer
+
+
+def transfer(bus: I2CBus, address: int, data: bytes, length: int) -> bytes:
+    """One combined transaction under the joints' exchange policy: the bus counts it once in
+    ``packets`` and each failed try in ``errors``."""
+    failed: dict[str, int] = {}
+    bus.stats["packets"] += 1
+    try:
+        return POLICY.run(lambda: bus.transfer(address, data, length), f"{address:#04x}",
+                          failed)
+    except NoAnswer:
+        raise NoAnswer(f"no answer from {address:#04x} on {bus.url} ({POLICY.tries} tries)",
+                       hint="check the device's power, wiring and address") from None
+    except DeviceError:
+        failed["errors"] = failed.get("errors", 0) + 1
+        raise
+    finally:
+        bus.stats["errors"] += failed.get("errors", 0)
+
+
+def _encoded(request: codec.Request) -> tuple[codec.Request, tuple[bytes, int]]:
+    return request, codec.Host.encode(request)
 
 
 class Joint:
@@ -51,9 +75,10 @@ class Joint:
         self.offset = 0.0
         self.flags = codec.INITIAL_FLAGS
         self.mode: str | None = None  # the command interface in use
-        self._position = codec.read_request(codec.ANGLEMOVED)
-        self._rpm = codec.read_request(codec.GETENCODERRPM)
-        self._ping = codec.read_request(codec.PING)
+        # the requests of every cycle, encoded once
+        self._position = _encoded(codec.read(codec.ANGLEMOVED))
+        self._rpm = _encoded(codec.read(codec.GETENCODERRPM))
+        self._ping = _encoded(codec.read(codec.PING))
 
     # flags
     @property
@@ -68,52 +93,58 @@ class Joint:
     def busy(self) -> bool:
         return bool(self.flags & codec.BUSY)
 
-    # wire
-    def command(self, request: bytes) -> int:
-        self.flags = self.bus.transfer(self.address, request, 1)[0]
-        return self.flags
+    # wire: through the host role of the codec
+    def exchange(self, request: codec.Request,
+                 encoded: tuple[bytes, int] | None = None) -> codec.Reply:
+        data, length = encoded or codec.Host.encode(request)
+        reply = codec.Host.decode(request, transfer(self.bus, self.address, data, length))
+        self.flags = reply.flags
+        return reply
 
-    def _get(self, request: bytes) -> float:
-        value, self.flags = codec.decode_float(self.bus.transfer(self.address, request, 5))
+    def command(self, request: codec.Request) -> int:
+        return self.exchange(request).flags
+
+    def _get(self, request: codec.Request, encoded: tuple[bytes, int] | None = None) -> float:
+        value = self.exchange(request, encoded).value
+        assert value is not None  # a float read's reply has one
         return value
 
     def ping(self) -> int:
-        self.flags = codec.decode_ping(self.bus.transfer(self.address, self._ping, 2))
-        return self.flags
+        return self.exchange(*self._ping).flags
 
     def position(self) -> float:
-        return codec.from_motor_degrees(self._get(self._position), self.reduction, self.offset)
+        return codec.from_motor_degrees(self._get(*self._position), self.reduction, self.offset)
 
     def velocity(self) -> float:
-        return codec.from_motor_rpm(self._get(self._rpm), self.reduction)
+        return codec.from_motor_rpm(self._get(*self._rpm), self.reduction)
 
     def read_home_offset(self) -> float:
-        return self._get(codec.read_request(codec.HOMEOFFSET))
+        return self._get(codec.read(codec.HOMEOFFSET))
 
     # commands
     def activate(self) -> None:
         """Enable (drive, hold), stall guard, and the joint's acceleration and velocity."""
-        self.command(codec.setup(self.drive, self.hold))
+        self.command(codec.setup_command(self.drive, self.hold))
         if self.stall_threshold > 0:
-            self.command(codec.write_u8(codec.ENABLESTALLGUARD, self.stall_threshold))
+            self.command(codec.u8_command(codec.ENABLESTALLGUARD, self.stall_threshold))
         self.set_limits(self.max_acceleration, self.max_velocity)
 
     def set_limits(self, acceleration: float, velocity: float) -> None:
         scale = abs(self.reduction)  # joint units → motor degrees
-        self.command(codec.write_float(codec.SETMAXACCELERATION,
-                                       codec.to_motor_degrees(acceleration, scale, 0.0)))
-        self.command(codec.write_float(codec.SETMAXVELOCITY,
-                                       codec.to_motor_degrees(velocity, scale, 0.0)))
+        self.command(codec.float_command(codec.SETMAXACCELERATION,
+                                         codec.to_motor_degrees(acceleration, scale, 0.0)))
+        self.command(codec.float_command(codec.SETMAXVELOCITY,
+                                         codec.to_motor_degrees(velocity, scale, 0.0)))
 
     def stop(self) -> None:
-        self.command(codec.write_u8(codec.STOP, 0))
+        self.command(codec.u8_command(codec.STOP, 0))
 
     def disable(self) -> None:
         """stop → hold current 0 → drive current 0 → freewheel: back-drivable."""
         self.stop()
-        self.command(codec.write_u8(codec.SETHOLDCURRENT, 0))
-        self.command(codec.write_u8(codec.SETCURRENT, 0))
-        self.command(codec.write_u8(codec.SETBRAKEMODE, 0))
+        self.command(codec.u8_command(codec.SETHOLDCURRENT, 0))
+        self.command(codec.u8_command(codec.SETCURRENT, 0))
+        self.command(codec.u8_command(codec.SETBRAKEMODE, 0))
         self.mode = None
 
     def claim(self, mode: str) -> None:
@@ -130,18 +161,19 @@ class Joint:
 
     def set_position(self, position: float) -> None:
         self.claim("position")
-        self._after_motion(self.command(codec.write_float(
+        self._after_motion(self.command(codec.float_command(
             codec.MOVETOANGLE, codec.to_motor_degrees(position, self.reduction, self.offset))))
 
     def set_velocity(self, velocity: float) -> None:
         """A velocity set point; the joint's deadman stops it unless one comes every 50 ms."""
         self.claim("velocity")
-        self._after_motion(self.command(codec.write_float(
+        self._after_motion(self.command(codec.float_command(
             codec.SETRPM, codec.to_motor_rpm(velocity, self.reduction))))
 
     def _after_motion(self, flags: int) -> None:
         if flags & codec.NOTENABLED:
-            raise DeviceError(f"{self.name} is {codec.ERRORS[-3]}")
+            raise DeviceFault(f"{self.name} is {codec.ERRORS[codec.NOT_ENABLED]}",
+                              codec.NOT_ENABLED)
 
     def start_homing(self) -> None:
         """HOME toward the hard stop the homing speed points at; that stop becomes the offset."""
@@ -153,15 +185,15 @@ class Joint:
         self.set_limits(self.homing.get("acceleration", self.max_acceleration),
                         self.max_velocity)
         self.offset = self.high if speed > 0 else self.low
-        self.command(codec.home(codec.to_motor_rpm(speed, self.reduction),
-                                int(self.homing.get("threshold", 0)),
-                                int(self.homing.get("current", self.drive))))
+        self.command(codec.home_command(codec.to_motor_rpm(speed, self.reduction),
+                                        int(self.homing.get("threshold", 0)),
+                                        int(self.homing.get("current", self.drive))))
 
     def finish_homing(self) -> None:
         self.set_limits(self.max_acceleration, self.max_velocity)
         self.stop()
         if not self.ping() & codec.NOTHOMED:
-            self.command(codec.write_float(codec.HOMEOFFSET, self.offset))
+            self.command(codec.float_command(codec.HOMEOFFSET, self.offset))
         self.disable()
 
 
@@ -307,7 +339,7 @@ class BioscaraDriver(Driver):
         read_back = {}
         for part, items in changes.items():
             joint = self.joint(part)
-            joint.command(codec.write_float(codec.HOMEOFFSET, float(items["home offset"])))
+            joint.command(codec.float_command(codec.HOMEOFFSET, float(items["home offset"])))
             value = joint.read_home_offset()
             if joint.homed:  # positions read from now on count from it
                 joint.offset = value
@@ -408,7 +440,8 @@ class BioscaraDriver(Driver):
         joint = self.joints[name]
         position = self.values.get(f"{name}/position", float("nan"))
         joint.disable()
-        raise DeviceError(f"{name} stalled at {position:.4f} and was stopped; it is disabled",
+        raise DeviceFault(f"{name} stalled at {position:.4f} and was stopped; it is disabled",
+                          codec.STALLED,
                           hint="clear the obstruction, then jog again (enabling clears STALL)")
 
     def home(self, names: list[str], force: bool = False,

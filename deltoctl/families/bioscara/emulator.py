@@ -13,9 +13,10 @@ import math
 import random
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 from deltoctl.core.serving import ServeContext
+from deltoctl.errors import ProtocolError
 from deltoctl.families.bioscara import codec
 
 if TYPE_CHECKING:
@@ -32,7 +33,7 @@ SPIKE = 100.0
 LPF_GAIN = TICK / 0.1  # Ts/τ with K = 1
 # emulator assumption: the PID error counts motor degrees between command and encoder
 ERROR_PER_DEG = 1.0
-NO_OPS = frozenset({codec.SETBRAKEMODE, 0x12})  # brake mode is not modelled; GETDRIVERRPM
+NO_OPS = frozenset({codec.SETBRAKEMODE, codec.GETDRIVERRPM})  # brake mode is not modelled
 
 
 class JointFirmware:
@@ -64,87 +65,125 @@ class JointFirmware:
         self.now = self.last_request = clock()
         self.requests = 0
 
-    # -- the I2C side ----------------------------------------------------------------------------
+    # -- the I2C side: requests through the device role of the codec ----------------------------
     def write(self, data: bytes) -> None:
         self._request()
         if not data:
             return
-        self.payload = self._handle(data[0], data[1:])
+        try:
+            request = codec.Device.parse(data)
+        except ProtocolError:  # unknown, or not the command's arguments: a blocking no-op
+            self._block(data[0])
+            self.payload = b""
+            return
+        self.payload = codec.Device.answer(request, self._handle(request))
 
     def read(self, length: int) -> bytes:
         """The last command's payload, then the flags (a one-byte read: the flags alone)."""
         self._request()
-        payload = self.payload[:length - 1].ljust(length - 1, b"\0")
-        return payload + bytes([self.flags])
+        return codec.Device.reply(self.payload, self.flags, length)
 
     def _request(self) -> None:
         self.advance(self.clock())
         self.last_request = self.now
         self.requests += 1
 
-    def _handle(self, register: int, p: bytes) -> bytes:
+    def _handle(self, request: codec.Request) -> float | None:
         """Runs one command (the ISR's non-blocking handler, or queues a blocking one); the
-        return value is the payload before the flags."""
-        f = codec.FLOAT.unpack_from
-        if register == codec.PING:
-            return bytes([codec.ACK])
-        if register == codec.ANGLEMOVED:
-            homed = not self.flags & codec.NOTHOMED
-            return codec.FLOAT.pack(self.angle - self.home_angle if homed else 0.0)
-        if register == codec.GETENCODERRPM:
-            return codec.FLOAT.pack(self.measured / 6.0)
-        if register == codec.HOMEOFFSET:
-            if len(p) >= 4:
-                self.home_offset = f(p)[0]
-                return b""
-            return codec.FLOAT.pack(self.home_offset)
-        if register == codec.SETUP and len(p) >= 2:
-            self.drive, self.hold = p[0], p[1]
-            self._stop()
-            self.flags &= ~(codec.STALL | codec.NOTENABLED)
-            self.stallguard = None
-        elif register == codec.SETRPM and len(p) >= 4:
-            if not self.flags & codec.STALL:
-                self.rpm, self.target = f(p)[0], None
-        elif register == codec.MOVESTEPS and len(p) >= 4:
-            self.rpm, self.target = 0.0, self.command + codec.INT32.unpack_from(p)[0] / \
-                STEPS_PER_DEG
-        elif register == codec.MOVETOANGLE and len(p) >= 4:
-            if not self.flags & codec.STALL:
-                self.rpm, self.target = 0.0, self.home_angle + f(p)[0]
-        elif register in (codec.SETCURRENT, codec.SETHOLDCURRENT) and p:
-            if register == codec.SETCURRENT:
-                self.drive = p[0]
-            else:
-                self.hold = p[0]
-            if p[0] == 0:
-                self._disable()
-        elif register == codec.SETMAXACCELERATION and len(p) >= 4:
-            self.max_acceleration = abs(f(p)[0])
-        elif register == codec.SETMAXVELOCITY and len(p) >= 4:
-            self.max_velocity = abs(f(p)[0])
-        elif register == codec.ENABLESTALLGUARD and p:
-            self.stallguard = p[0] * 10.0
-            self.flags &= ~codec.STALL
-        elif register == codec.DISABLECLOSEDLOOP:
+        value a read answers, None for a command."""
+        run = self._HANDLERS.get(request.command)
+        if run is None:
+            self._block(request.command)
+            return None
+        return run(self, *request.args)
+
+    def _block(self, command: int) -> None:
+        """Blocking (or unknown): BUSY until loop() runs it."""
+        if command in NO_OPS:
+            return
+        self.flags |= codec.BUSY
+        self.busy_until = self.now + (ORIENTATION_TIME if command == codec.CHECKORIENTATION
+                                      else TICK)
+
+    def _nothing(self, *args: float) -> None:
+        return None
+
+    def _angle_moved(self) -> float:
+        homed = not self.flags & codec.NOTHOMED
+        return self.angle - self.home_angle if homed else 0.0
+
+    def _encoder_rpm(self) -> float:
+        return self.measured / 6.0
+
+    def _home_offset(self, value: float | None = None) -> float | None:
+        if value is None:
+            return self.home_offset
+        self.home_offset = value
+        return None
+
+    def _setup(self, drive: int, hold: int) -> None:
+        self.drive, self.hold = drive, hold
+        self._stop()
+        self.flags &= ~(codec.STALL | codec.NOTENABLED)
+        self.stallguard = None
+
+    def _set_rpm(self, rpm: float) -> None:
+        if not self.flags & codec.STALL:
+            self.rpm, self.target = rpm, None
+
+    def _move_steps(self, steps: int) -> None:
+        self.rpm, self.target = 0.0, self.command + steps / STEPS_PER_DEG
+
+    def _move_to_angle(self, angle: float) -> None:
+        if not self.flags & codec.STALL:
+            self.rpm, self.target = 0.0, self.home_angle + angle
+
+    def _set_current(self, value: int) -> None:
+        self.drive = value
+        if value == 0:
             self._disable()
-        elif register == codec.STOP:
-            self._stop()
-            self.flags &= ~codec.BUSY
-            if self.homing is not None:  # an aborted HOME leaves the joint not homed
-                self._end_homing(homed=False)
-        elif register == codec.HOME and len(p) >= 4:
-            direction, rpm, sensitivity, current = p[:4]
-            self._stop()
-            self.flags |= codec.BUSY | codec.NOTHOMED
-            self.homing = {"start": self.now + HOME_PAUSE, "rpm": rpm if direction else -rpm,
-                           "sensitivity": sensitivity, "current": current,
-                           "drive": self.drive}
-        elif register not in NO_OPS:
-            self.flags |= codec.BUSY  # blocking (or unknown): BUSY until loop() runs it
-            self.busy_until = self.now + (ORIENTATION_TIME if register ==
-                                          codec.CHECKORIENTATION else TICK)
-        return b""
+
+    def _set_hold_current(self, value: int) -> None:
+        self.hold = value
+        if value == 0:
+            self._disable()
+
+    def _set_max_acceleration(self, value: float) -> None:
+        self.max_acceleration = abs(value)
+
+    def _set_max_velocity(self, value: float) -> None:
+        self.max_velocity = abs(value)
+
+    def _enable_stallguard(self, threshold: int) -> None:
+        self.stallguard = threshold * 10.0
+        self.flags &= ~codec.STALL
+
+    def _disable_closed_loop(self, _mode: int) -> None:
+        self._disable()
+
+    def _stop_command(self, _mode: int) -> None:
+        self._stop()
+        self.flags &= ~codec.BUSY
+        if self.homing is not None:  # an aborted HOME leaves the joint not homed
+            self._end_homing(homed=False)
+
+    def _home(self, direction: int, rpm: int, sensitivity: int, current: int) -> None:
+        self._stop()
+        self.flags |= codec.BUSY | codec.NOTHOMED
+        self.homing = {"start": self.now + HOME_PAUSE, "rpm": rpm if direction else -rpm,
+                       "sensitivity": sensitivity, "current": current, "drive": self.drive}
+
+    _HANDLERS: ClassVar[dict[int, Callable[..., float | None]]] = {
+        codec.PING: _nothing, codec.ANGLEMOVED: _angle_moved,
+        codec.GETENCODERRPM: _encoder_rpm, codec.HOMEOFFSET: _home_offset,
+        codec.SETUP: _setup, codec.SETRPM: _set_rpm, codec.MOVESTEPS: _move_steps,
+        codec.MOVETOANGLE: _move_to_angle, codec.SETCURRENT: _set_current,
+        codec.SETHOLDCURRENT: _set_hold_current,
+        codec.SETMAXACCELERATION: _set_max_acceleration,
+        codec.SETMAXVELOCITY: _set_max_velocity, codec.ENABLESTALLGUARD: _enable_stallguard,
+        codec.DISABLECLOSEDLOOP: _disable_closed_loop, codec.STOP: _stop_command,
+        codec.HOME: _home,
+    }
 
     # -- the firmware's loop ---------------------------------------------------------------------
     def _stop(self) -> None:

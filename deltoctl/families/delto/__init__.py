@@ -30,7 +30,7 @@ FAMILY = Family(
         SimOption("stall", "joints", "Fault: a joint that cannot move (repeatable)."),
         SimOption("ft_creep", "numbers", "Fault: every fingertip F/T offset creeps, per axis "
                   "Fx,Fy,Fz (N/s),Tx,Ty,Tz (N·m/s); the axes not given stay.", None, -100,
-                  100, (1, 6), "FX,FY,FZ,…"),
+                  100, (1, 6), metavar="FX,FY,FZ,…"),
     ),
     identity_fields=(("reported_model", "{}"), ("firmware", "fw {}")),
 )

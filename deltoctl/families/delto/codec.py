@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import re
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
 from itertools import chain
@@ -230,6 +231,23 @@ def unpack_data_reply(data: bytes, model: DeltoModel, codes: tuple[int, ...],
         raise ProtocolError(f"GET_DATA reply: {len(data)} bytes, expected {3 + layout.size} for "
                             f"{model.name} with codes {list(codes)}")
     return layout.unpack_from(data, 3)
+
+
+def data_reply_unpacker(model: DeltoModel, codes: tuple[int, ...],
+                        sensor_type: int) -> Callable[[bytes], tuple[int, ...]]:
+    """``unpack_data_reply`` for one shape of reply, its layout worked out once: a cycle's
+    reply is a length, a command byte and one unpack; a bad one gets the same errors."""
+    layout = _reply_layout(model, codes, sensor_type)
+    size = 3 + layout.size
+    head = bytes([size >> 8 & 0xFF, size & 0xFF, GET_DATA])
+    unpack_from = layout.unpack_from
+
+    def unpack(data: bytes) -> tuple[int, ...]:
+        if len(data) != size or data[:3] != head:
+            return unpack_data_reply(data, model, codes, sensor_type)  # raises: says why
+        return unpack_from(data, 3)
+
+    return unpack
 
 
 def decode_data_reply(data: bytes, model: DeltoModel, codes: tuple[int, ...],

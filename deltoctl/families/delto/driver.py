@@ -88,6 +88,7 @@ class DeltoDriver(Driver):
         self.codes: tuple[int, ...] = ()
         self.limiters = [CurrentLimiter() for _ in hw.joints]
         self._duty_plan: tuple = (None, [])
+        self._last_duty: tuple[list[int], bytes] = ([], b"")  # duties, their SET_DUTY
         self._request = b""  # GET_DATA with this connection's data codes
         self._reply_plan: tuple = ()
         self._pending: TcpLink | None = None  # a GET_DATA sent by start_read, reply not yet read
@@ -335,10 +336,12 @@ class DeltoDriver(Driver):
                     name = f"cell_{k // grid.cols}_{k % grid.cols}"
                     if sensor.state(name):
                         plan.append((f"{sensor.name}/{name}", cells[f * grid.cells + k]))
+        gpio = [i for i, _ in fields.get("gpio", ())]
         self._reply_plan = (model, sensor_type, [key for key, _ in plan],
                             itemgetter(*(i for _, (i, _) in plan)),
                             [scale for _, (_, scale) in plan],
-                            [i for i, _ in fields.get("gpio", ())])
+                            _picker(gpio) if gpio else None,
+                            codec.data_reply_unpacker(model, self.codes, sensor_type))
 
     def start_read(self) -> None:
         """Send GET_DATA; ``read`` takes the reply (another gripper's request goes out
@@ -363,7 +366,7 @@ class DeltoDriver(Driver):
             self._start_reconnect()
             return self.values
         self.stats["packets"] += 1
-        model, sensor_type = self._reply_plan[:2]
+        unpack = self._reply_plan[6]
         timing = self.timing
         try:
             t0 = time.perf_counter()
@@ -371,7 +374,7 @@ class DeltoDriver(Driver):
                 link.send(self._request)
             reply = link.recv_frame(DATA_TIMEOUT)
             t1 = time.perf_counter()
-            raw = codec.unpack_data_reply(reply, model, self.codes, sensor_type)
+            raw = unpack(reply)
         except DeviceError as exc:
             self.stats["errors"] += 1
             self._lost(exc)
@@ -384,15 +387,15 @@ class DeltoDriver(Driver):
 
     def _store(self, raw: tuple[int, ...]) -> None:
         v = self.values
-        model, _, keys, pick, scales, gpio = self._reply_plan
+        model, _, keys, pick, scales, gpio, _ = self._reply_plan
         if model.legacy:  # the DG-3F-B sends no velocity: differentiate the position
             now = time.monotonic()
             dt = now - self._last_read if self._last_read else 0.0
             self._last_read = now
             before = [v.get(k) for k in self._keys["position"]]
         v.update(zip(keys, map(mul, pick(raw), scales)))
-        if gpio:
-            v.update(zip(self._keys["gpio"], (1.0 if raw[i] else 0.0 for i in gpio)))
+        if gpio is not None:  # each input and output: 1.0 or 0.0
+            v.update(zip(self._keys["gpio"], map(float, map(bool, gpio(raw)))))
         if model.legacy:
             for key, pos_key, previous in zip(self._keys["velocity"], self._keys["position"],
                                               before):
@@ -422,19 +425,24 @@ class DeltoDriver(Driver):
         identity, model = self.identity, self.model
         if identity is None or model is None:
             return
-        if self._duty_plan[0] is not identity:  # per joint, worked out once per connection
+        plan = self._duty_plan
+        if plan[0] is not identity:  # per joint, worked out once per connection
             joints = self.hw.joints[: model.motors]
-            self._duty_plan = (identity, [(j.name, f"{j.name}/effort", self.limiters[i],
-                                           identity.direction[i])
-                                          for i, j in enumerate(joints)])
+            steps = [(j.name, f"{j.name}/effort", self.limiters[i], identity.direction[i])
+                     for i, j in enumerate(joints)]
+            plan = self._duty_plan = (identity, steps, ([s[0] for s in steps],
+                                                        [s[1] for s in steps]),
+                                      codec.encode_duty([0] * model.motors))
+        targets = list(map(get, plan[2][by]))
+        if not any(targets):  # no joint commanded, or 0 for each: duty 0 on every motor
+            self._send(plan[3])
+            return
         values = self.values
         duties = []
-        for plan in self._duty_plan[1]:
-            target = get(plan[by])
+        for target, (_, effort_key, limiter, direction) in zip(targets, plan[1]):
             if not target or not isfinite(target):  # NaN would clamp to full duty: stop
                 duties.append(0)
                 continue
-            _, effort_key, limiter, direction = plan
             limited = limiter(target, values.get(effort_key, 0.0))
             if (limited > 0) != (target > 0):
                 duties.append(0)  # the limiter shrinks a command, never reverses it
@@ -442,7 +450,9 @@ class DeltoDriver(Driver):
             duty = int(effort_to_duty_percent(limited) * 10)
             duties.append(max(-DUTY_WIRE_LIMIT, min(DUTY_WIRE_LIMIT, duty)) * direction)
         duties += [0] * (model.motors - len(duties))
-        self._send(codec.encode_duty(duties))
+        if duties != self._last_duty[0]:  # a command held from cycle to cycle: encoded once
+            self._last_duty = (duties, codec.encode_duty(duties))
+        self._send(self._last_duty[1])
 
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:
@@ -552,6 +562,13 @@ class DeltoDriver(Driver):
                     return
         finally:
             self._reconnecting = False
+
+
+def _picker(indices: list[int]) -> Callable[[tuple[int, ...]], tuple[int, ...]]:
+    """The values at ``indices``, always as a tuple (``itemgetter`` of one gives the value)."""
+    if len(indices) == 1:
+        return lambda raw, i=indices[0]: (raw[i],)
+    return itemgetter(*indices)
 
 
 TOPIC_PART = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")

@@ -2,6 +2,12 @@
 
 The MH5 configures 416 Hz, ±2 g and 245 dps, reads gyro, accelerometer and temperature, maps
 the axes into its ROS frame in software and low-pass filters each value.
+
+The conversation is the chip's register file, kept here for both sides: a write starts with a
+register address, the bytes after it fill that register and the next ones (auto-increment),
+and a read returns bytes from where the last write left the address. The host (the driver)
+encodes a :class:`Read` or a :class:`Write` and checks what it reads back; the device (the
+emulator) keeps the register address and turns each write and read into one of them.
 """
 
 from __future__ import annotations
@@ -26,6 +32,8 @@ REGISTERS = {WHO_AM_I: "WHO_AM_I", CTRL1_XL: "CTRL1_XL", CTRL2_G: "CTRL2_G",
              CTRL4_C: "CTRL4_C", CTRL5_C: "CTRL5_C", STATUS_REG: "STATUS_REG",
              ORIENT_CFG_G: "ORIENT_CFG_G", OUT_TEMP_L: "OUT_TEMP_L",
              OUTX_L_G: "OUTX_L_G", OUTX_L_XL: "OUTX_L_XL"}
+REGISTER_COUNT = 0x80  # the register file: addresses 0x00-0x7F
+READ_ONLY = frozenset({WHO_AM_I})  # what a write leaves as it is
 BLOCK = 14  # bytes from OUT_TEMP_L to OUTZ_H_XL
 BW_SCAL_ODR = 0x80  # CTRL4_C: the accelerometer bandwidth comes from CTRL1_XL's BW bits
 
@@ -67,8 +75,87 @@ def frame_name(data: bytes) -> str | None:
     """The register an I2C write selects (one byte: a read follows) or writes, for -vv."""
     if not data:
         return None
-    name = REGISTERS.get(data[0], f"register {data[0]:#04x}")
+    name = register_name(data[0])
     return name if len(data) == 1 else f"write {name}"
+
+
+# -- the conversation, both roles -----------------------------------------------------------------
+@dataclass(frozen=True)
+class Read:
+    """``count`` bytes from ``register`` on (auto-increment)."""
+
+    register: int
+    count: int = 1
+
+
+@dataclass(frozen=True)
+class Write:
+    """``values`` into ``register`` and the ones after it (none: the register a read takes)."""
+
+    register: int
+    values: bytes = b""
+
+    def cells(self) -> list[tuple[int, int]]:
+        """``(register, value)`` each value lands in, the read-only registers left out."""
+        cells = [((self.register + i) % REGISTER_COUNT, v) for i, v in enumerate(self.values)]
+        return [(r, v) for r, v in cells if r not in READ_ONLY]
+
+
+def register_name(register: int) -> str:
+    return REGISTERS.get(register, f"register {register:#04x}")
+
+
+def _check_register(register: int, error: type[Exception]) -> None:
+    if not 0 <= register < REGISTER_COUNT:
+        raise error(f"{register:#x} is no LSM6DS3 register (0x00-0x7f)")
+
+
+class Host:
+    """The driver's side: the bytes of each request, and what a read brought back checked."""
+
+    @staticmethod
+    def encode(request: Read | Write) -> tuple[bytes, int]:
+        """What to write, and how many bytes to read after the repeated start (0: none)."""
+        _check_register(request.register, InvalidInput)
+        if isinstance(request, Write):
+            return bytes([request.register]) + request.values, 0
+        if not 1 <= request.count <= REGISTER_COUNT:
+            raise InvalidInput(f"a read of {request.count} bytes from "
+                               f"{register_name(request.register)}: 1 to {REGISTER_COUNT}")
+        return bytes([request.register]), request.count
+
+    @staticmethod
+    def decode(request: Read | Write, reply: bytes) -> bytes:
+        expected = request.count if isinstance(request, Read) else 0
+        if len(reply) != expected:
+            raise ProtocolError(f"{register_name(request.register)}: expected {expected} "
+                                f"bytes, got {len(reply)}")
+        return reply
+
+
+class Device:
+    """The chip's side: the register address, set by a write and moved by every byte."""
+
+    def __init__(self) -> None:
+        self.pointer = 0
+
+    def written(self, data: bytes) -> Write:
+        """The write the host made; ProtocolError when it names no register."""
+        if not data:
+            raise ProtocolError("an empty write names no register")
+        _check_register(data[0], ProtocolError)
+        self.pointer = (data[0] + len(data) - 1) % REGISTER_COUNT
+        return Write(data[0], bytes(data[1:]))
+
+    def read(self, count: int) -> Read:
+        """The read the host makes of ``count`` bytes; the address moves past them."""
+        request = Read(self.pointer, count)
+        self.pointer = (self.pointer + count) % REGISTER_COUNT
+        return request
+
+    @staticmethod
+    def reply(registers: bytes | bytearray, request: Read) -> bytes:
+        return bytes(registers[request.register:request.register + request.count])
 
 
 def _lookup(table: dict, value: float, what: str) -> int:

@@ -14,7 +14,8 @@ from typing import Any
 
 from deltoctl import registry
 from deltoctl.core.driver import Block, Driver
-from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, ProtocolError
+from deltoctl.core.exchange import ExchangePolicy
+from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, NoAnswer, ProtocolError
 from deltoctl.families.lsm6ds3 import codec
 from deltoctl.transport.i2c import I2CBus  # what every I2C link gives
 
@@ -23,6 +24,33 @@ ZERO_RATE = math.radians(codec.ZERO_RATE_DPS)  # rad/s: the gyroscope at rest, p
 # no orientation estimate: the MH5 reports a fixed quaternion
 ORIENTATION = {"orientation.x": 0.0, "orientation.y": 0.0, "orientation.z": 0.0,
                "orientation.w": 1.0}
+POLICY = ExchangePolicy(tries=3, pause=50e-6)  # as every I2C device of the MH5
+
+
+def exchange(bus: I2CBus, address: int, request: codec.Read | codec.Write) -> bytes:
+    """One transaction through the host role, under the exchange policy: the bus counts it
+    once in ``packets`` and each failed try in ``errors``; what a read brought back."""
+    data, length = codec.Host.encode(request)
+
+    def attempt() -> bytes:
+        if length:
+            return bus.transfer(address, data, length)
+        bus.write(address, data)
+        return b""
+
+    failed: dict[str, int] = {}
+    bus.stats["packets"] += 1
+    try:
+        reply = POLICY.run(attempt, f"{address:#04x}", failed)
+    except NoAnswer:
+        raise NoAnswer(f"no answer from {address:#04x} on {bus.url} ({POLICY.tries} tries)",
+                       hint="check the device's power, wiring and address") from None
+    except DeviceError:
+        failed["errors"] = failed.get("errors", 0) + 1
+        raise
+    finally:
+        bus.stats["errors"] += failed.get("errors", 0)
+    return codec.Host.decode(request, reply)
 
 
 class Lsm6ds3Driver(Driver):
@@ -51,16 +79,23 @@ class Lsm6ds3Driver(Driver):
         self.chip = ""
         self.calibration = codec.Calibration()
         self.calibration_source: dict[str, str] | None = None  # the file applied, and its hash
-        self._request = bytes([codec.OUT_TEMP_L])
+        self._outputs = codec.Read(codec.OUT_TEMP_L, codec.BLOCK)
 
     @property
     def stats(self) -> dict[str, int]:
         bus = self.bus.stats if self.bus else {"packets": 0, "errors": 0}
         return {"packets": bus["packets"], "errors": bus["errors"], "reconnects": 0}
 
-    def _register(self, register: int) -> int:
+    def _read(self, register: int, count: int = 1) -> bytes:
         assert self.bus is not None
-        return self.bus.transfer(self.address, bytes([register]), 1)[0]
+        return exchange(self.bus, self.address, codec.Read(register, count))
+
+    def _register(self, register: int) -> int:
+        return self._read(register)[0]
+
+    def _write(self, register: int, value: int) -> None:
+        assert self.bus is not None
+        exchange(self.bus, self.address, codec.Write(register, bytes([value])))
 
     def configure(self) -> None:
         self.bus = registry.open_link(self.url, self.block.links)  # by its scheme
@@ -71,11 +106,10 @@ class Lsm6ds3Driver(Driver):
             raise DeviceError(f"{self.sensor.name} at {self.address:#04x} on {self.url}: "
                               f"{exc.message}", hint="check the address and the part") from None
         ctrl1, ctrl2 = self.settings
-        self.bus.write(self.address, bytes([codec.CTRL1_XL, ctrl1]))
-        self.bus.write(self.address, bytes([codec.CTRL2_G, ctrl2]))
-        ctrl4 = self._register(codec.CTRL4_C)
-        self.bus.write(self.address, bytes([codec.CTRL4_C, ctrl4 | codec.BW_SCAL_ODR]))
-        self.bus.write(self.address, bytes([codec.ORIENT_CFG_G, 0]))  # remap in software
+        self._write(codec.CTRL1_XL, ctrl1)
+        self._write(codec.CTRL2_G, ctrl2)
+        self._write(codec.CTRL4_C, self._register(codec.CTRL4_C) | codec.BW_SCAL_ODR)
+        self._write(codec.ORIENT_CFG_G, 0)  # remap in software
         self._load_calibration()
         self.connected = True
 
@@ -103,7 +137,7 @@ class Lsm6ds3Driver(Driver):
     def _sample(self) -> tuple[float, tuple, tuple]:
         """Temperature, angular velocity and acceleration, neither calibrated nor filtered."""
         assert self.bus is not None
-        block = self.bus.transfer(self.address, self._request, codec.BLOCK)
+        block = exchange(self.bus, self.address, self._outputs)
         return codec.decode(block, self.accel, self.gyro)
 
     def sample(self, calibrated: bool = True) -> tuple[tuple, tuple]:
@@ -155,7 +189,6 @@ class Lsm6ds3Driver(Driver):
     # -- the built-in self-test ------------------------------------------------------------------
     def _average(self, register: int, ready: int) -> tuple[float, ...]:
         """The mean raw X/Y/Z of SELF_TEST_SAMPLES new samples, one discarded first."""
-        assert self.bus is not None
         total = [0.0, 0.0, 0.0]
         for i in range(codec.SELF_TEST_SAMPLES + 1):
             for _ in range(100):  # at 52 Hz a sample is ready within 20 ms
@@ -164,7 +197,7 @@ class Lsm6ds3Driver(Driver):
                 time.sleep(0.002)
             else:
                 raise DeviceError(f"{self.sensor.name}: no new sample during the self-test")
-            xyz = codec.raw_axes(self.bus.transfer(self.address, bytes([register]), 6))
+            xyz = codec.raw_axes(self._read(register, codec.RAW_AXES.size))
             if i:
                 total = [t + v for t, v in zip(total, xyz)]
         return tuple(t / codec.SELF_TEST_SAMPLES for t in total)
@@ -172,14 +205,13 @@ class Lsm6ds3Driver(Driver):
     def _self_test_one(self, ctrl: int, setting: int, output: int, ready: int, on: int,
                        waits: tuple[float, float]) -> tuple[float, ...]:
         """|output change| per chip axis in LSB when the self-test bits ``on`` are set."""
-        assert self.bus is not None
-        self.bus.write(self.address, bytes([ctrl, setting]))
+        self._write(ctrl, setting)
         time.sleep(waits[0])
         off = self._average(output, ready)
-        self.bus.write(self.address, bytes([codec.CTRL5_C, on]))
+        self._write(codec.CTRL5_C, on)
         time.sleep(waits[1])
         on_values = self._average(output, ready)
-        self.bus.write(self.address, bytes([codec.CTRL5_C, 0]))
+        self._write(codec.CTRL5_C, 0)
         return tuple(abs(a - b) for a, b in zip(on_values, off))
 
     def self_test(self) -> dict[str, Any]:
@@ -197,7 +229,7 @@ class Lsm6ds3Driver(Driver):
                 codec.GDA, codec.ST_G_POSITIVE, (wait["gyro"], wait["gyro_on"]))
         finally:
             for register, value in saved.items():
-                self.bus.write(self.address, bytes([register, value]))
+                self._write(register, value)
         mg = codec.accel_scale(codec.SELF_TEST_ACCEL[1]) / codec.G * 1000.0
         dps = codec.MDPS_PER_LSB_125 * codec.SELF_TEST_GYRO[1] / 125 / 1000.0
         return {"sensor": self.sensor.name, "chip": self.chip,
@@ -274,7 +306,7 @@ class Lsm6ds3Driver(Driver):
                 writes.append((register, name, value))
         writes.sort()
         for register, _, value in writes:
-            self.bus.write(self.address, bytes([register, value]))
+            self._write(register, value)
         return {self.sensor.name: {name: self._register(register)
                                    for register, name, _ in writes}} if writes else {}
 

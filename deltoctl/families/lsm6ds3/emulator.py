@@ -7,14 +7,16 @@ standard input (``face -x``, ``tilt 10 0 0``, ``rate 0 0 90``, ``faces +z:2,-z:2
 
 from __future__ import annotations
 
+import errno
 import math
+import os
 import random
 import time
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from deltoctl.core.serving import ServeContext
-from deltoctl.errors import InvalidInput
+from deltoctl.errors import InvalidInput, ProtocolError
 from deltoctl.families.lsm6ds3 import FAMILY, codec
 
 if TYPE_CHECKING:
@@ -31,9 +33,9 @@ UP = {"+z": (0.0, 0.0), "-z": (180.0, 0.0), "+y": (90.0, 0.0), "-y": (-90.0, 0.0
 
 class Lsm6ds3Chip:
     def __init__(self, who_am_i: int = 0x6A, temperature: float = 31.0) -> None:
-        self.registers = bytearray(128)
+        self.registers = bytearray(codec.REGISTER_COUNT)
         self.registers[codec.WHO_AM_I] = who_am_i
-        self.pointer = 0
+        self.device = codec.Device()  # the register address a read starts from
         self.temperature = temperature
         self.roll = self.pitch = self.yaw = 0.0  # rad: the ROS frame against the world
         self.rates = (0.0, 0.0, 0.0)  # rad/s in the ROS frame
@@ -106,23 +108,26 @@ class Lsm6ds3Chip:
         return ((force[0] - da, force[1] + da, force[2] - da),
                 (rates[0] - dg, rates[1] + dg, rates[2] - dg))
 
+    # -- the I2C side: writes and reads through the device role of the codec ------------------
     def write(self, data: bytes) -> None:
+        """A register selected, and the values after it stored (a NACK for no register)."""
         if not data:
             return
-        self.pointer = data[0]
-        for value in data[1:]:
-            if self.pointer != codec.WHO_AM_I:  # read-only
-                self.registers[self.pointer] = value
-            self.pointer = (self.pointer + 1) % len(self.registers)
+        try:
+            request = self.device.written(data)
+        except ProtocolError:
+            raise OSError(errno.EREMOTEIO, os.strerror(errno.EREMOTEIO)) from None
+        for register, value in request.cells():
+            self.registers[register] = value
 
     def read(self, length: int) -> bytes:
-        if self.pointer <= codec.OUTX_L_XL + 5 and self.pointer + length > codec.OUT_TEMP_L:
+        request = self.device.read(length)
+        start = request.register
+        if start <= codec.OUTX_L_XL + 5 and start + length > codec.OUT_TEMP_L:
             self._sample()
-        if self.pointer == codec.STATUS_REG:  # a new sample at every read
+        if start == codec.STATUS_REG:  # a new sample at every read
             self.registers[codec.STATUS_REG] = codec.XLDA | codec.GDA
-        start = self.pointer
-        self.pointer = (start + length) % len(self.registers)
-        return bytes(self.registers[start:start + length])
+        return self.device.reply(self.registers, request)
 
 
 def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
