@@ -114,7 +114,7 @@ def _name_frames(profile: Profile, hw: Hardware, family: Family, url: str) -> No
 def _with_scheme(url: str, hw: Hardware, family: Family) -> str:
     """A target as given, when it has a scheme; one without is an error that suggests the
     URL of the block's family's transport (``/dev/ttyUSB0`` → ``serial:///dev/ttyUSB0``)."""
-    if "://" in url:
+    if "://" in url or any(url.startswith(f"{s}:") for s in family.schemes):  # usb:VID:PID
         return url
     from deltoctl.transport import url_hint
 
