@@ -17,8 +17,9 @@ EXIT_CODES = (
     (USAGE, "usage error or invalid input (bad profile, argument or file)"),
     (WARNINGS, "finished with warnings (reconnects, data gaps, a model mismatch you allowed)"),
     (UNREACHABLE, "device unreachable"),
-    (REFUSED, "refused for safety (limit, not homed, no confirmation)"),
-    (INTERRUPTED, "interrupted (Ctrl-C)"),
+    (REFUSED, "refused for safety (limit, not homed, no confirmation: a no, or no terminal "
+              "and no --yes)"),
+    (INTERRUPTED, "interrupted (Ctrl-C, at a confirmation question too)"),
 )
 
 

@@ -351,6 +351,22 @@ def for_plugin(plugin: str) -> str | None:
     return next((f.name for f in families().values() if plugin in f.plugins), None)
 
 
+# families in packages of their own, only to say which package to install when a profile
+# needs one this computer lacks: package → (family, its plugins' prefix, its URL schemes)
+PACKAGES = {"deltoctl-canopen": ("canopen", "canopen_ros2_control/", ("can",))}
+
+
+def install_hint(family: str | None = None, plugin: str = "", scheme: str = "") -> str:
+    """``; pip install deltoctl-canopen provides it`` when a known package provides the
+    family, the plugin or the URL scheme (not installed here), else ``""``."""
+    for package, (name, prefix, schemes) in PACKAGES.items():
+        if (family == name or (plugin and plugin.startswith(prefix))
+                or scheme in schemes) and name not in families():
+            return (f"; the {name} family (plugin {prefix}…) comes with the package {package}: "
+                    f"pip install {package} (its source: plugins/{package})")
+    return ""
+
+
 def of_block(family_name: str | None, plugin: str) -> Family | None:
     """A block's family: the one it names (or its profile names), else its plugin's."""
     return get(family_name or for_plugin(plugin))

@@ -47,3 +47,4 @@ def did_you_mean(typed: str, names: Iterable[str], n: int = 4) -> str:
     """`` (did you mean a, b?)`` to append to a message, or ''."""
     close = close_matches(typed, names, n)
     return f" (did you mean {', '.join(close)}?)" if close else ""
+

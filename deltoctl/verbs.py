@@ -27,15 +27,16 @@ class Verb:
     too) → the effect of the command when it is given. (A plain class: the table is read at
     every start-up.)"""
 
-    __slots__ = ("effect", "example", "module", "remote", "subs", "when")
+    __slots__ = ("effect", "example", "module", "remote", "stage", "subs", "when")
 
     def __init__(self, effect: str, example: str = "", module: str = "", remote: bool = True,
                  subs: Mapping[str, Verb] | None = None,
-                 when: Mapping[tuple[str, ...], str] | None = None) -> None:
+                 when: Mapping[tuple[str, ...], str] | None = None, stage: str = "") -> None:
         self.effect = effect
         self.example = example
         self.module = module  # top-level verbs: the deltoctl.cli module whose register(app) adds it
         self.remote = remote
+        self.stage = stage  # top-level verbs: one of STAGES, the panel of the root's help
         self.subs: Mapping[str, Verb] = subs or {}
         self.when: Mapping[tuple[str, ...], str] = when or {}
 
@@ -52,17 +53,28 @@ class Verb:
 
 YES = ("--yes", "-y")  # the global option that confirms motion without asking
 
+# the stages of a bring-up, in the order the root's help shows their verbs
+LIFECYCLE, DATA, CONFIGURATION, TOOLS, REMOTE = (
+    "lifecycle", "data", "configuration", "tools", "remote")
+STAGES = (LIFECYCLE, DATA, CONFIGURATION, TOOLS, REMOTE)
+TITLES = {LIFECYCLE: "Lifecycle: reach, identify, move and actuate a device",
+          DATA: "Data: stream, record, replay and read recordings",
+          CONFIGURATION: "Configuration: profiles, device settings and registers",
+          TOOLS: "Tools", REMOTE: "Remote: robots over Zenoh"}
+
 
 TABLE: dict[str, Verb] = {
-    "config": Verb(READS, "deltoctl -p mh5 config snapshot", "config_cmd", subs={
+    "config": Verb(READS, "deltoctl -p mh5 config snapshot", "config_cmd", stage=CONFIGURATION,
+                   subs={
         "snapshot": Verb(READS, "deltoctl -p mh5 config snapshot -o mh5.yaml"),
         "diff": Verb(READS, "deltoctl -p mh5 config diff mh5.yaml"),
         "restore": Verb(ACTUATES, "deltoctl -p mh5 config restore mh5.yaml --allow torque-off"),
     }),
-    "info": Verb(READS, "deltoctl info run.mcap --json", "data_cmd"),
+    "info": Verb(READS, "deltoctl info run.mcap --json", "data_cmd", stage=DATA),
     "plot": Verb(READS, "deltoctl plot run.mcap 'rj_dg_1_*/position' --out plot.png",
-                 "data_cmd"),
-    "profile": Verb(READS, "deltoctl profile show dg-5f-right rj_dg_1_2", "profile_cmd", subs={
+                 "data_cmd", stage=DATA),
+    "profile": Verb(READS, "deltoctl profile show dg-5f-right rj_dg_1_2", "profile_cmd",
+                    stage=CONFIGURATION, subs={
         "list": Verb(READS, "deltoctl profile list --json"),
         "show": Verb(READS, "deltoctl profile show dg-5f-right rj_dg_1_2"),
         "validate": Verb(READS, "deltoctl profile validate my_robot.yaml --strict"),
@@ -71,54 +83,62 @@ TABLE: dict[str, Verb] = {
         "tests": Verb(READS, "deltoctl profile tests mh5 -o tests/"),
     }),
     "connect": Verb(READS, "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 connect",
-                    "device_cmd"),
-    "identify": Verb(READS, "deltoctl -p dg-5f-right --sim identify --json", "device_cmd"),
-    "detect": Verb(READS, "deltoctl -p mh5 --hardware upper_body detect", "device_cmd"),
-    "home": Verb(MOVES, "deltoctl -p bioscara-arm home -j j1 --yes", "motion_cmd"),
-    "jog": Verb(MOVES, "deltoctl -p dg-5f-right jog rj_dg_2_2 5deg -y", "motion_cmd"),
-    "calibrate": Verb(READS, "deltoctl -p dg-5f-right calibrate ft", "calibrate_cmd", subs={
+                    "device_cmd", stage=LIFECYCLE),
+    "identify": Verb(READS, "deltoctl -p dg-5f-right --sim identify --json", "device_cmd",
+                     stage=LIFECYCLE),
+    "detect": Verb(READS, "deltoctl -p mh5 --hardware upper_body detect", "device_cmd",
+                   stage=LIFECYCLE),
+    "home": Verb(MOVES, "deltoctl -p bioscara-arm home -j j1 --yes", "motion_cmd", stage=LIFECYCLE),
+    "jog": Verb(MOVES, "deltoctl -p dg-5f-right jog rj_dg_2_2 5deg -y", "motion_cmd",
+                stage=LIFECYCLE),
+    "calibrate": Verb(READS, "deltoctl -p dg-5f-right calibrate ft", "calibrate_cmd",
+                      stage=LIFECYCLE, subs={
         "ft": Verb(ACTUATES, "deltoctl -p dg-5f-right calibrate ft --samples 200"),
         "imu": Verb(ACTUATES, "deltoctl -p mh5 calibrate imu --tumble"),  # its self-test
     }),
     "gpio": Verb(READS, "deltoctl -p rrbot-gpio gpio set flange_vacuum/vacuum on", "device_cmd",
-                 subs={
+                 stage=LIFECYCLE, subs={
         "get": Verb(READS, "deltoctl -p dg-5f-right gpio get --json"),
         "set": Verb(ACTUATES, "deltoctl -p rrbot-gpio gpio set flange_vacuum/vacuum on"),
     }),
     "stream": Verb(READS, "deltoctl -p dg-5f-right stream --rate 50 -i 'rj_dg_1_*/position'",
-                   "device_cmd"),
+                   "device_cmd", stage=DATA),
     "record": Verb(READS, "deltoctl -p mh5 record run.mcap --duration 60 --foxglove",
-                   "record_cmd"),
-    # with --device it moves the robot along the recording
-    "replay": Verb(MOVES, "deltoctl replay fault.mcap --tolerance 1deg --json", "replay_cmd"),
+                   "record_cmd", stage=DATA),
+    # on the profile's simulators; with --device it moves the robot along the recording
+    "replay": Verb(READS, "deltoctl replay fault.mcap --tolerance 1deg --json", "replay_cmd",
+                   stage=DATA, when={("--device",): MOVES}),
     # the acceptance sequence: with --yes its motion checks move the joints
     "report": Verb(READS, "deltoctl -p dg-5f-right report -o acceptance.html --record 5",
-                   "report_cmd", when={YES: MOVES}),
-    "torque": Verb(ACTUATES, "deltoctl -p mh5 torque off left_arm", "servo_cmd"),
-    "reboot": Verb(ACTUATES, "deltoctl -p mh5 reboot head_y", "servo_cmd"),
+                   "report_cmd", stage=LIFECYCLE, when={YES: MOVES}),
+    "torque": Verb(ACTUATES, "deltoctl -p mh5 torque off left_arm", "servo_cmd",
+                   stage=LIFECYCLE),
+    "reboot": Verb(ACTUATES, "deltoctl -p mh5 reboot head_y", "servo_cmd", stage=LIFECYCLE),
     "register": Verb(READS, "deltoctl -p mh5 register get head_y present_temperature",
-                     "servo_cmd", subs={
+                     "servo_cmd", stage=CONFIGURATION, subs={
         "get": Verb(READS, "deltoctl -p mh5 register get head_y present_temperature"),
         "set": Verb(ACTUATES, "deltoctl -p mh5 register set head_y return_delay_time 0"),
     }),
     # the agent's own verbs, and a benchmark that would load the robot's computer while it
     # moves, do not run remotely
-    "sim": Verb(READS, "deltoctl sim serve mh5 --missing head_y", "sim_cmd", remote=False,
+    "sim": Verb(READS, "deltoctl sim serve mh5 --missing head_y", "sim_cmd", stage=TOOLS,
+                remote=False,
                 subs={"serve": Verb(READS, "deltoctl sim serve dg-5f-right --firmware 2.7")}),
-    "bench": Verb(READS, "deltoctl bench loop --duration 2", "bench_cmd", remote=False, subs={
+    "bench": Verb(READS, "deltoctl bench loop --duration 2", "bench_cmd", stage=TOOLS,
+                  remote=False, subs={
         "loop": Verb(READS), "dynamixel": Verb(READS), "i2c": Verb(READS),
     }),
-    "ports": Verb(READS, "deltoctl ports --json", "ports_cmd"),
+    "ports": Verb(READS, "deltoctl ports --json", "ports_cmd", stage=TOOLS),
     "doctor": Verb(READS, "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 doctor",
-                   "doctor_cmd"),
+                   "doctor_cmd", stage=TOOLS),
     "completion": Verb(READS, "deltoctl completion bash > "
                               "~/.local/share/bash-completion/completions/deltoctl",
-                       "completion_cmd", remote=False),
-    "help": Verb(READS, "deltoctl help exit-codes", "help_cmd"),
+                       "completion_cmd", stage=TOOLS, remote=False),
+    "help": Verb(READS, "deltoctl help exit-codes", "help_cmd", stage=TOOLS),
     "agent": Verb(READS, "deltoctl -p dg-5f-right agent --name hand-1 --sim", "agent_cmd",
-                  remote=False),
+                  stage=REMOTE, remote=False),
     "fleet": Verb(READS, "deltoctl fleet run --robots 'hand-*' identify", "fleet_cmd",
-                  remote=False, subs={
+                  stage=REMOTE, remote=False, subs={
         "list": Verb(READS, "deltoctl --zenoh-config fleet.json5 fleet list --json"),
         "run": Verb(MOVES, "deltoctl fleet run --robots 'hand-*' identify --json"),
     }),
@@ -209,6 +229,16 @@ def walk() -> list[tuple[str, Verb]]:
 def modules() -> dict[str, str]:
     """verb → the module of deltoctl.cli that adds it."""
     return {name: entry.module for name, entry in TABLE.items()}
+
+
+def by_stage() -> list[str]:
+    """The verbs in the order of their stages of a bring-up (STAGES), table order within
+    one; a verb of no stage last."""
+    def rank(name: str) -> int:
+        stage = TABLE[name].stage
+        return STAGES.index(stage) if stage in STAGES else len(STAGES)
+
+    return sorted(TABLE, key=rank)
 
 
 def examples() -> dict[str, str]:

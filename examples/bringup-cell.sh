@@ -22,7 +22,7 @@ dc detect                           # the I2C grid; the gripper's sensors and GP
 dc home --yes                       # the arm into its hard stops, then the gripper to its pose
 dc jog j4 -0.3 --yes                # an arm joint (I2C) ...
 dc jog j_dg_1_2 10deg --yes         # ... and a gripper joint (TCP), found by name
-dc gpio set gpio/output_2 on        # grasp
+dc gpio set gpio/output_2 on --yes  # grasp
 dc stream --duration 0.2 --interfaces '*/connection_status' | tail -n 1
 dc record "$out/cell.mcap" --duration 1
 echo "recording in $out"

@@ -22,7 +22,7 @@ for bus, url in json.load(open(sys.argv[1]))["buses"].items(): print(f"-t\n{bus}
 "$deltoctl" "${targets[@]}" register set head_y return_delay_time 0 --yes
 "$deltoctl" "${targets[@]}" jog head_y 15deg --velocity 30deg --yes   # torque comes on
 "$deltoctl" "${targets[@]}" home --yes
-"$deltoctl" "${targets[@]}" torque off legs
+"$deltoctl" "${targets[@]}" torque off legs --yes
 "$deltoctl" "${targets[@]}" stream --duration 0.2 --interfaces 'imu/linear_acceleration.*' | tail -n 1
 "$deltoctl" "${targets[@]}" record "$out/mh5.mcap" --duration 1.5
 echo "recording in $out"

@@ -21,8 +21,8 @@ export DELTOCTL_TARGET
 "$deltoctl" home --yes
 "$deltoctl" jog rj_dg_2_2 15deg --yes
 "$deltoctl" jog rj_dg_2_2 -10deg --yes
-"$deltoctl" calibrate ft --output-dir "$out"
-"$deltoctl" gpio set output_2 on
+"$deltoctl" calibrate ft --output-dir "$out" --yes
+"$deltoctl" gpio set output_2 on --yes
 "$deltoctl" gpio get
 "$deltoctl" stream --duration 0.2 --interfaces 'rj_dg_2_*/position' | tail -n 1
 "$deltoctl" record "$out/dg5f.mcap" --duration 2

@@ -87,6 +87,14 @@ def check_tare(samples: int, force_tolerance: float, torque_tolerance: float,
         raise InvalidInput(f"--output-dir {output_dir} is not a directory")
 
 
+def tare_description(system: System) -> str:
+    """What a tare is about to do, for the caller's confirmation."""
+    blocks = ft_blocks(system)
+    return (f"tare the F/T sensors {', '.join(s for names in blocks.values() for s in names)} "
+            f"of {', '.join(blocks)}: each one's zero becomes what it reads now, so nothing "
+            "may touch them")
+
+
 def tare_ft(system: System, samples: int = 50, force_tolerance: float = 0.3,
             torque_tolerance: float = 0.03, output_dir: Path | None = None) -> dict[str, Any]:
     """Tare every F/T sensor and check the residual over ``samples``; with ``output_dir``,

@@ -42,6 +42,14 @@ def imu_members(system: System) -> list[Member]:
     return members
 
 
+def self_test_description(system: System, tumble: bool) -> str:
+    """What the calibration is about to do, for the caller's confirmation."""
+    sensors = ", ".join(f"{m.driver.sensor.name} of {m.name}" for m in imu_members(system))
+    return (f"run the built-in self-test of {sensors}: the chip drives its own test "
+            "excitation, then its settings are restored"
+            + ("; then the six-position tumble, by hand" if tumble else ""))
+
+
 def _mean_std(samples: list[tuple]) -> tuple[list[float], list[float]]:
     columns = list(zip(*samples))
     return ([statistics.fmean(c) for c in columns],

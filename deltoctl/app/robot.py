@@ -127,14 +127,16 @@ def target_names(profile: Profile) -> list[str]:
     return [*_groups(joints), "all", *(j.name for j in joints)]
 
 
-def select_joints(profile: Profile, target: str, capability: str) -> list[str]:
-    """The joints of the blocks that offer ``capability`` named by a joint, a group (the
-    joints' ``group`` param, and arms/legs) or ``all``."""
+def select_joints(profile: Profile, target: str, capability: str,
+                  hardware: Sequence[str] = ()) -> list[str]:
+    """The joints of the blocks that offer ``capability`` (of ``hardware`` only, when given)
+    named by a joint, a group (the joints' ``group`` param, and arms/legs) or ``all``."""
     from deltoctl import registry
 
     def offers(hw: Any) -> bool:
         family = registry.of_block(profile.family_of(hw), hw.plugin)
-        return family is not None and capability in family.capabilities
+        return family is not None and capability in family.capabilities and (
+            not hardware or hw.name in hardware)
 
     joints = [j for hw in profile.hardware if offers(hw) for j in hw.joints]
     if not joints:
@@ -152,6 +154,22 @@ def select_joints(profile: Profile, target: str, capability: str) -> list[str]:
         raise InvalidInput(f"{target!r} is neither a joint nor a group of {profile.name}"
                            + (near or listed))
     return chosen
+
+
+def joints_named(target: str, joints: Sequence[str]) -> str:
+    """``5 joint(s) of left_arm (l_sho_p, …)``, ``head_y``: what a verb acts on, in words."""
+    if [target] == list(joints):
+        return target
+    shown = ", ".join(joints[:6]) + (f" and {len(joints) - 6} more" if len(joints) > 6 else "")
+    which = "" if target == "all" else f" of {target}"
+    return f"{len(joints)} joint(s){which} ({shown})"
+
+
+def servo_named(system: System, joint: str) -> str:
+    """``head_y (ID 52)``: a joint and the address of its servo on the bus."""
+    hw = system.member(joint).hw
+    address = next((j.address for j in hw.joints if j.name == joint), None)
+    return joint if address is None else f"{joint} (ID {address})"
 
 
 def _cannot(system: System, capability: str, what: str) -> None:

@@ -6,6 +6,7 @@ from typing import Annotated, Any
 
 import typer
 
+from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import Options, options, parse_pairs
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import emit_json, info, table
@@ -48,6 +49,7 @@ def calibrate_ft(
     calibration-<model>-<address>-<time>.json. --verify reports each check (id, value,
     limit, verdict); --watch S the drift of each axis over S seconds; --mass KG a known
     mass's weight."""
+    from deltoctl.app import calibrate
     from deltoctl.app.calibrate import check_tare, check_verify, fail_ft, verify_ft
 
     opts = options(ctx)
@@ -56,6 +58,7 @@ def calibrate_ft(
     check_verify(mass, watch, timeout, drift)
     verify = verify or mass is not None or watch is not None
     with open_robot(opts, allow_model_mismatch) as robot:
+        confirm(ctx, calibrate.tare_description(robot.system))
         result = robot.calibrate_ft(samples, force_tolerance, torque_tolerance, output_dir)
         if verify:
             result["checks"] = verify_ft(robot.system, result, mass, sensor, watch, _ask,
@@ -115,12 +118,13 @@ def calibrate_imu(
     calibration-<chip>-<address>-<time>.json — name it in the sensor's `calibration` param
     and stream and record apply it. Exit 1 when a check fails."""
     from deltoctl.app.imu_calibration import calibrate_imu as run
-    from deltoctl.app.imu_calibration import check_options, fail_imu
+    from deltoctl.app.imu_calibration import check_options, fail_imu, self_test_description
     from deltoctl.render.checks import check_rows
 
     opts = options(ctx)
     check_options(samples, timeout, output_dir)
     with open_robot(opts, allow_model_mismatch) as robot:
+        confirm(ctx, self_test_description(robot.system, tumble))
         result = run(robot.system, samples, _ask if tumble else None, timeout, output_dir)
     blocks = result["blocks"]
     if opts.json:

@@ -150,8 +150,8 @@ def restore(
     verification fails, 5 when refused for safety (EEPROM with torque on, a safety setting
     not named by --allow), 3 when some items could not be written (read-only)."""
     from deltoctl.app import config
+    from deltoctl.cli.confirm import confirm
     from deltoctl.cli.device_cmd import open_robot
-    from deltoctl.cli.motion_cmd import confirm_motion
 
     opts = options(ctx)
     permitted = frozenset(config.permission(a) for a in allow or ())
@@ -164,7 +164,7 @@ def restore(
             _report(opts, snapshot_file, rows, notes)
             raise config.refusal(refused, permitted)
         if writes:
-            confirm_motion(opts, config.description(writes))
+            confirm(ctx, config.description(writes))
             config.write_changes(robot.system, rows, permitted)
         notes = robot.warnings() + notes
     _report(opts, snapshot_file, rows, notes)

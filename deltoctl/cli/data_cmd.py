@@ -48,7 +48,7 @@ def plot(
         "--end", metavar="S", help="Up to S seconds after the recording's start.")] = None,
 ) -> None:
     """Interfaces over time: in the terminal (plotext), or as a figure with --out
-    (matplotlib). Reads only the topics that carry them. Needs pip install 'deltoctl[plot]'."""
+    (matplotlib). Reads only the topics that carry them. Needs pip install 'deltoctl\\[plot]'."""
     from deltoctl.app.plot import DEFAULT_PLOT, png_plot, read_plot, terminal_plot
 
     opts = options(ctx)

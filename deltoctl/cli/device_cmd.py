@@ -8,6 +8,7 @@ import typer
 
 from deltoctl.app.robot import check_loop
 from deltoctl.app.sinks import LinkWatch
+from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.output import (
     emit_json,
@@ -188,11 +189,13 @@ def gpio_set(
     if not math.isfinite(number):
         raise InvalidInput(f"value must be finite, got {value!r}")
     with open_robot(opts) as robot:
+        full = robot.gpio_output(name)
+        confirm(ctx, f"set {full} of {robot.system.member(full).name} to {value}")
         after = robot.set_gpio(name, number)
     if opts.json:
         emit_json(after)
     else:
-        say(f"{robot.gpio_output(name)} = {number:g}")
+        say(f"{full} = {number:g}")
     finish(robot.system)
 
 

@@ -8,6 +8,7 @@ from typing import Annotated, Any, NoReturn
 
 import typer
 
+from deltoctl.cli.confirm import confirmed_remotely
 from deltoctl.cli.context import Options, options
 from deltoctl.errors import DeltoctlError, InvalidInput
 
@@ -22,19 +23,6 @@ def register(root: typer.Typer) -> None:
 
 
 # -- --robot ---------------------------------------------------------------------------------
-
-def _asked(opts: Options, what: str) -> bool:
-    """Whether motion was confirmed on this terminal (``WHAT. Move?``); False without asking
-    with --yes (the command line carries it) or without a terminal (the robot refuses, exit 5,
-    as a local run would); a no refuses it here."""
-    if opts.yes or not sys.stdin.isatty():
-        return False
-    if not typer.confirm(f"{what}. Move?", default=False, err=True):
-        from deltoctl.errors import Refused
-
-        raise Refused("not confirmed; nothing moved")
-    return True
-
 
 def _write_out(data: bytes) -> None:
     buffer = getattr(sys.stdout, "buffer", None)
@@ -57,7 +45,7 @@ def forward(ctx: typer.Context) -> NoReturn:
     robot) and exit code, as if run there."""
     from deltoctl.cli.main import ARGV
     from deltoctl.cli.output import stdout_is_terminal
-    from deltoctl.fleet import MOTION, check_robot
+    from deltoctl.fleet import ACTUATING, check_robot
     from deltoctl.fleet.client import ErrorLines, RemoteCall, caller_session
     from deltoctl.fleet.run import strip_remote, verb_of
     from deltoctl.render.stream import live_lines
@@ -70,7 +58,7 @@ def forward(ctx: typer.Context) -> NoReturn:
         verb = verb_of(_record_file_dropped(argv), robot)
         if verb == "record" and not {"--help", "-h"} & set(argv):
             raise typer.Exit(_remote_record(opts, robot, argv, errors.feed))
-        if verb in MOTION and _asked(opts, f"robot {robot}: {' '.join(argv)}"):
+        if verb in ACTUATING and confirmed_remotely(opts, f"robot {robot}: {' '.join(argv)}"):
             argv = ["--yes", *argv]
         drawn = verb == "stream" and not opts.json and not {"-h", "--help"} & set(argv)
         with caller_session(opts.zenoh_config, f"robot {robot}") as session, live_lines(
@@ -268,8 +256,8 @@ def run_cmd(
         chosen = choose(agents(session, wait=wait), robots)
         if one_verb:  # checked once the robots are known, to name them
             verb_of(lines[0], ", ".join(sorted(chosen)))
-        lines = confirmed(lines, lambda: _asked(
-            opts, f"motion on {len(chosen)} robots ({', '.join(sorted(chosen))})"))
+        lines = confirmed(lines, lambda: confirmed_remotely(
+            opts, f"actuate or move {len(chosen)} robots ({', '.join(sorted(chosen))})"))
         report = len(lines) == 1 and verb_of(lines[0]) == "report"
         if report and "--json" not in lines[0]:  # each robot's JSON, gathered below
             lines = [[*lines[0], "--json"]]

@@ -36,10 +36,15 @@ def _documented(param: Any) -> Any:
 
 
 def teach_verbs(root: Any, loaded: dict[str, Any]) -> None:
-    """Teach the verbs just loaded by the root group."""
+    """Teach the verbs just loaded by the root group: their panel (their stage) and line in
+    its help."""
+    from deltoctl.render.manpages import summary
+
     globals_ = [_documented(p) for p in root.params if p.name not in _NOT_GLOBAL]
     for name, command in loaded.items():
         teach(command, name, globals_)
+        command.rich_help_panel = verbs.TITLES.get(verbs.TABLE[name].stage)
+        command.short_help = summary(command.help)
 
 
 def teach(command: Any, path: str, globals_: list[Any]) -> None:

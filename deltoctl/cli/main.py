@@ -37,7 +37,7 @@ class DeltoctlGroup(TyperGroup):
     into one line (one JSON object with --json) and its exit code."""
 
     def list_commands(self, ctx: Any) -> list[str]:
-        return list(VERBS)
+        return verbs.by_stage()  # the root's help shows them by stage, in this order
 
     def get_command(self, ctx: Any, cmd_name: str) -> Any:
         if cmd_name not in self.commands and cmd_name in VERBS:
@@ -211,7 +211,8 @@ JsonOpt = Annotated[bool, typer.Option(
     "--json", help="Write one JSON document (NDJSON for streams) on stdout; an error is "
                    "one JSON object on stderr.")]
 YesOpt = Annotated[bool, typer.Option(
-    "--yes", "-y", help="Do not ask for confirmation before motion.")]
+    "--yes", "-y", help="Do not ask for confirmation before a command that actuates or "
+                        "moves (needed without a terminal).")]
 VerboseOpt = Annotated[int, typer.Option(
     "--verbose", "-v", count=True, metavar="", show_default=False,
     help="More diagnostics on stderr: -v each link, -vv every packet too.")]
@@ -314,7 +315,7 @@ def command_path(args: Sequence[str]) -> tuple[tuple[str, ...], frozenset[str]]:
     try:
         ctx = _command_tree().make_context("deltoctl", list(args), resilient_parsing=True)
         path: list[str] = []
-        given = set(_given(ctx))
+        given = set(given_options(ctx))
         rest = [*ctx._protected_args, *ctx.args]
         while rest and hasattr(ctx.command, "resolve_command"):
             word = rest[0]
@@ -326,7 +327,7 @@ def command_path(args: Sequence[str]) -> tuple[tuple[str, ...], frozenset[str]]:
                                    + did_you_mean(word, ctx.command.list_commands(ctx)))
             path.append(name)
             ctx = command.make_context(name, rest, parent=ctx, resilient_parsing=True)
-            given.update(_given(ctx))
+            given.update(given_options(ctx))
             rest = [*ctx._protected_args, *ctx.args]
         return tuple(path), frozenset(given)
     except click_exceptions.UsageError as exc:
@@ -335,7 +336,7 @@ def command_path(args: Sequence[str]) -> tuple[tuple[str, ...], frozenset[str]]:
         return (verbs.UNRESOLVED,), frozenset()
 
 
-def _given(ctx: Any) -> list[str]:
+def given_options(ctx: Any) -> list[str]:
     """The spellings of the options a context's command line (or environment) gave: not
     their defaults, nor a flag given as off."""
     from typer._click.core import ParameterSource

@@ -1,17 +1,17 @@
-"""Motion verbs: home and jog. Confirmation on a terminal unless --yes; refused (exit 5)
-outside limits or without confirmation; duty 0 on the way out, Ctrl-C included."""
+"""Motion verbs: home and jog. Confirmed as the verb table says (deltoctl.cli.confirm);
+refused (exit 5) outside limits or without confirmation; duty 0 on the way out, Ctrl-C
+included."""
 
 import contextlib
-import sys
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
+from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import advancing, emit_json, info, progress, say
-from deltoctl.errors import Refused
 
 VelocityOpt = Annotated[str | None, typer.Option(
     "--velocity", help="Setpoint speed: 20deg/s, 10mm/s, or a bare number in rad/s "
@@ -22,15 +22,6 @@ def register(app: typer.Typer) -> None:
     app.command("home")(home)
     # negative deltas (`jog J -5deg`) are arguments, not unknown options
     app.command("jog", context_settings={"ignore_unknown_options": True})(jog)
-
-
-def confirm_motion(opts: Options, what: str) -> None:
-    if opts.yes:
-        return
-    if not sys.stdin.isatty():
-        raise Refused(f"{what}: motion needs confirmation; pass --yes to move without asking")
-    if not typer.confirm(f"{what}. Move?", default=False, err=True):
-        raise Refused("not confirmed; nothing moved")
 
 
 def complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
@@ -65,7 +56,7 @@ def home(
     profile = opts.load_profile()
     plan = plan_home(profile, opts.hardware, joint or [])
     speed = joint_speed(profile, list(plan.targets), velocity)
-    confirm_motion(opts, plan.describe())
+    confirm(ctx, plan.describe())
     bars = _Bars(opts, plan.routine)
     with open_robot(opts, allow_model_mismatch, profile) as robot:
         try:
@@ -164,7 +155,7 @@ def jog(
         system = robot.system
         targets, moves = jog_targets(system, pairs, to)  # e.g. not homed: before asking
         system.check_move(targets, speed)  # the System's envelope, before anyone is asked
-        confirm_motion(opts, "jog " + "; ".join(moves))
+        confirm(ctx, "jog " + "; ".join(moves))
         report = _jog(opts, system, targets, speed, record)
     if opts.json:
         emit_json(report)

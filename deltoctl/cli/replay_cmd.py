@@ -65,13 +65,13 @@ def replay(
     joints go to the recorded start pose; then the commands follow, and a joint that leaves
     its limits or strays beyond --max-deviation from the recording stops every block
     (exit 5). Runs on the profile's simulators unless --device (with --yes, or confirmed on
-    a terminal): then on the device -t names, under the limits of -p PROFILE or of the
+    a terminal, --sim too): then on the device -t names, under the limits of -p PROFILE or of the
     catalog's profile of the recorded name; a recorded profile looser than that is refused
     (exit 5)."""
     import copy
 
     from deltoctl.app.replay import plan_replay, replay_report, where_to_replay
-    from deltoctl.cli.motion_cmd import confirm_motion
+    from deltoctl.cli.confirm import confirm
     from deltoctl.units import nonnegative
 
     opts = options(ctx)
@@ -88,8 +88,7 @@ def replay(
     for note in plan.notes:
         warn(note)
     on_device = device and not opts.sim
-    if on_device:
-        confirm_motion(opts, plan.describe(recording, opts.target))
+    confirm(ctx, plan.describe(recording, opts.target or ["the simulators"]))
     robot, result, stopped = _run(opts, run_opts, allow_model_mismatch, plan, recording,
                                   deviation)
     report = replay_report(recording, robot.system, plan.recorded, result, limit, on_device,

@@ -5,9 +5,10 @@ from typing import Annotated, Any
 
 import typer
 
+from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import options
 from deltoctl.cli.device_cmd import finish, open_robot
-from deltoctl.cli.motion_cmd import complete_joint, confirm_motion
+from deltoctl.cli.motion_cmd import complete_joint
 from deltoctl.cli.output import emit_json, say, table
 from deltoctl.errors import DeviceError, InvalidInput
 
@@ -79,9 +80,11 @@ def register_set(
     value: Annotated[int, typer.Argument(help="The raw value.")],
 ) -> None:
     """Write one control table item and read it back (asks first: a write can move)."""
+    from deltoctl.app.robot import servo_named
+
     opts = options(ctx)
-    confirm_motion(opts, f"write {item} = {value} to {joint}")
     with open_robot(opts) as robot:
+        confirm(ctx, f"write {item} = {value} to {servo_named(robot.system, joint)}")
         after = robot.write_register(joint, item, value)
     _report(opts, {"joint": joint, "item": item, "value": after}, f"{joint}: {item} = {after}")
     finish(robot.system)
@@ -93,14 +96,16 @@ def torque(
     target: TargetArg = "all",
 ) -> None:
     """Switch servo torque on or off for a joint or a group."""
-    from deltoctl.app.robot import select_joints
+    from deltoctl.app.robot import joints_named, select_joints
+
     opts = options(ctx)
     if state not in ("on", "off"):
         raise InvalidInput(f"state must be on or off, got {state!r}")
     profile = opts.load_profile()
-    joints = select_joints(profile, target, "torque")
-    if state == "on":
-        confirm_motion(opts, f"torque on for {len(joints)} joint(s): they hold their position")
+    joints = select_joints(profile, target, "torque", opts.hardware)
+    confirm(ctx, f"switch torque {state} for {joints_named(target, joints)}: " + (
+        "they hold their position" if state == "on"
+        else "they go limp, and an arm under gravity falls"))
     with open_robot(opts, profile=profile) as robot:
         done = robot.torque(joints, state == "on")
     _report(opts, {"torque": state, "joints": done}, f"torque {state}: {len(done)} joint(s)")
@@ -109,11 +114,13 @@ def torque(
 
 def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
     """Reboot servos (clears a shutdown after a hardware error; torque comes back off)."""
-    from deltoctl.app.robot import select_joints
+    from deltoctl.app.robot import joints_named, select_joints
 
     opts = options(ctx)
     profile = opts.load_profile()
-    joints = select_joints(profile, target, "reboot")
+    joints = select_joints(profile, target, "reboot", opts.hardware)
+    confirm(ctx, f"reboot the servos of {joints_named(target, joints)}: their torque goes off, "
+                 "an arm under gravity falls")
     with open_robot(opts, profile=profile) as robot:
         done = robot.reboot(joints)
     _report(opts, {"rebooted": done}, f"rebooted {len(done)} of {len(joints)} joint(s)")

@@ -111,6 +111,18 @@ def _name_frames(profile: Profile, hw: Hardware, family: Family, url: str) -> No
                       registry.trace_label(url))
 
 
+def _with_scheme(url: str, hw: Hardware, family: Family) -> str:
+    """A target as given, when it has a scheme; one without is an error that suggests the
+    URL of the block's family's transport (``/dev/ttyUSB0`` → ``serial:///dev/ttyUSB0``)."""
+    if "://" in url or any(url.startswith(f"{s}:") for s in family.schemes):  # usb:VID:PID
+        return url
+    from deltoctl.transport import url_hint
+
+    near = next((h for s in family.schemes if (h := url_hint(url, s))), "")
+    raise InvalidInput(f"{url!r} is not a target URL (no scheme) for {hw.name}{near}",
+                       hint="a target is a URL: " + ", ".join(f"{s}://…" for s in family.schemes))
+
+
 class System:
     """``with System(profile, targets) as system: system.read()``."""
 
@@ -135,7 +147,8 @@ class System:
             family = registry.of_block(profile.family_of(hw), hw.plugin)
             if family is None:
                 self.notes.append(f"{hw.name} left out: no driver family for plugin "
-                                  f"{hw.plugin!r} (families: {', '.join(registry.families())})")
+                                  f"{hw.plugin!r} (families: {', '.join(registry.families())})"
+                                  + registry.install_hint(plugin=hw.plugin))
                 continue
             url = self._url(hw, family, named, bare)
             block = Block(profile, hw, family, url, probe, allow_model_mismatch, self.links,
@@ -154,10 +167,9 @@ class System:
     def _url(self, hw: Hardware, family: Family, named: dict, bare: list) -> str:
         if not family.schemes:
             return ""  # no transport (a mock)
-        if hw.bus in named:
-            return str(named[hw.bus])
-        if bare:
-            return str(bare[0])
+        given = named.get(hw.bus, bare[0] if bare else None)
+        if given is not None:
+            return _with_scheme(str(given), hw, family)
         if hw.bus is None or hw.bus not in self.profile.buses:
             raise InvalidInput(f"{hw.name!r} has no bus URL: pass --target URL")
         return self.profile.buses[hw.bus]

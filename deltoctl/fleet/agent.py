@@ -259,6 +259,14 @@ def collect(proc: Any, timeout: float) -> tuple[bytes, bytes]:
     return box.get("stdout", b""), box.get("stderr", b"")
 
 
+# what makes an agent serve motion: a rehearsal on its own computer, or mutual TLS
+MOTION_HINT = ("to rehearse on this computer, start the agent with "
+               "--allow-unauthenticated-motion and loopback endpoints only (--listen "
+               "tcp/127.0.0.1:7447); over a network, give it a --zenoh-config whose every link "
+               "is mutual TLS, e.g. zenoh-agent.json5 of `deltoctl help examples` (deltoctl "
+               "help security)")
+
+
 class Agent:
     """Serves ``robot`` (profile ``spec``) on a Zenoh session opened from ``config``.
 
@@ -494,8 +502,7 @@ class Agent:
         if verb in ACTUATING and not self.motion_allowed:
             what = ("a command deltoctl cannot classify (it counts as motion)"
                     if verb == UNRESOLVED else f"'{verb}'")
-            raise Refused(f"{what} refused: {self.why_not}",
-                          "`deltoctl help security` says how")
+            raise Refused(f"{what} refused: {self.why_not}", MOTION_HINT)
         fits(self.links, argv)  # before any bookkeeping: the zygote takes it in one message
         with self.lock:
             if rid in self.running:

@@ -13,7 +13,7 @@ from collections.abc import Callable, Collection
 from typing import Any
 
 from deltoctl.errors import DeltoctlError, InvalidInput, Unreachable
-from deltoctl.fleet import MOTION
+from deltoctl.fleet import ACTUATING
 from deltoctl.verbs import Command
 
 # exit codes from best to worst: the fleet's code is the worst of its robots'
@@ -91,10 +91,10 @@ def robots_found(session: Any, wait: float) -> list[dict[str, Any]]:
 
 
 def confirmed(lines: list[list[str]], ask: Callable[[], bool]) -> list[list[str]]:
-    """The command lines, each that moves with --yes once ``ask`` confirmed motion (asked
-    once for the fleet, only when a line moves)."""
-    if any(verb_of(ln) in MOTION for ln in lines) and ask():
-        return [["--yes", *ln] if verb_of(ln) in MOTION else ln for ln in lines]
+    """The command lines, each that actuates or moves with --yes once ``ask`` confirmed
+    (asked once for the fleet, only when a line actuates or moves)."""
+    if any(verb_of(ln) in ACTUATING for ln in lines) and ask():
+        return [["--yes", *ln] if verb_of(ln) in ACTUATING else ln for ln in lines]
     return lines
 
 

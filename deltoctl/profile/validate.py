@@ -136,6 +136,7 @@ def validate(profile: Profile, strict: bool = False) -> Profile:
             if comp.kind == "joint":
                 _check_joint(hw, comp, fail, doubt)
             _check_interfaces(hw, comp, interfaces, fail, doubt)
+            warnings += _near_standard(comp, src, where)
             if comp.kind == "joint":
                 _check_limits(comp, where, fail)
             _check_params(comp.params, f"{comp.kind} {comp.name!r}", where, fail, travel=True)
@@ -164,7 +165,7 @@ def _check_profile(profile: Profile, fail: Fail) -> None:
     known = registry.families()
     if profile.family is not None and profile.family not in known:
         raise fail(f"unknown driver family {profile.family!r} "
-                   f"(known: {', '.join(known)})", None)
+                   f"(known: {', '.join(known)}){registry.install_hint(profile.family)}", None)
     schemes = {s for f in known.values() for s in f.schemes}
     for bus, url in profile.buses.items():
         try:
@@ -173,7 +174,8 @@ def _check_profile(profile: Profile, fail: Fail) -> None:
             scheme = ""
         if scheme not in schemes:
             raise fail(f"bus {bus!r}: {url!r} is not a target URL "
-                       "(expected tcp://HOST:PORT, serial:///dev/PORT or i2c:///dev/i2c-N)", None)
+                       "(expected tcp://HOST:PORT, serial:///dev/PORT or i2c:///dev/i2c-N)"
+                       + registry.install_hint(scheme=scheme), None)
 
 
 def _check_block(profile: Profile, hw: Hardware, fail: Fail, doubt: Doubt) -> None:
@@ -195,7 +197,8 @@ def _check_block(profile: Profile, hw: Hardware, fail: Fail, doubt: Doubt) -> No
     family_name = profile.family_of(hw)
     if family_name is not None and family_name not in known:
         raise fail(f"unknown driver family {family_name!r} in {hw.name!r} "
-                   f"(known: {', '.join(known)})", hw.line)
+                   f"(known: {', '.join(known)})"
+                   + registry.install_hint(family_name, hw.plugin), hw.line)
     if hw.bus is not None and hw.bus not in profile.buses:
         raise fail(f"{hw.name!r} names unknown bus {hw.bus!r} "
                    f"(the profile's buses: {', '.join(profile.buses) or 'none'})", hw.line)
@@ -283,6 +286,38 @@ def _check_interfaces(hw: Hardware, comp: Component, seen: dict[tuple[str, str],
                            "hardware component)", line)
             seen[(which, full)] = hw.name
             _check_interface(comp, itf, line, fail, doubt)
+
+
+# ros2_control's standard interface names (hardware_interface_type_values.hpp)
+STANDARD_INTERFACES = ("position", "velocity", "acceleration", "effort", "torque", "force",
+                       "current", "temperature")
+
+
+def _near_standard(comp: Component, src: str | None,
+                   where: int | None) -> list[ProfileWarning]:
+    """A warning for each interface name one letter off a standard one (``positon``): a
+    controller that claims ``position`` would never find it."""
+    found = []
+    for itf in [*comp.command_interfaces, *comp.state_interfaces]:
+        near = [n for n in STANDARD_INTERFACES if one_letter_off(itf.name, n)]
+        if near:
+            found.append(ProfileWarning(
+                f"{comp.name}/{itf.name}: did you mean {comp.name}/{near[0]}? ({itf.name!r} is "
+                "one letter off a standard interface name of ros2_control)",
+                src, itf.line or where))
+    return found
+
+
+def one_letter_off(typed: str, name: str) -> bool:
+    """Whether ``typed`` is ``name`` with one letter left out, added, changed, or swapped with
+    its neighbour (``positon``, ``postion``, ``velocty``)."""
+    if typed == name or abs(len(typed) - len(name)) > 1:
+        return False
+    start = next((i for i, (a, b) in enumerate(zip(typed, name)) if a != b),
+                 min(len(typed), len(name)))
+    rest_t, rest_n = typed[start:], name[start:]
+    return (rest_t[1:] == rest_n[1:] or rest_t == rest_n[1:] or rest_t[1:] == rest_n
+            or (len(rest_t) > 1 and rest_t[:2] == rest_n[1::-1] and rest_t[2:] == rest_n[2:]))
 
 
 def _check_interface(comp: Component, itf: Interface, line: int | None, fail: Fail,

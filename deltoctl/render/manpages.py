@@ -119,8 +119,17 @@ def _exit_status(exit_codes: tuple[tuple[int, str], ...]) -> list[str]:
     return lines
 
 
+def summary(text: str | None) -> str:
+    """A help in one line: the first sentence of its first paragraph, up to a colon, a
+    semicolon or a bracket (``What a recording holds``)."""
+    import re
+
+    first = " ".join((text or "").split("\n\n")[0].split())
+    return re.split(r"\. |: |; | \(", first, maxsplit=1)[0].rstrip(".")
+
+
 def _first_line(text: str | None) -> str:
-    return (text or "").strip().split("\n\n")[0].replace("\n", " ")
+    return (text or "").strip().split("\n\n")[0].replace("\n", " ").replace("\\[", "[")
 
 
 def _text(text: str) -> str:

@@ -60,6 +60,16 @@ class Transport:
     shared: bool = False  # one link per URL for every block of a System (an I2C bus)
 
 
+def url_hint(url: str, scheme: str) -> str:
+    """`` (did you mean tcp://127.0.0.1:502?)`` for a target given without its scheme: a path
+    (``/dev/ttyUSB0``) for a scheme of device files, ``HOST:PORT`` for one of hosts."""
+    if "://" in url or not url:
+        return ""
+    if url.startswith("/") == scheme.endswith("tcp"):  # a file for a host's scheme
+        return ""
+    return f" (did you mean {scheme}://{url}?)"
+
+
 def split_url(url: str) -> SplitResult:
     """``urlsplit``, with a URL it cannot read (``tcp://[::1``: an IPv6 address without its
     closing bracket) one clear error naming it."""

@@ -17,7 +17,7 @@ from smbus2 import i2c_msg
 
 from deltoctl import trace
 from deltoctl.errors import DeviceError, InvalidInput, NoAnswer, Unreachable
-from deltoctl.transport import Check, Target, Transport, split_url
+from deltoctl.transport import Check, Target, Transport, split_url, url_hint
 
 # errnos of a device that did not acknowledge: NoAnswer (also importable from here)
 NO_ANSWER = (errno.ENXIO, errno.EREMOTEIO, errno.EIO, errno.ETIMEDOUT, errno.EAGAIN)
@@ -29,7 +29,7 @@ def parse_i2c_url(url: str) -> tuple[str, str, int]:
     parts = split_url(url)
     expected = "expected i2c:///dev/i2c-N or i2c+tcp://HOST:PORT from `deltoctl sim serve`"
     if parts.scheme not in ("i2c", "i2c+tcp"):
-        raise InvalidInput(f"{url!r} is not an I2C target ({expected})")
+        raise InvalidInput(f"{url!r} is not an I2C target ({expected})" + url_hint(url, "i2c"))
     keys = [key for key, _ in parse_qsl(parts.query, keep_blank_values=True)]
     if keys:
         raise InvalidInput(f"{url!r}: unknown key {keys[0]!r} (an I2C target takes no keys)")

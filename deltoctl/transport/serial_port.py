@@ -9,7 +9,7 @@ from urllib.parse import parse_qs
 
 from deltoctl import trace
 from deltoctl.errors import InvalidInput, Unreachable
-from deltoctl.transport import Check, Target, Transport, split_url
+from deltoctl.transport import Check, Target, Transport, split_url, url_hint
 
 KEYS = ("baud", "rs485")
 MAX_BAUD = 12_000_000
@@ -29,7 +29,8 @@ def parse_serial_url(url: str) -> tuple[str, int, bool]:
         parse_usb(spec)
     elif parts.scheme != "serial" or not parts.path or parts.netloc:
         raise InvalidInput(f"{url!r} is not a serial target (expected "
-                           "serial:///dev/PORT?baud=N[&rs485=1], three slashes)")
+                           "serial:///dev/PORT?baud=N[&rs485=1], three slashes)"
+                           + url_hint(url, "serial"))
     else:
         spec = parts.path
     query = parse_qs(parts.query, keep_blank_values=True)

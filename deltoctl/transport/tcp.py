@@ -11,7 +11,7 @@ import time
 
 from deltoctl import trace
 from deltoctl.errors import InvalidInput, LinkLost, Unreachable
-from deltoctl.transport import Check, Target, Transport, split_url
+from deltoctl.transport import Check, Target, Transport, split_url, url_hint
 
 __all__ = ["TRANSPORT", "LinkLost", "TcpLink", "parse_tcp_url", "tcp_transport"]
 
@@ -24,7 +24,8 @@ def parse_tcp_url(url: str, default_port: int | None = None) -> tuple[str, int]:
 
     parts = split_url(url)
     if parts.scheme != "tcp" or not parts.hostname:
-        raise InvalidInput(f"{url!r} is not a TCP target (expected tcp://HOST:PORT)")
+        raise InvalidInput(f"{url!r} is not a TCP target (expected tcp://HOST:PORT)"
+                           + url_hint(url, "tcp"))
     keys = [key for key, _ in parse_qsl(parts.query, keep_blank_values=True)]
     if keys:
         raise InvalidInput(f"{url!r}: unknown key {keys[0]!r} (a tcp:// target takes no keys)")

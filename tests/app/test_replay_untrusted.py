@@ -166,7 +166,7 @@ def test_device_sim_rehearses_under_the_catalogs_limits(cli, elsewhere, tmp_path
     jogged = tmp_path / "jog.mcap"
     assert cli("-p", "dg-5f-right", "--sim", "jog", JOINT, "10deg", "--yes", "--record",
                str(jogged)).exit_code == 0
-    result = cli("replay", str(jogged), "--device", "--sim", "--json")
+    result = cli("--yes", "replay", str(jogged), "--device", "--sim", "--json")
     assert result.exit_code == 0, result.stderr
     assert json.loads(result.stdout)["result"]["on"] == "simulator"
     assert accepted == []

@@ -87,7 +87,7 @@ def test_cell_homes_the_arm_by_its_routine_then_jogs_both(cli, deltoctl_sim):
 
 def test_gpio_by_name_on_either_hand(cli, deltoctl_sim):
     t = _targets(deltoctl_sim.buses(BIMANUAL))
-    assert cli("-p", BIMANUAL, *t, "gpio", "set", "right_gpio/output_2", "on").exit_code == 0
+    assert cli("--yes", "-p", BIMANUAL, *t, "gpio", "set", "right_gpio/output_2", "on").exit_code == 0
     values = json.loads(cli("-p", BIMANUAL, *t, "--json", "gpio", "get").stdout)["result"]
     assert values["right_gpio/output_2"] == 1.0 and values["left_gpio/output_2"] == 0.0
 
@@ -190,7 +190,7 @@ def test_the_cell_bringup_script_runs_every_verb(tmp_path):
 
 
 def test_calibrate_tares_every_hand_and_writes_a_report_each(cli, tmp_path):
-    result = cli("-p", BIMANUAL, "--sim", "--json", "calibrate", "ft", "-n", "5",
+    result = cli("--yes", "-p", BIMANUAL, "--sim", "--json", "calibrate", "ft", "-n", "5",
                  "-o", str(tmp_path))
     assert result.exit_code == 0, result.stderr
     report = json.loads(result.stdout)
@@ -204,7 +204,7 @@ def test_mh5_torque_reboot_register_reach_both_buses(cli, deltoctl_sim):
     result = cli("-p", "mh5", *t, "--yes", "--json", "torque", "on", "all")
     assert result.exit_code == 0, result.stderr
     assert len(json.loads(result.stdout)["result"]["joints"]) == 22
-    result = cli("-p", "mh5", *t, "--json", "reboot", "legs")
+    result = cli("--yes", "-p", "mh5", *t, "--json", "reboot", "legs")
     assert result.exit_code == 0, result.stderr
     assert len(json.loads(result.stdout)["result"]["rebooted"]) == 12
     result = cli("-p", "mh5", *t, "--json", "register", "get", "r_ank_r", "present_temperature")

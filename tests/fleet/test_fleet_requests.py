@@ -73,6 +73,12 @@ def test_double_dash_shapes_are_refused_without_mtls_and_switch_nothing(agent, a
     assert output_2(agent) == 0.0
 
 
+def test_a_refusal_names_the_rehearsal_flag_and_mutual_tls(agent):
+    code, _, err = call(agent, ["gpio", "set", "output_2", "on", "--yes"])
+    assert code == 5 and "--allow-unauthenticated-motion" in err
+    assert "loopback" in err and "mutual TLS" in err and "zenoh-agent.json5" in err
+
+
 def test_reading_verbs_still_run_for_an_unauthenticated_peer(agent):
     code, out, _ = call(agent, ["--json", "gpio", "--", "get"])
     assert code == 0 and "gpio/output_2" in json.loads(out)["result"]

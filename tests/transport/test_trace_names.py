@@ -42,7 +42,8 @@ def test_the_log_file_names_the_grippers_frames(cli, tmp_path):
     result = cli("--sim", "-p", "dg-5f-right", "--log-file", str(log), "connect", "-n", "2")
     assert result.exit_code == 0, result.stderr
     (names,) = _frames(log).values()
-    assert {"GET_VERSION", "GET_DATA", "SET_DUTY"} <= names
+    assert {"GET_VERSION", "GET_DATA"} <= names
+    assert "SET_DUTY" not in names  # a connect never drives the gripper, nor stops it
 
 
 def test_a_dynamixel_bus_and_its_imu_are_named_frame_by_frame(cli, tmp_path):

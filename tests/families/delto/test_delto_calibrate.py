@@ -11,7 +11,7 @@ from deltoctl.profile.catalog import load_profile
 def test_tare_removes_the_offset_and_writes_a_report(cli, tmp_path):
     with DeltoServer(firmware_for_profile(load_profile("dg-4f"), seed=3)) as server:
         biased = max(abs(v) for row in server.firmware.ft_offset for v in row[:3])
-        result = cli("-p", "dg-4f", "-t", server.endpoint, "calibrate", "ft", "--json",
+        result = cli("--yes", "-p", "dg-4f", "-t", server.endpoint, "calibrate", "ft", "--json",
                      "-n", "20", "-o", str(tmp_path))
     assert result.exit_code == 0, result.stderr
     result = json.loads(result.stdout)
@@ -31,7 +31,7 @@ def test_tare_removes_the_offset_and_writes_a_report(cli, tmp_path):
 def test_firmware_without_offset_command_fails_the_check(cli, tmp_path):
     with DeltoServer(firmware_for_profile(load_profile("dg-5f-right"), firmware=(2, 2),
                                           seed=1)) as server:
-        result = cli("-p", "dg-5f-right", "-t", server.endpoint, "calibrate", "ft", "-n", "10",
+        result = cli("--yes", "-p", "dg-5f-right", "-t", server.endpoint, "calibrate", "ft", "-n", "10",
                      "-o", str(tmp_path))
     assert result.exit_code == 1
     assert "over tolerance" in result.stderr and "v2.3" in result.stderr
@@ -39,7 +39,7 @@ def test_firmware_without_offset_command_fails_the_check(cli, tmp_path):
 
 
 def test_no_ft_sensors(cli, tmp_path):
-    result = cli("--sim", "-p", "dg-5f-s15-right", "calibrate", "ft", "-o", str(tmp_path))
+    result = cli("--yes", "--sim", "-p", "dg-5f-s15-right", "calibrate", "ft", "-o", str(tmp_path))
     assert result.exit_code == 2
     assert "no F/T sensors" in result.stderr
 
@@ -47,7 +47,7 @@ def test_no_ft_sensors(cli, tmp_path):
 def test_a_gripper_with_tactile_sensors_where_the_profile_says_ft(cli, tmp_path):
     firmware = firmware_for_profile(load_profile("dg-5f-right"), sensor_type=3)  # TACTILE_M
     with DeltoServer(firmware) as server:
-        result = cli("-p", "dg-5f-right", "-t", server.endpoint, "calibrate", "ft", "-n", "3",
+        result = cli("--yes", "-p", "dg-5f-right", "-t", server.endpoint, "calibrate", "ft", "-n", "3",
                      "-o", str(tmp_path))
     assert result.exit_code == 1, result.stderr
     assert "reports tactile fingertips (TACTILE_M, 5×3 cells), not F/T sensors" in \

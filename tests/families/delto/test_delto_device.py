@@ -165,11 +165,11 @@ def test_gpio_get_and_set(cli, gripper, tmp_path):
     state = json.loads(cli(*target, "gpio", "get", "--json").stdout)["result"]
     assert state == {"gpio/output_1": 0.0, "gpio/output_2": 0.0, "gpio/output_3": 0.0,
                      "gpio/input_1": 1.0}
-    result = cli(*target, "gpio", "set", "output_2", "on", "--json")
+    result = cli("--yes", *target, "gpio", "set", "output_2", "on", "--json")
     assert result.exit_code == 0, result.stderr
     assert json.loads(result.stdout)["result"]["gpio/output_2"] == 1.0
     assert server.firmware.gpio_out == [False, True, False]
-    cli(*target, "gpio", "set", "output_1", "on")
+    cli("--yes", *target, "gpio", "set", "output_1", "on")
     assert server.firmware.gpio_out == [True, True, False]  # the others keep their state
     assert cli(*target, "gpio", "set", "output_9", "on").exit_code == 2
     assert cli(*target, "gpio", "set", "output_1", "maybe").exit_code == 2

@@ -31,7 +31,7 @@ AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 
 
 def test_verify_and_watch_report_each_check(cli, gripper, tmp_path):
-    result = cli("-p", "dg-4f", "-t", gripper.endpoint, "calibrate", "ft", "--json", "-n", "20",
+    result = cli("--yes", "-p", "dg-4f", "-t", gripper.endpoint, "calibrate", "ft", "--json", "-n", "20",
                  "--watch", "0.3", "-o", str(tmp_path))
     assert result.exit_code == 0, result.stderr
     checks = by_id(json.loads(result.stdout)["result"]["checks"])
@@ -55,7 +55,7 @@ def test_one_creeping_axis_fails_and_the_others_pass(deltoctl_sim, cli, tmp_path
     its drift check fails on every fingertip, each other axis's passes, in the table and in
     --json; a limit of one axis is set on the command line."""
     (target,) = deltoctl_sim.buses("dg-4f", ft_creep="0,0,0.6").values()
-    args = ("-p", "dg-4f", "-t", target, "calibrate", "ft", "-n", "10", "--watch", "1.5",
+    args = ("--yes", "-p", "dg-4f", "-t", target, "calibrate", "ft", "-n", "10", "--watch", "1.5",
             "--drift-limit", "tz=0.05", "-o", str(tmp_path))
     result = cli(*args, "--json")
     assert result.exit_code == 1, result.stderr
@@ -78,7 +78,7 @@ def test_one_creeping_axis_fails_and_the_others_pass(deltoctl_sim, cli, tmp_path
 
 def test_a_creeping_sensor_fails_the_drift_check(cli, gripper, tmp_path):
     gripper.firmware.ft_creep = (0.6, 0.0, 0.0)  # N/s
-    result = cli("-p", "dg-4f", "-t", gripper.endpoint, "calibrate", "ft", "-n", "10",
+    result = cli("--yes", "-p", "dg-4f", "-t", gripper.endpoint, "calibrate", "ft", "-n", "10",
                  "--watch", "1.5", "-o", str(tmp_path))
     assert result.exit_code == 1
     assert "F/T checks failed: fingertip_finger_1.drift.fx" in result.stderr
@@ -108,7 +108,7 @@ def test_a_known_mass_reads_its_weight(gripper, tmp_path):
 def test_the_terminal_asks_for_the_mass(gripper, tmp_path):
     pexpect = pytest.importorskip("pexpect")
     child = pexpect.spawn(DELTOCTL, ["-p", "dg-4f", "-t", gripper.endpoint, "calibrate", "ft",
-                                     "-n", "20", "--mass", "0.5", "-o", str(tmp_path)],
+                                     "-n", "20", "--mass", "0.5", "-o", str(tmp_path), "--yes"],
                           encoding="utf-8", timeout=60)
     try:
         child.expect(r"put 0\.5 kg on fingertip_finger_1 and let it rest")
@@ -121,7 +121,7 @@ def test_the_terminal_asks_for_the_mass(gripper, tmp_path):
 
 
 def test_no_mass_is_a_clear_error(cli, gripper, tmp_path):
-    result = cli("-p", "dg-4f", "-t", gripper.endpoint, "calibrate", "ft", "-n", "10",
+    result = cli("--yes", "-p", "dg-4f", "-t", gripper.endpoint, "calibrate", "ft", "-n", "10",
                  "--mass", "0.2", "--timeout", "0.5", "-o", str(tmp_path))
     assert result.exit_code == 1
     assert "no steady load on fingertip_finger_1 within 0.5 s" in result.stderr
@@ -138,7 +138,7 @@ def test_no_mass_is_a_clear_error(cli, gripper, tmp_path):
     (("--watch", "1", "--drift-limit", "fz=abc"), "--drift-limit fz"),
 ])
 def test_bad_options_are_one_clear_error(cli, gripper, tmp_path, args, message):
-    result = cli("-p", "dg-4f", "-t", gripper.endpoint, "calibrate", "ft", "-n", "5",
+    result = cli("--yes", "-p", "dg-4f", "-t", gripper.endpoint, "calibrate", "ft", "-n", "5",
                  "--timeout", "1", *args, "-o", str(tmp_path))
     assert result.exit_code == 2, result.stderr
     assert message in result.stderr and "Traceback" not in result.stderr

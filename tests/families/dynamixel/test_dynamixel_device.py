@@ -73,10 +73,10 @@ def test_torque_by_group_and_reboot_after_a_shutdown(cli, mh5_buses):
                                   for i in (31, 32, 33, 34, 41, 42, 43, 44)))
     assert upper[51].memory[64] == 0 and lower[11].memory[64] == 0  # head, legs untouched
     assert cli("-p", "mh5", *targets, "torque", "on", "head").exit_code == 5  # no --yes
-    assert cli("-p", "mh5", *targets, "torque", "off", "l_sho_p").exit_code == 0
+    assert cli("--yes", "-p", "mh5", *targets, "torque", "off", "l_sho_p").exit_code == 0
     assert eventually(lambda: upper[34].memory[64] == 0)
     lower[24].memory[70] = 0x20  # overload shutdown on r_kne_p
-    result = cli("-p", "mh5", *targets, "reboot", "right_leg", "--json")
+    result = cli("--yes", "-p", "mh5", *targets, "reboot", "right_leg", "--json")
     assert result.exit_code == 0
     assert "r_kne_p" in json.loads(result.stdout)["result"]["rebooted"]
     assert lower[24].memory[70] == 0

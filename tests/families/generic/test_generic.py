@@ -77,7 +77,7 @@ def test_verbs_on_generic_profiles(cli, name, tmp_path):
 
 
 def test_gpio_and_jog_on_rrbot(cli):
-    result = cli("-p", "rrbot-gpio", "gpio", "set", "flange_analog_IOs/analog_output1", "2.5",
+    result = cli("--yes", "-p", "rrbot-gpio", "gpio", "set", "flange_analog_IOs/analog_output1", "2.5",
                  "--json")
     assert result.exit_code == 0
     assert json.loads(result.stdout)["result"]["flange_analog_IOs/analog_output1"] == 2.5

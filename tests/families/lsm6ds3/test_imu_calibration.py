@@ -55,7 +55,7 @@ def imu_server():
 
 
 def run(cli, server, profile, *args):
-    return cli("-p", profile, "-t", f"i2c={server.url}", *args)
+    return cli("-p", profile, "-t", f"i2c={server.url}", "--yes", *args)
 
 
 def checks_of(result):
@@ -173,7 +173,7 @@ def test_the_terminal_says_which_face_to_put_down(imu_server, tmp_path):
     chip.point_up("-y")  # where the operator left it
     child = pexpect.spawn(DELTOCTL, ["-p", imu_profile(tmp_path / "p.yaml"), "-t",
                                      f"i2c={imu_server.url}", "calibrate", "imu", "--tumble",
-                                     "-n", "20", "-o", str(tmp_path)],
+                                     "-n", "20", "-o", str(tmp_path), "--yes"],
                           encoding="utf-8", timeout=60, cwd=str(tmp_path))
     try:
         for axis in ("+z", "-z", "+x", "-x", "+y", "-y"):
