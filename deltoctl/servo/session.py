@@ -259,6 +259,7 @@ class Session:
         if self.role != DEVICE:
             raise ProtocolError("a host session receives replies: use receive")
         out: list[Request] = []
+        size = self.frames.request_size
         while True:
             try:
                 found = self._reader.feed(data)
@@ -266,9 +267,10 @@ class Session:
                 self.garbled += 1
                 data = b""
                 continue
-            size = self.frames.request_size
+            if not found:
+                return out
+            data = b""
             out += [Request(i, inst, params, size(len(params))) for i, inst, params in found]
-            return out
 
     def answers(self, request: Request, device_id: int, level: int | None = None) -> bool:
         """Whether servo ``device_id`` at Status Return Level ``level`` answers ``request``

@@ -60,8 +60,9 @@ def _frame(data: bytes | bytearray, at: int, size: int) -> Frame:
 
 class ChecksumReader:
     """Finds frames in a byte stream: ``feed(data)`` returns (ID, instruction or error,
-    params) per frame whose checksum checks; a bad checksum raises ProtocolError once its
-    frame is passed by (the next ``feed``, with more bytes or none, goes on after it)."""
+    params) per frame whose checksum checks; a bad checksum raises ProtocolError once the
+    frames before it are returned (the next ``feed``, with more bytes or none, raises it and
+    the one after goes on past it)."""
 
     def __init__(self) -> None:
         self._buf = bytearray()
@@ -79,6 +80,8 @@ class ChecksumReader:
             size = _size_at(buf, 0)
             if size == INCOMPLETE:
                 return out
+            if size == BAD_CHECKSUM and out:
+                return out  # the frames before it first; the next feed raises
             if size < 0:
                 device_id = buf[2]
                 del buf[:1]

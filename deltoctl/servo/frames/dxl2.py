@@ -145,7 +145,8 @@ def status(device_id: int, error: int = 0, params: bytes = b"") -> bytes:
 
 class PacketReader:
     """Finds packets in a byte stream: ``feed(data)`` returns (id, instruction, body) tuples
-    whose CRC checks; a bad CRC raises ProtocolError (the bytes are dropped)."""
+    whose CRC checks; a bad CRC raises ProtocolError (the bytes are dropped) once the packets
+    before it are returned (the next ``feed``, with more bytes or none, raises it)."""
 
     def __init__(self) -> None:
         self._buf = bytearray()
@@ -169,8 +170,10 @@ class PacketReader:
             if len(self._buf) < total:
                 return out
             raw = bytes(self._buf[:total])
-            del self._buf[:total]
             crc = raw[-2] | (raw[-1] << 8)
+            if crc16(raw[:-2]) != crc and out:
+                return out  # the packets before it first; the next feed raises
+            del self._buf[:total]
             if crc16(raw[:-2]) != crc:
                 raise ProtocolError(f"CRC mismatch from ID {raw[4]}: got {crc:#06x}, "
                                     f"expected {crc16(raw[:-2]):#06x}")
@@ -232,21 +235,24 @@ class SyncReplies:
 
 
 def split_statuses(data: bytes) -> list[Reply]:
-    """Status packets in whatever shape they came (some missing, stuffed, out of order):
-    ``(id, error, data)`` per valid one, packet by packet, so one bad CRC costs only its
-    own reply."""
-    reader, out, start = PacketReader(), [], 0
-    while True:
-        end = data.find(HEADER, start + 1)
-        try:
-            found = reader.feed(data[start:] if end < 0 else data[start:end])
-        except ProtocolError:
-            found = []
-        out += [(i, body[0], bytes(body[1:])) for i, inst, body in found
-                if inst == STATUS and body]
-        if end < 0:
-            return out
-        start = end
+    """Status packets in whatever shape they came (some missing, stuffed, out of order, in
+    noise): ``(id, error, data)`` per valid one. Each header is tried where it lies; one that
+    does not start a packet whose CRC checks is passed by, so a bad byte (even in a length)
+    costs only its own reply."""
+    out, at, size = [], data.find(HEADER), len(data)
+    while 0 <= at <= size - 10:
+        end = at + 7 + (data[at + 5] | data[at + 6] << 8)
+        if end - at >= 10 and end <= size and \
+                crc16(data, 0, at, end - 2) == data[end - 2] | data[end - 1] << 8:
+            body = data[at + 7:end - 2]
+            if b"\xff\xff\xfd\xfd" in body:
+                body = unstuff(body)
+            if body[0] == STATUS and len(body) > 1:
+                out.append((data[at + 4], body[1], bytes(body[2:])))
+            at = data.find(HEADER, end)
+        else:
+            at = data.find(HEADER, at + 1)
+    return out
 
 
 def fast_sync_status(blocks: list[tuple[int, int, bytes]]) -> bytes:
