@@ -4,6 +4,7 @@ a silent servo, tries by the exchange policy, a lost port reopened, and pacing."
 
 from __future__ import annotations
 
+import os
 import time
 
 import pytest
@@ -104,3 +105,33 @@ def test_a_paced_bus_takes_the_wire_time():
             assert took >= wire * 10 / 9600
         finally:
             link.close()
+
+
+def test_the_sync_loops_read_slow_in_full_and_leave_the_fast_one_on_the_wire(bus):
+    from deltoctl.core.loop import CommLoop
+    from deltoctl.servo.sync_loops import SyncLoops, SyncRead
+
+    link, session = link_to(bus)
+    link.stats.update(packets=0, errors=0)
+    taken: dict[str, list] = {"slow": [], "fast": []}
+    lost: list[Exception] = []
+    loops = SyncLoops(link, session, SYNC_READ, lost.append)
+    slow, fast = CommLoop("slow", 0.001), CommLoop("fast", 0.0)  # once a ~17 min; every cycle
+    loops.add(SyncRead(slow, 40, 1, taken["slow"].extend))
+    loops.add(SyncRead(fast, 10, 2, taken["fast"].extend))
+    try:
+        loops.start([1, 2, 3])
+        assert taken["slow"] == [(1, 0, b"\x29"), (2, 0, b"\x2a"), (3, 0, b"\x2b")]
+        assert loops.pending and taken["fast"] == []  # sent, its replies on their way
+        loops.finish()
+        assert [r[0] for r in taken["fast"]] == [1, 2, 3] and not loops.pending
+        loops.start([1, 2, 9])  # the slow loop is not due; servo 9 is silent
+        loops.finish()
+        assert len(taken["slow"]) == 3 and [r[0] for r in taken["fast"][3:]] == [1, 2]
+        assert (fast.total_packets, fast.total_errors, slow.total_packets) == (2, 1, 1)
+        assert link.stats == {"packets": 3, "errors": 1}
+        os.close(link.port.fd)  # the adapter goes away
+        loops.start([1, 2, 3])
+        assert lost and not loops.pending
+    finally:
+        link.close()

@@ -24,6 +24,7 @@ from deltoctl.families.dynamixel.models import Model, by_number, expected_model,
 from deltoctl.families.dynamixel.plugins import gpio_readings, servo_ids
 from deltoctl.servo.frames import Reply
 from deltoctl.servo.serial_io import SerialLink
+from deltoctl.servo.sync_loops import SyncLoops, SyncRead
 
 RAD_PER_RAW = 0.001533980787886  # 2π/4096
 CENTER = 2047
@@ -60,11 +61,9 @@ class DynamixelDriver(Driver):
         self.allow_model_mismatch = block.allow_model_mismatch
         self.torque_enabled: set[int] = set()
         self.moving: set[int] = set()  # servos sent a goal they may not have reached
-        self._requests: dict[tuple, bytes] = {}  # sync reads' params, built once
         # Fast Sync Read (XL430 firmware 45 and later) for the reader loops, when the block
         # says fast_sync_read: true
         self.fast = str(hw.params.get("fast_sync_read", "false")).lower() in ("1", "true", "yes")
-        self._inflight: tuple[int, list[int], Any] | None = None  # a sync read sent
         self._followed: dict[str, tuple[float, float]] = {}  # replayed goals and speeds
         self._units: dict[int, float | None] | None = None  # Present Current's A per step
         self.loops = {}
@@ -75,6 +74,11 @@ class DynamixelDriver(Driver):
                 raise InvalidInput(f"{hw.name}: {name}_rate must be a number (Hz)") from None
             # writers send what a verb commands, when it commands it: never held back
             self.loops[name] = CommLoop(f"{hw.name}_{name}", rate if "reader" in name else 0.0)
+        self.sync = SyncLoops(self.link, self.session,
+                              codec.FAST_SYNC_READ if self.fast else codec.SYNC_READ, self._lost)
+        # the slow loop's exchange in full, then the fast loop's, overlapped with other buses'
+        self.sync.add(SyncRead(self.loops["tv_reader"], 144, 3, self._take_voltage_temperature))
+        self.sync.add(SyncRead(self.loops["pvl_reader"], 126, 10, self._take_pvl))
 
     def comm_loops(self) -> list[CommLoop]:
         return list(self.loops.values())
@@ -181,7 +185,6 @@ class DynamixelDriver(Driver):
         if self.connected:
             self.warnings.append(f"{self.hw.name}: {self.url} lost ({exc})")
         self.connected = False
-        self._inflight = None
         self.link.lost()
 
     def start_read(self) -> None:
@@ -189,31 +192,17 @@ class DynamixelDriver(Driver):
         takes its replies (the other bus sends its own meanwhile)."""
         if self.port is None and self.link.reopen():
             self.connected = True
-        if self._inflight is not None or self.port is None:
-            return
-        ids = list(self.present)
-        try:
-            if self.loops["tv_reader"].due():
-                self._read_voltage_temperature(ids)
-            if self.loops["pvl_reader"].due():
-                self._inflight = (10, ids, self.loops["pvl_reader"])
-                self._send_sync_read(126, 10, ids)
-        except OSError as exc:  # pyserial's errors are OSErrors too
-            self._lost(exc)
+        self.sync.start(list(self.present))
 
     def read(self) -> dict[str, float]:
-        if self._inflight is None:
+        if not self.sync.pending:
             self.start_read()
-        if self._inflight is None:
-            return self.values
-        length, ids, loop = self._inflight
-        self._inflight = None
+        self.sync.finish()
+        return self.values
+
+    def _take_pvl(self, replies: list[Reply]) -> None:
+        """Present Load (or Current), Velocity and Position (126, 10 bytes)."""
         values = self.values
-        try:
-            replies = self._sync_replies(length, ids, loop)
-        except OSError as exc:
-            self._lost(exc)
-            return values
         for device_id, _, data in replies:
             joint = self.joints[device_id]
             load, velocity, position = PVL.unpack(data)
@@ -230,7 +219,6 @@ class DynamixelDriver(Driver):
                     "Present Position": (position - CENTER) * RAD_PER_RAW,
                     "Present Velocity": velocity * RAD_S_PER_RAW,
                     "Present Current" if unit else "Present Load": load * (unit or 0.1)})
-        return values
 
     def _servo_states(self, states: dict[str, str], readings: dict[str, float]) -> None:
         """A servo gpio's states, as the servo reports them: rad, rad/s, A, % of load, V, °C
@@ -249,29 +237,10 @@ class DynamixelDriver(Driver):
             units = self._units = {i: _amps_per_step(m) for i, (m, _) in self.present.items()}
         return units
 
-    def _send_sync_read(self, address: int, length: int, ids: list[int]) -> None:
-        key = (address, length, tuple(ids))
-        params = self._requests.get(key)
-        if params is None:
-            params = self._requests[key] = codec.sync_read_params(address, length, ids)
-        self.link.write(self.session.send(
-            codec.BROADCAST_ID, codec.FAST_SYNC_READ if self.fast else codec.SYNC_READ, params))
-
-    def _sync_read(self, address: int, length: int, ids: list[int],
-                   loop: CommLoop | None = None) -> list[Reply]:
+    def _sync_read(self, address: int, length: int, ids: list[int]) -> list[Reply]:
         """One sync read (or Fast Sync Read): ``(id, error, data)`` per valid reply; a missing
         or corrupted reply counts as an error, never raises."""
-        self._send_sync_read(address, length, ids)
-        return self._sync_replies(length, ids, loop)
-
-    def _sync_replies(self, length: int, ids: list[int], loop: CommLoop | None) -> list[Reply]:
-        self.stats["packets"] += 1
-        replies = self.link.collect(self.session, POLICY.timeout).replies
-        ok = len(replies) == len(ids)
-        self.stats["errors"] += not ok
-        if loop is not None:
-            loop.count(ok)
-        return replies
+        return self.sync.read(address, length, ids)
 
     def bulk_read(self, reads: list[tuple[int, int, int]]) -> list[Reply]:
         """One Bulk Read of (ID, address, length) each: ``(id, error, data)`` per valid
@@ -282,9 +251,9 @@ class DynamixelDriver(Driver):
         self.stats["errors"] += not done.complete
         return done.replies
 
-    def _read_voltage_temperature(self, ids: list[int]) -> None:
+    def _take_voltage_temperature(self, replies: list[Reply]) -> None:
         """The slow loop: Present Input Voltage (144, 0.1 V) and Temperature (146, °C)."""
-        for device_id, _, data in self._sync_read(144, 3, ids, self.loops["tv_reader"]):
+        for device_id, _, data in replies:
             name = self.joints[device_id].name
             voltage, temperature = struct.unpack("<Hb", data)
             self.values[f"{name}/voltage"] = voltage / 10.0
