@@ -117,7 +117,7 @@ class Session:
         self.level = instructions.top_level if level is None else level  # the host's servos'
         self.garbled = 0  # frames dropped for a bad checksum or CRC
         self._reader = frames.reader()
-        self._cache: dict[tuple, tuple[bytes, Expect]] = {}
+        self._cache: dict[tuple, tuple[bytes, Expect, int]] = {}  # a read loop's requests
         self._expect = _NOTHING
         self.expected_bytes = 0  # of the replies to the request sent (0: unknown)
         self._data = b""
@@ -168,7 +168,7 @@ class Session:
             cached = (self.frames.request(device_id, instruction, params), expect,
                       self._size(expect))
             if expect.kind in (SYNC, FAST, BULK) and len(self._cache) < 256:
-                self._cache[key] = cached  # a read loop's
+                self._cache[key] = cached
         packet, self._expect, self.expected_bytes = cached
         self._data = b""
         if self._expect.kind == SYNC and hasattr(self.frames, "sync_replies"):

@@ -18,7 +18,10 @@ class Reader(Protocol):
 
 
 class Frames(Protocol):
-    """What a session needs of a frame variant."""
+    """What a session needs of a frame variant. A variant with a Fast Sync Read adds
+    ``combined_size(servos, length)``, ``split_combined(data, length, ids)`` and
+    ``combined(blocks)``; one whose sync replies are checked in place as they arrive adds
+    ``sync_replies(length, ids)`` (Protocol 2.0 has both)."""
 
     name: str
     broadcast_id: int
