@@ -13,7 +13,7 @@ from typing import Any
 from deltoctl.core.exchange import ExchangePolicy, Reopener
 from deltoctl.errors import DeltoctlError, NoAnswer
 from deltoctl.servo.frames import Reply
-from deltoctl.servo.session import NEED_DATA, Done, Session
+from deltoctl.servo.session import Done, Session
 
 
 class SerialLink:
@@ -102,9 +102,9 @@ class SerialLink:
                 if left <= 0 or not poll(left * 1000):
                     break
                 event = receive(read(fd, 4096))
-                if event is not NEED_DATA:
+                if isinstance(event, Done):
                     self._stale = session.received != session.expected_bytes
-                    return event  # type: ignore[return-value]
+                    return event
         else:
             port = self.port
             deadline = time.monotonic() + timeout
@@ -112,8 +112,8 @@ class SerialLink:
                 data = port.read(port.in_waiting or 1)
                 if data:
                     event = receive(data)
-                    if event is not NEED_DATA:
-                        return event  # type: ignore[return-value]
+                    if isinstance(event, Done):
+                        return event
         self._stale = True
         return session.give_up()
 

@@ -17,10 +17,10 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 from deltoctl.errors import ProtocolError
-from deltoctl.servo.frames import Frames, Reply
+from deltoctl.servo.frames import Frames, Reply, SyncCheck
 
 HOST, DEVICE = "host", "device"
 
@@ -121,7 +121,7 @@ class Session:
         self._expect = _NOTHING
         self.expected_bytes = 0  # of the replies to the request sent (0: unknown)
         self._data = b""
-        self._sync: Any = None  # the in-place check of a Sync Read's replies (Protocol 2.0)
+        self._sync: SyncCheck | None = None  # a Sync Read's replies, checked in place
 
     # -- the rules, for both roles -------------------------------------------------------------
     def expected(self, device_id: int, instruction: int, params: bytes,
@@ -171,10 +171,8 @@ class Session:
                 self._cache[key] = cached
         packet, self._expect, self.expected_bytes = cached
         self._data = b""
-        if self._expect.kind == SYNC and hasattr(self.frames, "sync_replies"):
-            self._sync = self.frames.sync_replies(self._expect.lengths[0], self._expect.ids)
-        else:
-            self._sync = None
+        kind, ids, lengths = self._expect
+        self._sync = self.frames.sync_replies(lengths[0] or 0, ids) if kind == SYNC else None
         return packet
 
     def _size(self, expect: Expect) -> int:
@@ -182,10 +180,10 @@ class Session:
         unknown: a broadcast PING's)."""
         kind, ids, lengths = expect
         if kind == FAST:
-            return self.frames.combined_size(len(ids), lengths[0])  # type: ignore[attr-defined]
+            return self.frames.combined_size(len(ids), lengths[0] or 0)
         if kind == ANY or None in lengths:
             return 0
-        return sum(self.frames.status_size(n) for n in lengths)  # type: ignore[arg-type]
+        return sum(self.frames.status_size(n or 0) for n in lengths)
 
     @property
     def expecting(self) -> bool:
@@ -237,8 +235,7 @@ class Session:
         if kind == NONE or not self._data:
             return []
         if kind == FAST:
-            return self.frames.split_combined(  # type: ignore[attr-defined]
-                self._data, lengths[0], ids)
+            return self.frames.split_combined(self._data, lengths[0] or 0, ids)
         found = self.frames.split(self._data)
         if kind == ANY:
             length = lengths[0]

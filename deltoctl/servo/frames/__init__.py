@@ -17,11 +17,20 @@ class Reader(Protocol):
     def reset(self) -> None: ...
 
 
+class SyncCheck(Protocol):
+    """The replies to one sync read checked in place as their bytes arrive: ``found`` holds
+    (id, error, data) per reply in order (False for one that does not check) while
+    ``in_shape`` (each the expected servo's, nothing stuffed)."""
+
+    found: list
+    in_shape: bool
+    ids: list[int]
+
+    def feed(self, data: bytes) -> None: ...
+
+
 class Frames(Protocol):
-    """What a session needs of a frame variant. A variant with a Fast Sync Read adds
-    ``combined_size(servos, length)``, ``split_combined(data, length, ids)`` and
-    ``combined(blocks)``; one whose sync replies are checked in place as they arrive adds
-    ``sync_replies(length, ids)`` (Protocol 2.0 has both)."""
+    """What a session needs of a frame variant."""
 
     name: str
     broadcast_id: int
@@ -47,4 +56,20 @@ class Frames(Protocol):
 
     def split(self, data: bytes) -> list[Reply]:
         """The valid statuses in ``data``, whatever its shape: a bad one costs only itself."""
+        ...
+
+    def sync_replies(self, length: int, ids: list[int]) -> SyncCheck | None:
+        """The in-place check of a sync read's replies (None: ``split`` them)."""
+        ...
+
+    def combined_size(self, servos: int, length: int) -> int:
+        """The bytes of a Fast Sync Read's one status (a variant without: ProtocolError)."""
+        ...
+
+    def split_combined(self, data: bytes, length: int, ids: list[int]) -> list[Reply]:
+        """A Fast Sync Read's status as (id, error, data) per servo."""
+        ...
+
+    def combined(self, blocks: list[tuple[int, int, bytes]]) -> bytes:
+        """A Fast Sync Read's status of (error, id, data) blocks."""
         ...

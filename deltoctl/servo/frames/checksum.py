@@ -163,5 +163,17 @@ class ChecksumFrames:
     def split(self, data: bytes) -> list[Reply]:
         return split_statuses(data)
 
+    def sync_replies(self, length: int, ids: list[int]) -> None:
+        return None  # split: a status is short, and a sync read's are few
+
+    def combined_size(self, servos: int, length: int) -> int:
+        raise ProtocolError("the checksum frame has no Fast Sync Read")
+
+    def split_combined(self, data: bytes, length: int, ids: list[int]) -> list[Reply]:
+        raise ProtocolError("the checksum frame has no Fast Sync Read")
+
+    def combined(self, blocks: list[tuple[int, int, bytes]]) -> bytes:
+        raise ProtocolError("the checksum frame has no Fast Sync Read")
+
 
 FRAMES = ChecksumFrames()
