@@ -8,6 +8,8 @@ from __future__ import annotations
 import struct
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from deltoctl.errors import ProtocolError
 from deltoctl.servo.frames import checksum, dxl2
@@ -19,6 +21,7 @@ from deltoctl.servo.session import (
     NEED_DATA,
     Done,
     Instructions,
+    NeedData,
     Session,
 )
 
@@ -214,3 +217,38 @@ def test_each_role_receives_its_own():
         Session(frames, instructions, HOST).receive_requests(b"")
     with pytest.raises(ValueError, match="role"):
         Session(frames, instructions, "servo")
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.sampled_from(sorted(VARIANTS)), st.dictionaries(st.integers(0, 20), st.integers(0, 2),
+                                                           min_size=1, max_size=6),
+       st.lists(st.integers(0, 24), min_size=1, max_size=8, unique=True), st.integers(0, 6),
+       st.integers(1, 40))
+def test_host_and_device_agree_on_who_answers(variant, servos, asked, length, piece):
+    frames, instructions = VARIANTS[variant]
+    levels = {i: min(level, instructions.top_level) for i, level in servos.items()}
+    host, bus = Session(frames, instructions, HOST), Bus(frames, instructions, levels)
+    done, _ = converse(host, bus, frames.broadcast_id, SYNC_READ,
+                       params(frames, 56, length) + bytes(asked), piece=piece)
+    assert done.replies == [(i, 0, data_of(i, length)) for i in asked if i in levels]
+    assert done.missing == [i for i in asked if i not in levels]
+    for device_id in asked[:3]:
+        level = levels.get(device_id)
+        host.level = instructions.top_level if level is None else level
+        done, _ = converse(host, bus, device_id, WRITE, params(frames, 65) + b"\x01")
+        if done is not None:  # the host waits for what the servo's level says it sends
+            assert [r[0] for r in done.replies] == ([device_id] if level is not None else [])
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.sampled_from(sorted(VARIANTS)), st.binary(max_size=80), st.integers(1, 30))
+def test_any_bytes_are_events_or_requests(variant, data, piece):
+    frames, instructions = VARIANTS[variant]
+    host = Session(frames, instructions, HOST)
+    host.send(frames.broadcast_id, SYNC_READ, params(frames, 56, 2) + bytes([1, 2]))
+    for k in range(0, len(data), piece):
+        assert isinstance(host.receive(data[k:k + piece]), (NeedData, Done))
+    done = host.give_up()
+    assert {r[0] for r in done.replies} <= {1, 2} and all(len(r[2]) == 2 for r in done.replies)
+    device = Session(frames, instructions, DEVICE)
+    assert all(r.size >= frames.request_size(0) for r in device.receive_requests(data))
