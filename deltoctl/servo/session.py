@@ -216,8 +216,8 @@ class Session:
         kind = self._expect.kind
         if kind == NONE:
             return Done([], [])
-        if kind == ANY or len(self._data) < self.expected_bytes:
-            return NEED_DATA
+        if kind == ANY or (kind != SINGLE and len(self._data) < self.expected_bytes):
+            return NEED_DATA  # (a single status may be short: an error with no data)
         replies = self._matched()
         return Done(replies, self._expect.ids) if len(replies) == len(self._expect.ids) \
             else NEED_DATA

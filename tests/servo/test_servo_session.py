@@ -177,6 +177,13 @@ def test_a_reply_from_another_id_or_of_another_length_is_no_match(pair):
     assert done.replies == [(2, 0x04, b"")]
 
 
+def test_a_refused_read_is_done_as_soon_as_its_short_status_is_in(pair):
+    frames, host, _ = pair
+    host.send(2, READ, params(frames, 56, 4))
+    done = host.receive(frames.status(2, 0x07, b""))  # no wait for the 4 bytes never sent
+    assert isinstance(done, Done) and done.replies == [(2, 0x07, b"")]
+
+
 def test_the_device_reads_requests_in_noise_and_skips_a_corrupted_one(pair):
     frames, host, bus = pair
     first = host.send(1, READ, params(frames, 56, 2))
