@@ -23,6 +23,8 @@ class SerialLink:
     def __init__(self, url: str, policy: ExchangePolicy,
                  stats: MutableMapping[str, int]) -> None:
         self.url, self.policy, self.stats = url, policy, stats
+        for key in ("packets", "errors", "reconnects"):
+            stats.setdefault(key, 0)
         self.reopener = Reopener(policy)
         self.port: Any = None
         self._poll: Any = None
@@ -52,7 +54,7 @@ class SerialLink:
 
     def lost(self) -> None:
         """The port went away: closed, and reopened one reopen period from now."""
-        self.stats["errors"] = self.stats.get("errors", 0) + 1
+        self.stats["errors"] += 1
         self.reopener.lost()
         self.close()
 
@@ -67,7 +69,7 @@ class SerialLink:
             return False
         self.reopener.reopened()
         self._stale = True
-        self.stats["reconnects"] = self.stats.get("reconnects", 0) + 1
+        self.stats["reconnects"] += 1
         return True
 
     # -- bytes -----------------------------------------------------------------------------------

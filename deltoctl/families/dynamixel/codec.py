@@ -103,6 +103,10 @@ def read_params(address: int, length: int) -> bytes:
     return _u16(address) + _u16(length)
 
 
+def write_params(address: int, data: bytes) -> bytes:
+    return _u16(address) + data
+
+
 def sync_read_params(address: int, length: int, ids: Iterable[int]) -> bytes:
     return _u16(address) + _u16(length) + bytes(ids)
 
@@ -121,11 +125,11 @@ def read(device_id: int, address: int, length: int) -> bytes:
 
 
 def write(device_id: int, address: int, data: bytes) -> bytes:
-    return packet(device_id, WRITE, _u16(address) + data)
+    return packet(device_id, WRITE, write_params(address, data))
 
 
 def reg_write(device_id: int, address: int, data: bytes) -> bytes:
-    return packet(device_id, REG_WRITE, _u16(address) + data)
+    return packet(device_id, REG_WRITE, write_params(address, data))
 
 
 def action(device_id: int = BROADCAST_ID) -> bytes:

@@ -125,7 +125,7 @@ class DynamixelDriver(Driver):
             raise InvalidInput(f"{value} does not fit {item.name} ({item.size} byte(s))") \
                 from None
         hint = " (EEPROM items need torque off)" if item.eeprom else ""
-        self._request(device_id, codec.WRITE, item.address.to_bytes(2, "little") + data,
+        self._request(device_id, codec.WRITE, codec.write_params(item.address, data),
                       f"write {item.name}{hint}")
 
     # -- lifecycle -------------------------------------------------------------------------------
