@@ -1,7 +1,9 @@
 """A Dynamixel Protocol 2.0 bus: ping and identify the profile's servos, register access with
 retries, and the MH5's sync loops — present load/velocity/position read (126, 10), voltage and
 temperature read (144, 3), profile/goal write (108, 12), torque write (64) — each at its own
-rate (the block's ``<loop>_rate`` params) with its own communication statistics."""
+rate (the block's ``<loop>_rate`` params) with its own communication statistics. The wire is
+the servo kit's: the host session matches the replies, the serial link tries and reopens by
+the exchange policy, the sync-read scheduler runs the loops."""
 
 from __future__ import annotations
 

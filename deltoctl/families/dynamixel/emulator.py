@@ -7,10 +7,11 @@ mode it lacks is a data range error; position mode keeps goals within the positi
 extended and current-based position do not; velocity mode turns at the goal velocity, within
 the velocity limit), moves to a goal with a time-based or velocity-based profile, reports its
 current in its own unit (or its load, without a current sensor), temperature and voltage, and
-honours Status Return Level, broadcast semantics, REG_WRITE and ACTION, reboot and factory
-reset, and answers only at its Baud Rate (the rate the host set on the pty). Faults: a missing
-servo, a corrupted CRC, no reply, a servo at another baud rate. Paced, the bus takes the wire
-time of every byte.
+honours REG_WRITE and ACTION, reboot and factory reset, and answers only at its Baud Rate (the
+rate the host set on the pty). Who answers what (Status Return Level, broadcast, sync, fast
+sync and bulk reads) is the device session's (deltoctl.servo.session), the pty and its pacing
+the kit's server (deltoctl.servo.pty_server). Faults: a missing servo, a corrupted CRC, no
+reply, a servo at another baud rate. Paced, the bus takes the wire time of every byte.
 """
 
 from __future__ import annotations
@@ -32,13 +33,12 @@ from deltoctl.families.dynamixel.models import (
     by_number,
     expected_model,
 )
-from deltoctl.servo.pty_server import PtyServer, Replies, precise_timers, wait_until
+from deltoctl.servo.pty_server import PtyServer, Replies
 from deltoctl.servo.session import Request
 
 if TYPE_CHECKING:
     from deltoctl.profile.model import Component, Hardware
 
-__all__ = ["DynamixelBus", "DynamixelPtyServer", "Servo", "precise_timers", "serve", "wait_until"]
 ACCESS_ERROR, DATA_LENGTH_ERROR, INSTRUCTION_ERROR, RESULT_FAIL = 7, 5, 2, 1
 DATA_RANGE_ERROR, DATA_LIMIT_ERROR = 4, 6
 RAW_PER_REV = 4096
