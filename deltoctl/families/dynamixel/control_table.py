@@ -11,29 +11,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from deltoctl.servo import items
+
 
 @dataclass(frozen=True)
-class Item:
-    address: int
-    size: int
-    name: str
-    access: str = "RW"  # "R" or "RW"
-    default: int = 0
-    signed: bool = False
-    low: int | None = None  # the documented range (None: only the size's)
-    high: int | None = None
-    # a safety setting (a limit, what an error does, where zero is, how the servo moves):
-    # `config restore` writes it only when named with --allow
-    safety: bool = False
+class Item(items.Item):
+    """An X-series item (the kit's, little-endian, two's complement where signed)."""
 
     @property
     def eeprom(self) -> bool:
         return self.address < 64
-
-    @property
-    def key(self) -> str:
-        """The name --allow takes: max-position-limit."""
-        return self.name.lower().replace(" ", "-")
 
 
 XL430_W250 = 1060
@@ -99,7 +86,7 @@ BAUD_RATES = {0: 9600, 1: 57600, 2: 115200, 3: 1_000_000, 4: 2_000_000, 5: 3_000
 
 
 def item_at(address: int, table: tuple[Item, ...] = XL430) -> Item | None:
-    return next((i for i in table if i.address <= address < i.address + i.size), None)
+    return items.item_at(address, table)  # type: ignore[return-value]
 
 
 def item_named(name: str, table: tuple[Item, ...] = XL430, model: str = "") -> Item:
