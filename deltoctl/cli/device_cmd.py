@@ -19,7 +19,7 @@ from deltoctl.cli.output import (
     table,
     warn,
 )
-from deltoctl.errors import WARNINGS, InvalidInput
+from deltoctl.errors import WARNINGS, DeviceError, InvalidInput
 
 AllowMismatch = Annotated[bool, typer.Option(
     "--allow-model-mismatch",
@@ -50,12 +50,17 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
         yield robot
 
 
-def finish(system: Any, extra: list[str] | None = None) -> None:
+def finish(system: Any, extra: list[str] | None = None,
+           failures: list[dict[str, Any]] | None = None) -> None:
     """Exit 3 when the verb finished but with warnings (a block left out, a model mismatch
-    allowed, reconnects)."""
+    allowed, reconnects); exit 1 naming each check of ``failures`` that failed."""
+    from deltoctl.app.checks import failures as failed
+
     warnings = system.warnings() + (extra or [])
     for w in warnings:
         warn(w)
+    if failed(failures or []):
+        raise DeviceError("; ".join(failed(failures or [])))
     if warnings:
         raise typer.Exit(WARNINGS)
 
@@ -118,7 +123,7 @@ def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> N
         from deltoctl.render.identity import detect_parts
 
         show(detect_parts(result))
-    finish(robot.system)
+    finish(robot.system, failures=result["checks"])
 
 
 def gpio_get(ctx: typer.Context) -> None:
