@@ -42,6 +42,14 @@ def failures(checks: list[dict[str, Any]]) -> list[str]:
     return [f"{c['id']}: {c['what']}{_figure(c)}" for c in checks if c["verdict"] == FAIL]
 
 
+def fail_on(checks: list[dict[str, Any]], doing: str = "") -> None:
+    """Raise DeviceError (exit 1) naming each failed check and what is wrong with it."""
+    from deltoctl.errors import DeviceError
+
+    if failures(checks):
+        raise DeviceError(doing + "; ".join(failures(checks)))
+
+
 def _figure(c: dict[str, Any]) -> str:
     value, low, high = c["value"], c["limit"]["min"], c["limit"]["max"]
     if not isinstance(value, (int, float)) or (low is None and high is None):

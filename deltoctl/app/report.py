@@ -242,16 +242,15 @@ def motion_checks(robot: Robot, limits: dict[str, float], steps: Steps | None = 
                   ) -> list[dict[str, Any]]:
     """Every block that can jog: N returns to the home pose, each from a step away (their
     spread per joint), then each joint to its soft limits and back (the error where each
-    move ends)."""
-    profile, checks = robot.profile, []
-    step = profile.safety.max_jog_step or 0.2
+    move ends). A joint whose position is not read (it does not answer) is left out."""
+    checks: list[dict[str, Any]] = []
     steps = steps or Steps(None, 1)
     for m in robot.system.able("jog"):
         steps.stage(f"motion: {m.name}")
         ranges = {j.name: r for j in m.hw.joints if (r := _range(j)) is not None}
         values = robot.read()
         for j in [j for j in ranges if f"{j}/position" not in values]:
-            del ranges[j]  # not answering: its detect check fails
+            del ranges[j]  # its detect check fails
             checks.append(check(f"motion.{j}", f"{j}: motion", None, verdict=SKIP,
                                 note="no position read: not moved"))
         if not ranges:
@@ -262,35 +261,44 @@ def motion_checks(robot: Robot, limits: dict[str, float], steps: Steps | None = 
             checks.append(check(f"motion.{m.name}", f"{m.name}: motion", None, verdict=SKIP,
                                 note=exc.message))
             continue
-        home = {j: min(max(profile.safety.home_pose.get(j, 0.0), lo), hi)
-                for j, (lo, hi) in ranges.items()}
-        seen: dict[str, list[float]] = {j: [] for j in ranges}
-        homes = int(limits["homes"])
-        for i in range(homes):
-            steps.within(f"motion: {m.name}: return home {i + 1} of {homes}", i / (homes + 2))
-            away = {j: min(max(h + (step / 2 if i % 2 else -step / 2), ranges[j][0]),
-                           ranges[j][1]) for j, h in home.items()}
-            _move_in_steps(robot, away, step)
-            _move_in_steps(robot, home, step)
-            values = robot.read()
-            for j in ranges:
-                seen[j].append(values[f"{j}/position"])
-        errors: dict[str, float] = {}
-        for side in (0, 1):
-            steps.within(f"motion: {m.name}: {len(ranges)} joints to their "
-                         f"{'upper' if side else 'lower'} soft limits", (homes + side) / (homes + 2))
-            ends = _move_in_steps(robot, {j: r[side] for j, r in ranges.items()}, step)
-            errors = {j: max(errors.get(j, 0.0), e) for j, e in ends.items()}
-        ends = _move_in_steps(robot, home, step)
+        checks += _block_motion(robot, m.name, ranges, limits, steps)
+    return checks
+
+
+def _block_motion(robot: Robot, block: str, ranges: dict[str, tuple[float, float]],
+                  limits: dict[str, float], steps: Steps) -> list[dict[str, Any]]:
+    """One block's returns home and moves to the soft limits and back, its joints' checks."""
+    profile, checks = robot.profile, []
+    step = profile.safety.max_jog_step or 0.2
+    home = {j: min(max(profile.safety.home_pose.get(j, 0.0), lo), hi)
+            for j, (lo, hi) in ranges.items()}
+    seen: dict[str, list[float]] = {j: [] for j in ranges}
+    homes = int(limits["homes"])
+    for i in range(homes):
+        steps.within(f"motion: {block}: return home {i + 1} of {homes}", i / (homes + 2))
+        away = {j: min(max(h + (step / 2 if i % 2 else -step / 2), ranges[j][0]),
+                       ranges[j][1]) for j, h in home.items()}
+        _move_in_steps(robot, away, step)
+        _move_in_steps(robot, home, step)
+        values = robot.read()
         for j in ranges:
-            checks.append(check(f"motion.{j}.home_repeatability",
-                                f"{j}: spread of {len(seen[j])} returns home",
-                                max(seen[j]) - min(seen[j]), "rad", None,
-                                limits["home_repeatability"]))
-            checks.append(check(f"motion.{j}.following_error",
-                                f"{j}: error at its soft limits and back",
-                                max(errors.get(j, 0.0), ends.get(j, 0.0)), "rad", None,
-                                limits["following_error"]))
+            seen[j].append(values[f"{j}/position"])
+    errors: dict[str, float] = {}
+    for side, side_name in enumerate(("lower", "upper")):
+        steps.within(f"motion: {block}: {len(ranges)} joints to their {side_name} soft limits",
+                     (homes + side) / (homes + 2))
+        ends = _move_in_steps(robot, {j: r[side] for j, r in ranges.items()}, step)
+        errors = {j: max(errors.get(j, 0.0), e) for j, e in ends.items()}
+    ends = _move_in_steps(robot, home, step)
+    for j in ranges:
+        checks.append(check(f"motion.{j}.home_repeatability",
+                            f"{j}: spread of {len(seen[j])} returns home",
+                            max(seen[j]) - min(seen[j]), "rad", None,
+                            limits["home_repeatability"]))
+        checks.append(check(f"motion.{j}.following_error",
+                            f"{j}: error at its soft limits and back",
+                            max(errors.get(j, 0.0), ends.get(j, 0.0)), "rad", None,
+                            limits["following_error"]))
     return checks
 
 

@@ -19,7 +19,7 @@ from deltoctl.cli.output import (
     table,
     warn,
 )
-from deltoctl.errors import WARNINGS, DeviceError, InvalidInput
+from deltoctl.errors import WARNINGS, InvalidInput
 
 AllowMismatch = Annotated[bool, typer.Option(
     "--allow-model-mismatch",
@@ -54,13 +54,12 @@ def finish(system: Any, extra: list[str] | None = None,
            failures: list[dict[str, Any]] | None = None) -> None:
     """Exit 3 when the verb finished but with warnings (a block left out, a model mismatch
     allowed, reconnects); exit 1 naming each check of ``failures`` that failed."""
-    from deltoctl.app.checks import failures as failed
+    from deltoctl.app.checks import fail_on
 
     warnings = system.warnings() + (extra or [])
     for w in warnings:
         warn(w)
-    if failed(failures or []):
-        raise DeviceError("; ".join(failed(failures or [])))
+    fail_on(failures or [])
     if warnings:
         raise typer.Exit(WARNINGS)
 

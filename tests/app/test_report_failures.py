@@ -139,3 +139,17 @@ def test_identity_fields_read_as_words(cli, tmp_path):
     assert re.search(r"^configured model +DG-4F", identify.stdout, re.M)
     assert re.search(r"^model match +yes$", identify.stdout, re.M)
     assert "configured_model" not in identify.stdout and "True" not in identify.stdout
+
+
+def test_motion_checks_leave_out_a_servo_that_does_not_answer(cli, tmp_path):
+    path = tmp_path / "mh5.yaml"
+    path.write_text((REPO / "profiles" / "mh5.yaml").read_text() + RELAXED % ", homes: 1")
+    result = cli("-p", str(path), *MISSING, "--yes", "report", "-o", str(tmp_path / "m.html"),
+                 "--json")
+    assert result.exit_code == 1, result.stderr
+    assert "Traceback" not in result.stderr and "internal error" not in result.stderr
+    doc = unwrap(json.loads(result.stdout))
+    checks = {c["id"]: c for c in doc["checks"]}
+    assert checks["motion.head_y"]["verdict"] == "skip"
+    assert checks["motion.head_p.following_error"]["verdict"] == "pass"
+    assert doc["failed"] == [HEAD_Y]
