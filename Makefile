@@ -21,6 +21,8 @@ demo: $(BIN)/deltoctl
 test: $(BIN)/deltoctl
 	$(BIN)/ruff check deltoctl tests bench
 	$(BIN)/lint-imports
+	site=$$(mktemp -d) && NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict \
+	    --site-dir "$$site"; status=$$?; rm -rf "$$site"; exit $$status
 	$(BIN)/python -m pytest -q
 	$(BIN)/ruff check plugins/deltoctl-canopen
 	$(BIN)/python -m pytest -q plugins/deltoctl-canopen/tests

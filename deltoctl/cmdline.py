@@ -9,8 +9,8 @@ from __future__ import annotations
 GLOBAL_OPTIONS: dict[str, bool] = {
     "--profile": True, "-p": True, "--target": True, "-t": True, "--arg": True,
     "--package-path": True, "--hardware": True, "--log-file": True, "--xacro": False,
-    "--sim": False, "--sim-option": True, "--json": False, "--yes": False, "-y": False,
-    "--verbose": False, "-v": False, "--quiet": False, "-q": False, "--robot": True,
+    "--sim": False, "--sim-fresh": False, "--sim-option": True, "--json": False, "--yes": False,
+    "-y": False, "--verbose": False, "-v": False, "--quiet": False, "-q": False, "--robot": True,
     "--zenoh-config": True,
 }
 # single letters of the global short options, for clusters such as -yq or -vvp NAME

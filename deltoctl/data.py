@@ -9,7 +9,7 @@ _PACKAGE = Path(__file__).resolve().parent
 
 
 def data_dir(name: str) -> Path:
-    """``profiles``, ``urdf`` or ``completions``."""
+    """``profiles``, ``urdf``, ``completions`` or ``examples``."""
     installed = _PACKAGE / "_data" / name
     if installed.is_dir():
         return installed

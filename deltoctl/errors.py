@@ -1,5 +1,5 @@
-"""The exit codes and their meanings (README: Exit codes; ``deltoctl help exit-codes``), and the
-errors that carry their exit code."""
+"""The exit codes and their meanings (``deltoctl help exit-codes``), and the errors that carry
+their exit code."""
 
 from __future__ import annotations
 
@@ -55,6 +55,10 @@ class Refused(DeltoctlError):
     """Refused for safety: a limit, not homed, no confirmation (exit 5)."""
 
     exit_code = REFUSED
+
+
+class NotHomed(Refused):
+    """Refused for safety because a joint is not homed (exit 5)."""
 
 
 class ProtocolError(DeviceError):

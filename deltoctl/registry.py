@@ -478,7 +478,12 @@ def transports() -> dict[str, Transport]:
 
 
 def scheme_of(url: str) -> str:
-    return url.partition("://")[0] if "://" in url else ""
+    """A URL's scheme: ``tcp`` of ``tcp://…``, or that of a transport whose URLs have no
+    authority (``usb:0403:6014``)."""
+    if "://" in url:
+        return url.partition("://")[0]
+    head, colon, _ = url.partition(":")
+    return head if colon and head in transport_refs() else ""
 
 
 def transport_of(url: str) -> Transport:

@@ -155,20 +155,23 @@ def _name(bus: str, data: bytes) -> str | None:
 
 
 def trace_tcp(link_: Any) -> None:
-    """Swap a TcpLink's send and recv_frame for traced ones (this link only)."""
+    """Swap a TcpLink's send and recv_into for traced ones (this link only): each send, and
+    the bytes of each receive (a frame, as a rule: a protocol's replies come one at a time)."""
     bus = f"{link_.host}:{link_.port}"
-    send, recv = link_.send, link_.recv_frame
+    send, recv_into = link_.send, link_.recv_into
 
     def traced_send(data: bytes) -> None:
         packet(bus, "tx", bytes(data), _name(bus, bytes(data)))
         send(data)
 
-    def traced_recv(timeout: float) -> bytes:
-        frame = recv(timeout)
-        packet(bus, "rx", frame, _name(bus, frame))
-        return frame
+    def traced_recv_into(buffer: Any, timeout: float) -> int:
+        count = recv_into(buffer, timeout)
+        if count:
+            data = bytes(buffer[:count])
+            packet(bus, "rx", data, _name(bus, data))
+        return count
 
-    link_.send, link_.recv_frame = traced_send, traced_recv
+    link_.send, link_.recv_into = traced_send, traced_recv_into
 
 
 def trace_i2c(bus: Any) -> None:

@@ -5,25 +5,102 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import dataclass
 
 from deltoctl.errors import InvalidInput
 
-_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-zA-Z°]*)\s*$")
-_SCALE = {"": 1.0, "rad": 1.0, "deg": math.pi / 180, "°": math.pi / 180, "m": 1.0, "mm": 1e-3}
+_QUANTITY = re.compile(
+    r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-zA-Z°]*(?:/s)?)\s*$")
+ANGLE, LENGTH = "angle", "length"
+_DEG = math.pi / 180
+# a unit as typed: (its scale to SI, its dimension: angle, length, or either per second)
+_UNITS: dict[str, tuple[float, str]] = {
+    "rad": (1.0, ANGLE), "deg": (_DEG, ANGLE), "°": (_DEG, ANGLE),
+    "m": (1.0, LENGTH), "mm": (1e-3, LENGTH),
+}
+_UNITS.update({f"{u}/s": (scale, f"{dim}/s") for u, (scale, dim) in list(_UNITS.items())})
+# what a joint's position is in: the SI unit, the one typed most
+JOINT_DIMENSIONS = {"revolute": ANGLE, "continuous": ANGLE, "prismatic": LENGTH}
+_NAMES = {ANGLE: ("an angle", "rad", "deg"), LENGTH: ("a length", "m", "mm")}
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """A number as typed: its value in SI, its unit as typed ("" for a bare number) and the
+    unit's dimension (None for a bare number)."""
+
+    value: float
+    unit: str = ""
+    dimension: str | None = None
+
+
+def parse_unit(text: str | float | int) -> Quantity:
+    """Parse a number with an optional unit (rad, deg, m, mm, or one of them per second).
+    Raises ValueError."""
+    if isinstance(text, bool):
+        raise ValueError(f"expected a number, got {text!r}")
+    if isinstance(text, (int, float)):
+        return Quantity(float(text))
+    match = _QUANTITY.match(str(text))
+    if not match or (match.group(2) and match.group(2) not in _UNITS):
+        raise ValueError(
+            f"expected a number with an optional unit (rad, deg, m, mm), got {text!r}"
+        )
+    unit = match.group(2)
+    scale, dimension = _UNITS[unit] if unit else (1.0, None)
+    return Quantity(float(match.group(1)) * scale, unit, dimension)
 
 
 def parse_quantity(text: str | float | int) -> float:
     """Parse a number with an optional unit into SI (rad or m). Raises ValueError."""
-    if isinstance(text, bool):
-        raise ValueError(f"expected a number, got {text!r}")
-    if isinstance(text, (int, float)):
-        return float(text)
-    match = _QUANTITY.match(str(text))
-    if not match or match.group(2) not in _SCALE:
-        raise ValueError(
-            f"expected a number with an optional unit (rad, deg, m, mm), got {text!r}"
-        )
-    return float(match.group(1)) * _SCALE[match.group(2)]
+    return parse_unit(text).value
+
+
+def joint_dimension(joint_type: str) -> str | None:
+    """What a joint's position is: an angle (revolute, continuous), a length (prismatic)."""
+    return JOINT_DIMENSIONS.get(joint_type)
+
+
+def mismatch(given: Quantity, dimension: str | None, speed: bool = False) -> str | None:
+    """Why ``given`` does not fit a joint whose position is ``dimension`` (None: it fits).
+    A bare number fits (SI); a speed may be typed as a position unit, per second."""
+    if given.dimension is None or dimension is None:
+        return None
+    if given.dimension == dimension or (speed and given.dimension == f"{dimension}/s"):
+        return None
+    name, si, common = _NAMES[dimension]
+    if speed:
+        return (f"a speed in {si}/s or {common}/s (a bare number is {si}/s), "
+                f"not {given.unit}")
+    return f"{name} in {si} or {common} (a bare number is {si}), not {given.unit}"
+
+
+def joint_quantity(text: str | float, joint_type: str, what: str, joint: str,
+                   speed: bool = False) -> Quantity:
+    """A finite quantity typed for ``what`` of ``joint``, its unit of the joint's dimension;
+    InvalidInput (exit 2) naming the joint's unit otherwise."""
+    value = quantity(text, what)
+    given = parse_unit(text)
+    wrong = mismatch(given, joint_dimension(joint_type), speed)
+    if wrong:
+        raise InvalidInput(f"{what} {text}: {joint} is a {joint_type} joint, so it takes "
+                           f"{wrong}")
+    return Quantity(value, given.unit, given.dimension)
+
+
+def shown(value: float, dimension: str | None, unit: str = "", signed: bool = False) -> str:
+    """A joint's position (SI) for people: in ``unit`` when an angle or length was typed in
+    it, else degrees for an angle and millimetres for a length, with fixed decimals."""
+    sign = "+" if signed else ""
+    unit = unit.removesuffix("/s")
+    if dimension is None or unit not in _UNITS or _UNITS[unit][1] != dimension:
+        unit = {ANGLE: "deg", LENGTH: "mm"}.get(dimension or "", "")
+    if not unit:
+        return f"{value:{sign}.4f}"
+    scaled = value / _UNITS[unit][0]
+    if unit in ("deg", "°"):
+        return f"{scaled:{sign}.2f}°"
+    return f"{scaled:{sign}.{2 if unit == 'mm' else 4}f} {unit}"
 
 
 def _parsed(text: str | float, what: str) -> float:

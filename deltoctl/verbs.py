@@ -108,6 +108,7 @@ TABLE: dict[str, Verb] = {
     "bench": Verb(READS, "deltoctl bench loop --duration 2", "bench_cmd", remote=False, subs={
         "loop": Verb(READS), "dynamixel": Verb(READS), "i2c": Verb(READS),
     }),
+    "ports": Verb(READS, "deltoctl ports --json", "ports_cmd"),
     "doctor": Verb(READS, "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 doctor",
                    "doctor_cmd"),
     "completion": Verb(READS, "deltoctl completion bash > "

@@ -150,3 +150,5 @@ needs_samples = pytest.mark.skipif(not SAMPLES.is_dir(), reason="../shared/data 
 @pytest.fixture(autouse=True)
 def _private_cache(tmp_path_factory, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path_factory.mktemp("cache")))
+    # --sim finds no 'sim serve' of the user's, only those a test starts
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path_factory.mktemp("run")))

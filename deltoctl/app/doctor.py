@@ -10,6 +10,7 @@ detail, the fix to type, the exit code it stands for when it fails).
 from __future__ import annotations
 
 import contextlib
+import os
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -18,8 +19,10 @@ from deltoctl.transport.doctor import check
 
 if TYPE_CHECKING:
     from deltoctl.profile.model import Profile
+    from deltoctl.transport.adapters import SerialAdapter
 
-Targets = dict[str, tuple[str, set[str]]]  # bus → (its URL, the families on it)
+Targets = dict[str, tuple[str, set[str], float]]  # bus → (its URL, its families, loop rate)
+LOOP_HZ = 50.0  # the rate stream and record read a bus at unless the profile says another
 
 
 def diagnose(profile: str | None, load: Callable[[], Profile], targets: Sequence[str] = (),
@@ -38,8 +41,8 @@ def diagnose(profile: str | None, load: Callable[[], Profile], targets: Sequence
                  else _bare(targets))
         if not profile and not found:
             results += host_checks()
-        for bus, (url, families) in found.items():
-            results += url_checks(bus, url, families, timeout)
+        for bus, (url, families, rate) in found.items():
+            results += url_checks(bus, url, families, timeout, rate)
     return {"profile": getattr(prof, "name", profile),
             "ok": all(r["ok"] for r in results), "checks": results}
 
@@ -97,7 +100,9 @@ def _targets(prof: Profile, given: Sequence[str], hardware: Sequence[str], sim: 
             results.append(check("target", bus, False, f"{hw.name} has no URL",
                                  f"deltoctl -p {prof.name} -t {bus}=URL doctor", USAGE))
             continue
-        targets.setdefault(bus, (url, set()))[1].add(family.name)
+        _, families, rate = targets.get(bus, (url, set(), 0.0))
+        families.add(family.name)
+        targets[bus] = (url, families, max(rate, float(hw.rw_rate) or LOOP_HZ))
     return targets
 
 
@@ -107,17 +112,19 @@ def _bare(given: Sequence[str]) -> Targets:
     targets: Targets = {}
     for item in given:
         name, found, url = item.partition("=")
-        if not found or "://" in name:
+        if not found or ":" in name:
             name, url = item, item
-        targets[name] = (url, set())
+        targets[name] = (url, set(), 0.0)
     return targets
 
 
 # -- one target -------------------------------------------------------------------------------
 
-def url_checks(bus: str, url: str, families: set[str], timeout: float) -> list[dict[str, Any]]:
+def url_checks(bus: str, url: str, families: set[str], timeout: float,
+               rate_hz: float = 0.0) -> list[dict[str, Any]]:
     """The checks of one bus's URL: those its transport (by the URL's scheme) names, with
-    the advice of the families on the bus for a device that refuses."""
+    the advice of the families on the bus for a device that refuses, and the rate a loop
+    asks of the bus."""
     from deltoctl import registry
     from deltoctl.transport import Target
 
@@ -126,7 +133,7 @@ def url_checks(bus: str, url: str, families: set[str], timeout: float) -> list[d
     try:
         transport = registry.transport_of(url)
         transport.parse(url)
-        return transport.checks(Target(bus, url, timeout, hints))
+        return transport.checks(Target(bus, url, timeout, hints, rate_hz))
     except DeltoctlError as exc:
         return [check("target", bus, False, exc.message, exc.hint, exc.exit_code)]
 
@@ -139,3 +146,71 @@ def host_checks() -> list[dict[str, Any]]:
 
     return [c for t in registry.transports().values() if t.host_checks
             for c in t.host_checks()]
+
+
+# -- the udev rule ----------------------------------------------------------------------------
+
+def udev_rule_text(profile: str | None, load: Callable[[], Profile],
+                   targets: Sequence[str] = (), hardware: Sequence[str] = ()) -> str:
+    """The udev rule of the profile's serial adapters (every USB one without a profile);
+    Unreachable when there is none to name."""
+    from deltoctl.errors import Unreachable
+    from deltoctl.transport.adapters import udev_rule
+
+    chosen = rule_adapters(profile, load, targets, hardware)
+    if not chosen:
+        raise Unreachable("no USB serial adapter to name",
+                          hint="plug it in; deltoctl ports lists the adapters")
+    return udev_rule(chosen)
+
+
+def rule_adapters(profile: str | None, load: Callable[[], Profile],
+                  targets: Sequence[str] = (),
+                  hardware: Sequence[str] = ()) -> list[tuple[str, SerialAdapter]]:
+    """(the /dev name to give, the adapter) of each serial bus of the profile, named
+    PROFILE-BUS; without a profile, of every USB serial adapter, named deltoctl-SERIAL."""
+    from deltoctl.transport.adapters import adapter_of_target, serial_adapters
+
+    if not profile:
+        return [(f"deltoctl-{a.serial or a.name}", a) for a in serial_adapters(holders=False)
+                if a.vid]
+    prof = load()
+    results: list[dict[str, Any]] = []
+    with contextlib.ExitStack() as stack:
+        found = _targets(prof, targets, hardware, False, stack, results)
+    chosen = []
+    for bus, (url, _, _) in found.items():
+        adapter = adapter_of_target(url)
+        if adapter is not None and adapter.vid:
+            chosen.append((f"{prof.name}-{bus}", adapter))
+    return chosen
+
+
+def install_udev_rule(text: str) -> list[str]:
+    """Install the rule (root only), then have udev read it and apply it to the adapters
+    plugged in now. What was done, one line each; Refused when this is not root."""
+    import subprocess
+
+    from deltoctl.errors import Refused
+    from deltoctl.transport.adapters import RULES_FILE, root, under
+
+    if os.geteuid() != 0:
+        raise Refused(f"writing {RULES_FILE} needs root",
+                      hint="sudo deltoctl doctor --write-udev-rule (with the same -p and -t), "
+                           f"or: deltoctl doctor --udev-rule | sudo tee {RULES_FILE}")
+    path = under(root(), RULES_FILE)
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(text)
+    done = [f"wrote {path}"]
+    if root() != "/":
+        return done  # a laid-out tree: no udev to tell
+    for argv in (["udevadm", "control", "--reload"], ["udevadm", "trigger", "--action=add",
+                                                      "--subsystem-match=tty",
+                                                      "--subsystem-match=usb-serial"]):
+        try:
+            subprocess.run(argv, check=True, capture_output=True, timeout=30)
+            done.append(" ".join(argv))
+        except (OSError, subprocess.SubprocessError) as exc:
+            done.append(f"{' '.join(argv)} failed ({exc}): run it by hand")
+    return done

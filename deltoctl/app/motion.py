@@ -15,6 +15,7 @@ from deltoctl.errors import DeviceError, InvalidInput
 if TYPE_CHECKING:
     from deltoctl.core.system import System
     from deltoctl.profile.model import Component, Profile
+    from deltoctl.units import Quantity
 
 Progress = Callable[[float], None]
 # a homing joint's progress: its name, what it does now, how far (0 to 1)
@@ -83,37 +84,95 @@ def jog_targets(system: System, steps: Sequence[tuple[str, str | float | None]],
                 to: str | float | None = None) -> tuple[dict[str, float], list[str]]:
     """Each joint's target — its step (``5deg``, ``0.1``) from where it is now, or ``to`` —
     once every block holding one can move (homed first …); and each move described, for
-    the confirmation."""
-    from deltoctl.units import quantity
+    the confirmation, in the unit typed (else degrees or millimetres). A unit that is not
+    the joint's (``5mm`` on a revolute joint) is refused before anything is read."""
+    from deltoctl.units import joint_dimension, shown
 
-    names = [name for name, _ in steps]
+    typed = {name: _joint_step(system.profile, name, step, to) for name, step in steps}
+    names = list(typed)
     ready_to_jog(system, names)
     present = present_positions(system, names)
     targets, moves = {}, []
-    for name, step in steps:
+    for name, given in typed.items():
         start = present[name]
-        target = quantity(to, "--to") if to is not None else \
-            start + quantity("" if step is None else step, "DELTA")
+        target = given.value if to is not None else start + given.value
         if not math.isfinite(target):
             raise InvalidInput(f"the target of {name} must be finite")
         targets[name] = target
-        moves.append(f"{name} ({system.member(name).name}) from {start:.4f} to "
-                     f"{target:.4f} ({math.degrees(target - start):+.1f}°)")
+        dim = joint_dimension(_joint(system.profile, name).joint_type)
+        moves.append(f"{name} ({system.member(name).name}) from "
+                     f"{shown(start, dim, given.unit)} to {shown(target, dim, given.unit)} "
+                     f"({shown(target - start, dim, given.unit, signed=True)})")
     return targets, moves
+
+
+def _joint(profile: Profile, name: str) -> Component:
+    comp = profile.component(name)
+    if comp is None or comp.kind != "joint":
+        raise InvalidInput(f"{profile.name} has no joint {name!r}"
+                           + _near(name, [j.name for j in profile.joints()]))
+    return comp
+
+
+def _joint_step(profile: Profile, name: str, step: str | float | None,
+                to: str | float | None) -> Quantity:
+    """A jog's DELTA (or --to POS) for ``name``, in the joint's unit."""
+    from deltoctl.units import joint_quantity
+
+    what, text = ("--to", to) if to is not None else ("DELTA", "" if step is None else step)
+    return joint_quantity(text, _joint(profile, name).joint_type, what, name)
+
+
+def joints_quantity(profile: Profile, joints: Sequence[str], text: str | float | None,
+                    what: str, speed: bool = False) -> float | None:
+    """One quantity for every joint in ``joints`` (a speed, a tolerance) in SI, its unit
+    that of each of them (a bare number is SI for each); None when none is given."""
+    from deltoctl.units import joint_quantity, quantity
+
+    if text is None or text == "":
+        return None
+    value = quantity(text, what)
+    for name in joints:
+        joint_quantity(text, _joint(profile, name).joint_type, what, name, speed=speed)
+    return value
+
+
+def joint_speed(profile: Profile, joints: Sequence[str], velocity: str | float | None,
+                what: str = "--velocity") -> float | None:
+    """A move's speed (``20deg/s``, ``10mm/s``, a bare number in rad/s or m/s) in SI, its
+    unit that of every joint in ``joints``; None when none is given. Not positive: exit 2."""
+    speed = joints_quantity(profile, joints, velocity, what, speed=True)
+    if speed is not None and not speed > 0:
+        raise InvalidInput(f"{what} must be positive")
+    return speed
+
+
+def joint_positions(profile: Profile, targets: Mapping[str, str | float],
+                    what: str = "target") -> dict[str, float]:
+    """Absolute targets (``30deg``, ``12mm``, a bare number in rad or m) in SI, each in its
+    joint's unit."""
+    from deltoctl.units import joint_quantity
+
+    return {name: joint_quantity(value, _joint(profile, name).joint_type, what, name).value
+            for name, value in targets.items()}
 
 
 def move(system: System, targets: Mapping[str, float], velocity: float | None = None,
          progress: Progress | None = None, *, jog: bool = True) -> dict[str, Any]:
-    """Move joints to ``targets``, the blocks on several links at once, and stop every block
-    on the way out; the report a ``jog --json`` prints."""
+    """Move joints to ``targets``, the blocks on several links at once, and stop the blocks
+    that moved on the way out; the report a ``jog --json`` prints. A move the envelope or a
+    block's motion rules refuse has no effect on any block: checked before anything is sent,
+    it stops nothing either."""
     from deltoctl.core.runner import interrupted_by_signals
 
     targets = dict(targets)
+    system.check_move(targets, velocity, jog=jog)
+    system.check_ready(targets)
     try:
         with interrupted_by_signals():
             result = system.move(targets, velocity, progress, jog=jog)
     finally:
-        system.stop()
+        system.stop(system.by_block(targets))
     values = system.read()
     return {
         "settled": result.settled,
@@ -135,8 +194,8 @@ def fail_unsettled(report: Mapping[str, Any]) -> None:
 
 @dataclass
 class HomePlan:
-    """What ``home`` will do: joints with a homing routine (into their hard stops, one at a
-    time), and the others' home poses."""
+    """What ``home`` will do: joints with a homing routine (into a hard stop, or a drive's own
+    homing mode; one at a time), and the others' home poses."""
 
     profile: str
     routine: list[str] = field(default_factory=list)
@@ -145,8 +204,8 @@ class HomePlan:
     def describe(self) -> str:
         what = []
         if self.routine:
-            what.append(f"home {', '.join(self.routine)} one at a time, each running into its "
-                        "hard stop")
+            what.append(f"home {', '.join(self.routine)} one at a time, each by its own "
+                        "routine (into its hard stop, or the drive's homing mode)")
         if self.targets:
             what.append(f"move {len(self.targets)} joints to the home pose")
         return f"{self.profile}: " + "; then ".join(what)
@@ -209,6 +268,8 @@ def home(system: System, plan: HomePlan, force: bool = False, velocity: float | 
     if unable:
         system.notes.append(f"{', '.join(unable)}: cannot home")
     targets = {j: t for j, t in plan.targets.items() if system.member(j).can("home")}
+    if targets:  # the home pose at this speed, before any routine runs
+        system.check_move(targets, velocity, jog=False)
     started = time.monotonic()
     report: dict[str, Any] = {"blocks": []}
     if plan.routine:

@@ -640,22 +640,28 @@ def run_replay(system: System, recorded: Recorded, max_deviation: float,
                notice: Callable[[str], None] | None = None) -> tuple[ReplayResult,
                                                                       Deviated | None]:
     """Move to the recorded start pose, then play the commands at their recorded timing;
-    every block is stopped on the way out. Returns the result, and why the replay was
-    stopped (a joint outside its limits or too far from its recording) or None."""
+    the blocks it commands are stopped on the way out. Returns the result, and why the
+    replay was stopped (a joint outside its limits or too far from its recording) or None.
+    A start pose outside the envelope, or a device not ready to move, is refused before
+    anything is sent or stopped."""
     from deltoctl.core.runner import interrupted_by_signals
 
     joints = recorded.joints
-    for block, names in system.by_block(joints).items():
+    blocks = system.by_block(joints)
+    for block, names in blocks.items():
         if not system.member(names[0]).can("jog"):
             raise InvalidInput(f"{block} cannot move its joints")
     player = Replay(system, recorded, max_deviation)
+    start = recorded.start_pose()
+    if start:
+        system.check_move(start, jog=False)  # a known pose, as home's
+    if not on_simulator:
+        system.check_ready(joints)  # e.g. not homed
     try:
         with interrupted_by_signals():
             if on_simulator:
                 _home_simulated(system, joints, notice)
-            for names in system.by_block(joints).values():
-                system.member(names[0]).driver.check_motion(names)  # e.g. not homed
-            start = recorded.start_pose()
+                system.check_ready(joints)
             if start:
                 moved = system.move(start, jog=False)  # a known pose, as home's
                 if not moved.settled:
@@ -663,10 +669,10 @@ def run_replay(system: System, recorded: Recorded, max_deviation: float,
                                       f"{', '.join(moved.unsettled)}; nothing replayed")
             try:
                 return player.run(progress), None
-            except Deviated as exc:  # the finally below stops every block first
+            except Deviated as exc:  # the finally below stops its blocks first
                 return exc.result, exc
     finally:
-        system.stop()
+        system.stop(blocks)
 
 
 def replay_report(path: Path, system: System, recorded: Recorded, result: ReplayResult,

@@ -284,34 +284,41 @@ class Robot:
 
     # -- motion --------------------------------------------------------------------------------
 
-    def move(self, targets: Mapping[str, float], velocity: float | None = None,
+    def move(self, targets: Mapping[str, float | str], velocity: float | str | None = None,
              progress: Callable[[float], None] | None = None) -> dict[str, Any]:
-        """Move joints to absolute targets (radians or metres), the blocks on several links
-        at once; every block is stopped on the way out. A target outside the envelope is
-        refused (``Refused``) before anything is sent. Returns the report a ``jog --json``
-        prints."""
-        from deltoctl.app.motion import move
+        """Move joints to absolute targets (``30deg``, ``12mm``, or a bare number in radians
+        or metres), the blocks on several links at once; the blocks that moved are stopped on
+        the way out. A unit that is not the joint's is ``InvalidInput``; a target outside the
+        envelope is refused (``Refused``) before anything is sent, with no effect at all (no
+        stop either). Returns the report a ``jog --json`` prints (its data, the blocks and
+        ``settled``, ``seconds``, ``unsettled``, in one dict)."""
+        from deltoctl.app.motion import joint_positions, joint_speed, move
 
-        return move(self.system, targets, velocity, progress)
+        positions = joint_positions(self.profile, targets)
+        speed = joint_speed(self.profile, list(positions), velocity, "velocity")
+        return move(self.system, positions, speed, progress)
 
     def home(self, joints: Sequence[str] = (), force: bool = False,
-             velocity: float | None = None) -> dict[str, Any]:
+             velocity: float | str | None = None) -> dict[str, Any]:
         """Home the robot's joints (or ``joints``): homing routines into their hard stops,
-        the others to the profile's home pose."""
-        from deltoctl.app.motion import home, plan_home
+        the others to the profile's home pose (at ``velocity``: ``20deg/s``, a bare number
+        in rad/s or m/s)."""
+        from deltoctl.app.motion import home, joint_speed, plan_home
 
         hardware = [m.name for m in self.system]
-        return home(self.system, plan_home(self.profile, hardware, joints), force, velocity)
+        plan = plan_home(self.profile, hardware, joints)
+        speed = joint_speed(self.profile, list(plan.targets), velocity, "velocity")
+        return home(self.system, plan, force, speed)
 
     def jog_targets(self, deltas: Mapping[str, float | str]) -> dict[str, float]:
-        """Each joint's target ``delta`` (a number, or a quantity such as ``5deg``) from
-        where it is now."""
+        """Each joint's target ``delta`` (a number in rad or m, or a quantity such as
+        ``5deg``, in the joint's unit) from where it is now."""
         from deltoctl.app.motion import jog_targets, moving_joints
 
         moving_joints(self.profile, list(deltas))
         return jog_targets(self.system, list(deltas.items()))[0]
 
-    def jog(self, deltas: Mapping[str, float | str], velocity: float | None = None,
+    def jog(self, deltas: Mapping[str, float | str], velocity: float | str | None = None,
             progress: Callable[[float], None] | None = None) -> dict[str, Any]:
         """Move joints by ``deltas`` from where they are (``max_jog_step`` bounds each)."""
         return self.move(self.jog_targets(deltas), velocity, progress)
@@ -398,6 +405,11 @@ class Robot:
 
     # -- data ----------------------------------------------------------------------------------
 
+    def joint_types(self) -> dict[str, str]:
+        """Each joint's ros2_control type (revolute, continuous, prismatic …): what its
+        position is, an angle or a length."""
+        return {j.name: j.joint_type for j in self.profile.joints()}
+
     def interfaces(self, patterns: Sequence[str] = ()) -> list[str]:
         """The state interfaces whose names match the globs (every one without globs)."""
         import fnmatch
@@ -444,8 +456,8 @@ class Robot:
         """Play a recording's commands (``jog --record``) back on this robot under its own
         profile's limits (a looser recorded profile is refused; differences are warnings):
         first to the recorded start pose, then at the recorded timing. A joint outside its
-        limits or further than ``max_deviation`` from the recording stops every block
-        (``Deviated``, exit 5). Returns the per-joint comparison."""
+        limits or further than ``max_deviation`` from the recording stops every block it
+        commands (``Deviated``, exit 5). Returns the per-joint comparison."""
         from deltoctl.app.replay import plan_replay, replay_report, run_replay
 
         path = Path(recording)

@@ -70,7 +70,7 @@ def agent(
     Ctrl-C or SIGTERM: every verb as a queryable, a liveliness token, a deadman on motion.
 
     Motion and outputs are served only to authenticated callers: when every link of the
-    agent is mutual TLS (see the README, Remote robots)."""
+    agent is mutual TLS (`deltoctl help security`)."""
     from deltoctl.cli.fleet_cmd import agent_checks
     from deltoctl.fleet import check_robot, host
     from deltoctl.fleet.agent import Agent
@@ -128,8 +128,12 @@ def _served_simulated() -> None:
 
 def _run(argv: list[str]) -> int:
     """One command line, as ``deltoctl`` runs it; its exit code."""
+    from deltoctl.cli import device_cmd
     from deltoctl.cli import main as cli
+    from deltoctl.fleet import SET_SAFE
 
+    if argv[:1] == [SET_SAFE]:  # the agent's own, after it killed a motion verb
+        device_cmd.SET_SAFE, argv = True, argv[1:]
     sys.argv = ["deltoctl", *argv]
     try:
         cli.main()

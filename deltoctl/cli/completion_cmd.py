@@ -30,7 +30,7 @@ def register(app: typer.Typer) -> None:
         out: Annotated[Path | None, typer.Option(
             "--out", metavar="DIR", help="Where the manual pages go (with man).")] = None,
     ) -> None:
-        """Print the completion script for a shell (see README: Shell completion), or write
+        """Print the completion script for a shell (`deltoctl help shell-completion`), or write
         the manual pages (deltoctl.1, deltoctl-VERB.1) to a directory."""
         if shell == "man":
             write_manpages(out)

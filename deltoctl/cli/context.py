@@ -20,6 +20,7 @@ class Options:
         profile: str | None = None,
         target: list[str] | None = None,
         sim: bool = False,
+        sim_fresh: bool = False,
         sim_options: list[str] | None = None,
         json: bool = False,
         yes: bool = False,
@@ -35,6 +36,7 @@ class Options:
         self.profile = profile
         self.target = target or []
         self.sim = sim
+        self.sim_fresh = sim_fresh  # --sim-fresh: never a running 'sim serve'
         self.sim_options = sim_options or []  # --sim-option NAME=VALUE, as given
         self.json = json
         self.yes = yes

@@ -19,7 +19,7 @@ from deltoctl.cli.output import (
     table,
     warn,
 )
-from deltoctl.errors import WARNINGS, InvalidInput
+from deltoctl.errors import WARNINGS, InvalidInput, NotHomed
 
 AllowMismatch = Annotated[bool, typer.Option(
     "--allow-model-mismatch",
@@ -29,25 +29,45 @@ AllowMismatch = Annotated[bool, typer.Option(
 # why every block runs on a simulator that -t names like a device: set by 'deltoctl agent
 # --sim' in the processes that run its verbs, so that their JSON and recordings say simulated
 SERVED_SIMULATED: str | None = None
+# every block set safe on the way out, whatever the verb sent: set by the agent's verb process
+# that runs the connect after a motion verb was killed (deltoctl.fleet.SET_SAFE)
+SET_SAFE = False
 
 
 @contextlib.contextmanager
 def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any = None,
                probe: bool = False) -> Iterator[Any]:
     """The robot of the selected profile's blocks (``--hardware``), configured and active;
-    with ``--sim``, each block's simulator is started first. Pass ``profile`` when the verb
-    loaded it already; ``probe`` for a verb that looks at a bus where nothing may answer."""
+    with ``--sim``, on the ``sim serve`` of this profile running for the user, else on
+    simulators started first. Pass ``profile`` when the verb loaded it already; ``probe`` for
+    a verb that looks at a bus where nothing may answer."""
     from deltoctl.app.robot import open_robot as open_app_robot
+    from deltoctl.sim import running
 
+    prof = profile or opts.load_profile()
     sim: Any = opts.sim
     if opts.sim and opts.sim_options:
         from deltoctl.sim.serve import options_given
 
         sim = options_given(opts.sim_options, "--sim-option")
-    with open_app_robot(profile or opts.load_profile(), opts.target, sim=sim,
-                        hardware=opts.hardware, allow_model_mismatch=allow_model_mismatch,
-                        probe=probe, notice=info, served_by=SERVED_SIMULATED) as robot:
-        yield robot
+    found = (running.find(prof, sim if isinstance(sim, dict) else {}, opts.hardware, warn)
+             if opts.sim and not opts.sim_fresh else None)
+    if found is not None:
+        info(f"using {found.name} of {found.profile}; --sim-fresh starts one of its own")
+    try:
+        with open_app_robot(prof, [*opts.target, *found.targets] if found else opts.target,
+                            sim=False if found else sim, hardware=opts.hardware,
+                            allow_model_mismatch=allow_model_mismatch, probe=probe, notice=info,
+                            served_by=found.name if found else SERVED_SIMULATED) as robot:
+            try:
+                yield robot
+            finally:
+                if SET_SAFE:
+                    robot.system.make_safe()
+    except NotHomed as exc:
+        if opts.sim and found is None:
+            exc.hint = running.fresh_hint(prof.name)
+        raise
 
 
 def finish(system: Any, extra: list[str] | None = None,
@@ -217,9 +237,11 @@ def stream(
     foxglove_host: FoxgloveHostOpt = "127.0.0.1",
     foxglove_origin: StreamOriginOpt = None,
 ) -> None:
-    """Stream every block's state interfaces: a live table on a terminal, NDJSON with --json
-    or when piped; with --foxglove, to Foxglove as well (every interface, whatever -i picks).
-    Exit 4 when a link is down at the end, 3 when one was lost and came back."""
+    """Stream every block's state interfaces: a live table on a terminal (fitted to it; the
+    rows that do not fit are counted, -i picks fewer), NDJSON with --json or when piped; with
+    --foxglove, to Foxglove as well (every interface, whatever -i picks). Exit 4 when a link
+    is down at the end, 3 when one was lost and came back."""
+    from deltoctl.app.latency import loop_warnings
     from deltoctl.app.sinks import LinesSink
     from deltoctl.cli.record_cmd import foxglove_live, start_foxglove
     from deltoctl.core.runner import run_cycles
@@ -232,7 +254,7 @@ def stream(
         system = robot.system
         names = robot.interfaces(interfaces or [])
         sink: Any = (LinesSink(names, emit_json_line) if opts.json or not stdout_is_terminal()
-                     else LiveSink(names, rate))
+                     else LiveSink(names, rate, robot.joint_types()))
         links = LinkWatch(system)
         stats = run_cycles(system, rate, duration, [sink, links, *start_foxglove(live, system)])
     info(f"{sink.samples} samples of {len(names)} interfaces")
@@ -240,4 +262,5 @@ def stream(
         emit_json({"samples": sink.samples, "interfaces": len(names),
                    "loop": stats.summary()}, err=True)
     links.finish()
-    finish(system)
+    finish(system, loop_warnings([m.url for m in system.members], rate,
+                                 stats.summary()["real_rate"]))

@@ -8,9 +8,9 @@ from typing import Annotated
 
 import typer
 
-from deltoctl.app.doctor import diagnose, exit_code
+from deltoctl.app.doctor import diagnose, exit_code, install_udev_rule, udev_rule_text
 from deltoctl.cli.context import options
-from deltoctl.cli.output import emit_json, say
+from deltoctl.cli.output import emit_json, info, say
 from deltoctl.render.doctor import doctor_lines
 
 
@@ -22,12 +22,23 @@ def doctor(
     ctx: typer.Context,
     timeout: Annotated[float, typer.Option(
         "--timeout", help="Seconds to wait for each target to accept a connection.")] = 1.0,
+    udev_rule: Annotated[bool, typer.Option(
+        "--udev-rule", help="Print a udev rule for the serial adapters (the profile's buses, "
+                            "or all): a named /dev link each and a 1 ms latency timer.")] = False,
+    write_udev_rule: Annotated[bool, typer.Option(
+        "--write-udev-rule", help="Install that rule (root), then udevadm reload and "
+                                  "trigger.")] = False,
 ) -> None:
     """Check the set-up before a bring-up: profile, ports, buses, routes, targets.
 
     One line per check with the fix to type; exit 0 only when all pass. Without -p: the
     -t URLs, or what each transport finds on this host (its ports and buses)."""
     opts = options(ctx)
+    if udev_rule or write_udev_rule:
+        text = udev_rule_text(opts.profile, opts.load_profile, opts.target, opts.hardware)
+        for line in install_udev_rule(text) if write_udev_rule else [text.rstrip("\n")]:
+            (info if write_udev_rule else say)(line)
+        return
     result = diagnose(opts.profile, opts.load_profile, opts.target, opts.hardware, opts.sim,
                       timeout)
     if opts.json:
@@ -38,3 +49,4 @@ def doctor(
     code = exit_code(result["checks"])
     if code:
         raise typer.Exit(code)
+

@@ -56,9 +56,11 @@ def forward(ctx: typer.Context) -> NoReturn:
     """Run the command line on ``--robot``'s agent: its stdout, stderr (errors naming the
     robot) and exit code, as if run there."""
     from deltoctl.cli.main import ARGV
+    from deltoctl.cli.output import stdout_is_terminal
     from deltoctl.fleet import MOTION, check_robot
     from deltoctl.fleet.client import ErrorLines, RemoteCall, caller_session
     from deltoctl.fleet.run import strip_remote, verb_of
+    from deltoctl.render.stream import live_lines
 
     opts = options(ctx)
     robot = check_robot(opts.robot or "")
@@ -70,8 +72,10 @@ def forward(ctx: typer.Context) -> NoReturn:
             raise typer.Exit(_remote_record(opts, robot, argv, errors.feed))
         if verb in MOTION and _asked(opts, f"robot {robot}: {' '.join(argv)}"):
             argv = ["--yes", *argv]
-        with caller_session(opts.zenoh_config, f"robot {robot}") as session:
-            code = RemoteCall(session, robot, argv, _write_out, errors.feed).run()
+        drawn = verb == "stream" and not opts.json and not {"-h", "--help"} & set(argv)
+        with caller_session(opts.zenoh_config, f"robot {robot}") as session, live_lines(
+                f"from robot {robot}", _write_out, drawn and stdout_is_terminal()) as out:
+            code = RemoteCall(session, robot, argv, out, errors.feed).run()
     except DeltoctlError as exc:  # this side failed (nothing answers): the robot named too
         if not opts.json:
             raise
@@ -191,7 +195,7 @@ def _remote_record(opts: Options, robot: str, argv: list[str], err: Any) -> int:
                                                             params["force"]))
     if done.result:
         if opts.json:
-            emit_json(done.result)
+            emit_json(done.result, profile=done.profile)
         else:
             info(recorded_text(robot, done.result))
         if done.result["link_losses"]:

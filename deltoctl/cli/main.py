@@ -195,9 +195,14 @@ ProfileOpt = Annotated[str | None, typer.Option(
     help="Device profile: a catalog name or a YAML/URDF/xacro file.")]
 TargetOpt = Annotated[list[str] | None, typer.Option(
     "--target", "-t", envvar="DELTOCTL_TARGET", metavar="[BUS=]URL",
-    help="Where the device is, e.g. tcp://169.254.186.72:502 (repeatable).")]
+    help="Where the device is, e.g. tcp://169.254.186.72:502 (repeatable; in the variable, "
+         "several apart by spaces).")]
 SimOpt = Annotated[bool, typer.Option(
-    "--sim", help="Run against a simulated device started for this command.")]
+    "--sim", help="Run against a simulated device: the 'sim serve' of this profile running "
+                  "for you, else one started for this command only (it forgets, e.g. homing, "
+                  "when the command ends).")]
+SimFreshOpt = Annotated[bool, typer.Option(
+    "--sim-fresh", help="Like --sim, always on a simulator started for this command.")]
 SimOptionOpt = Annotated[list[str] | None, typer.Option(
     "--sim-option", metavar="NAME=VALUE",
     help="With --sim: a fault or setting of the simulator, as 'sim serve --NAME VALUE' takes "
@@ -241,6 +246,7 @@ def root(
     profile: ProfileOpt = None,
     target: TargetOpt = None,
     sim: SimOpt = False,
+    sim_fresh: SimFreshOpt = False,
     sim_option: SimOptionOpt = None,
     json_out: JsonOpt = False,
     yes: YesOpt = False,
@@ -261,7 +267,8 @@ def root(
     ctx.obj = Options(
         profile=profile,
         target=list(target or []),
-        sim=sim,
+        sim=sim or sim_fresh,
+        sim_fresh=sim_fresh,
         sim_options=list(sim_option or []),
         json=json_out,
         yes=yes,
@@ -274,7 +281,7 @@ def root(
         robot=robot,
         zenoh_config=zenoh_config,
     )
-    if sim_option and not sim and not ctx.resilient_parsing:
+    if sim_option and not (sim or sim_fresh) and not ctx.resilient_parsing:
         raise InvalidInput("--sim-option is for the simulator --sim starts: add --sim "
                            "(or give the option to 'deltoctl sim serve')")
     if robot and not ctx.resilient_parsing:

@@ -12,10 +12,10 @@ from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import advancing, emit_json, info, progress, say
 from deltoctl.errors import Refused
-from deltoctl.units import positive
 
 VelocityOpt = Annotated[str | None, typer.Option(
-    "--velocity", help="Setpoint speed, e.g. 0.5 or 20deg (per second).")]
+    "--velocity", help="Setpoint speed: 20deg/s, 10mm/s, or a bare number in rad/s "
+                       "(revolute) / m/s (prismatic).")]
 
 
 def register(app: typer.Typer) -> None:
@@ -59,12 +59,12 @@ def home(
     Joints with a `home` command interface (the Bioscara arm) run into their hard stops one at
     a time, in the profile's homing order; the others go to safety.home_pose (zero unless the
     profile says otherwise). Blocks that cannot home are named."""
-    from deltoctl.app.motion import fail_unsettled, home, plan_home
+    from deltoctl.app.motion import fail_unsettled, home, joint_speed, plan_home
 
     opts = options(ctx)
     profile = opts.load_profile()
     plan = plan_home(profile, opts.hardware, joint or [])
-    speed = positive(velocity, "--velocity")
+    speed = joint_speed(profile, list(plan.targets), velocity)
     confirm_motion(opts, plan.describe())
     bars = _Bars(opts, plan.routine)
     with open_robot(opts, allow_model_mismatch, profile) as robot:
@@ -128,25 +128,33 @@ def jog(
     joint: Annotated[str, typer.Argument(autocompletion=complete_joint,
                                          help="The joint to move.")],
     delta: Annotated[str | None, typer.Argument(
-        help="Relative move, e.g. 0.1, -5deg.")] = None,
+        help="Relative move: 5deg, 2mm, or a bare number in rad (revolute) / m "
+             "(prismatic).")] = None,
     more: Annotated[list[str] | None, typer.Argument(
         metavar="[JOINT DELTA]...", show_default=False,
         help="More joints to move at the same time, each with its delta.")] = None,
-    to: Annotated[str | None, typer.Option("--to", help="Absolute target instead.")] = None,
+    to: Annotated[str | None, typer.Option(
+        "--to", help="Absolute target instead: 30deg, 12mm, or a bare number in rad / m.")]
+        = None,
     velocity: VelocityOpt = None,
     record: JogRecordOpt = None,
     allow_model_mismatch: AllowMismatch = False,
     force: JogForceOpt = False,
 ) -> None:
     """Move one joint by DELTA (or --to POS), within its limits and the profile's jog step;
-    more JOINT DELTA pairs move at the same time (blocks on several links at once)."""
-    from deltoctl.app.motion import fail_unsettled, jog_pairs, jog_targets
+    more JOINT DELTA pairs move at the same time (blocks on several links at once).
+
+    A bare number is in rad for a revolute joint, m for a prismatic one; 5deg, 2mm say
+    their unit, and a unit that is not the joint's (an angle on a prismatic joint) is
+    refused (exit 2). The confirmation shows the move in the unit typed (else degrees or
+    millimetres)."""
+    from deltoctl.app.motion import fail_unsettled, jog_pairs, jog_targets, joint_speed
     from deltoctl.app.recording import new_output, planned_output
 
     opts = options(ctx)
     profile = opts.load_profile()
     pairs = jog_pairs(profile, joint, delta, more, to)
-    speed = positive(velocity, "--velocity")
+    speed = joint_speed(profile, [name for name, _ in pairs], velocity)
 
     # a file that cannot be written, or exists, is refused (exit 2) before anything opens
     record = planned_output(record, force) if record else None

@@ -23,21 +23,23 @@ def stdout_is_terminal() -> bool:
 
 
 WARNINGS = "deltoctl.warnings"  # root ctx.meta key: the warnings said so far
-# verbs that report each block of the robot: their document's keys stay, beside the envelope's
+# verbs that report each block of the robot: ``blocks`` beside the envelope's keys, their
+# other data in ``result``
 BLOCK_VERBS = ("connect", "identify", "detect", "home", "jog", "calibrate ft", "calibrate imu")
 # verbs that read no profile (a file, the fleet, this computer): their envelope's is null
-NO_PROFILE = ("info", "plot", "help", "completion", "bench", "fleet")
+NO_PROFILE = ("info", "plot", "help", "completion", "bench", "fleet", "ports")
 
 
-def emit_json(data: Any, err: bool = False) -> None:
+def emit_json(data: Any, err: bool = False, profile: str | None = None) -> None:
     """The verb's JSON document (on stderr with ``err``: a stream's, whose stdout holds its
     frames). Inside a command it is written when the verb exits, in its envelope
-    (``envelope``), which then knows the warnings and the exit code."""
+    (``envelope``), which then knows the warnings and the exit code. ``profile`` names the
+    profile the verb ran on when the command line does not (a remote robot's)."""
     root = _root()
     if root is None:
         write_json(data, err)
         return
-    root.meta[DOCUMENT] = (_verb(), data, err)
+    root.meta[DOCUMENT] = (_verb(), data, err, profile)
 
 
 def write_json(data: Any, err: bool = False) -> None:
@@ -51,13 +53,15 @@ def write_json(data: Any, err: bool = False) -> None:
 
 def envelope(verb: str, data: Any, warnings: list[str], exit_code: int,
              profile: str | None) -> dict[str, Any]:
-    """Every verb's JSON in one shape: ``verb``, ``profile``, the data — ``blocks`` for a
-    document of the robot's blocks (its other keys kept beside them), else ``result`` —,
+    """Every verb's JSON in one shape, these keys and no others: ``verb``, ``profile``, the
+    data — ``blocks`` for the robot's blocks, ``result`` for the rest (a verb that reports
+    each block has both when it says more than its blocks: home's ``settled``) —,
     ``warnings`` and ``exit_code``."""
     named = data.get("profile") if isinstance(data, dict) else None
     profile = named if isinstance(named, str) else profile
     if verb in BLOCK_VERBS and isinstance(data, dict) and isinstance(data.get("blocks"), list):
-        body = {k: v for k, v in data.items() if k != "profile"}
+        rest = {k: v for k, v in data.items() if k not in ("profile", "blocks")}
+        body = {"blocks": data["blocks"], **({"result": rest} if rest else {})}
     else:
         body = {"result": data}
     return {"verb": verb, "profile": profile, **body, "warnings": list(warnings),
@@ -70,9 +74,9 @@ def flush_document(ctx: Any, exit_code: int) -> None:
     pending = meta.pop(DOCUMENT, None)
     if pending is None:
         return
-    verb, data, err = pending
-    profile = None if verb.split(" ")[0] in NO_PROFILE else \
-        getattr(ctx.find_root().obj, "profile", None)
+    verb, data, err, profile = pending
+    if profile is None and verb.split(" ")[0] not in NO_PROFILE:
+        profile = getattr(ctx.find_root().obj, "profile", None)
     write_json(envelope(verb, data, meta.get(WARNINGS, []), exit_code, profile), err)
 
 

@@ -138,6 +138,8 @@ def validate_cmd(
             f"{result['gpios']} gpios)")
         for note in result["warnings"]:
             info(f"warning: {note}")
+        for note in result.get("notes", []):
+            info(f"note: {note}")
     if opts.json:
         emit_json([result for result, _ in checked])
     failed = [code for result, code in checked if not result["ok"]]
@@ -217,7 +219,7 @@ def tests_cmd(
 ) -> None:
     """Write a starting pytest suite for a robot: identify, detect, its configuration against
     a golden snapshot (taken of the simulators), link quality and homing. It passes on the
-    simulators as written, and runs on the robot with --deltoctl-target (README: pytest)."""
+    simulators as written, and runs on the robot with --deltoctl-target (`deltoctl help pytest`)."""
     from deltoctl.app.suite import write_suite
 
     opts = options(ctx)

@@ -98,6 +98,7 @@ def record(
     """Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
     valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back, 1 when
     the file could not be written to the end (disk full, file too large, removed)."""
+    from deltoctl.app.latency import loop_warnings
     from deltoctl.app.recording import check_record, planned_output
     from deltoctl.app.recording import record as record_robot
     from deltoctl.core.runner import interrupted_by_signals
@@ -125,7 +126,9 @@ def record(
         result["foxglove"] = live.summary()
     _show(opts, result, output)
     links.finish()
-    finish(robot.system)  # exit 3 on warnings (a servo that never answered, a link lost)
+    # exit 3 on warnings (a servo that never answered, a link lost, a loop an adapter slowed)
+    finish(robot.system, loop_warnings([m.url for m in robot.system.members], rate,
+                                       result["loop"]["real_rate"]))
 
 
 def _shown(bar: "Progress | None", output: Path,

@@ -23,6 +23,7 @@ from deltoctl.errors import WARNINGS
 if TYPE_CHECKING:
     from deltoctl.app.replay import Deviated, ReplayPlan, ReplayResult
     from deltoctl.app.robot import Robot
+    from deltoctl.profile.model import Profile
 
 MAX_DEVIATION = 0.2  # rad or m: a replayed joint further than this from its recording stops
 
@@ -39,12 +40,13 @@ DeviceOpt = Annotated[bool, typer.Option(
                      "profile, never the recording's; asks for confirmation unless --yes.")]
 ToleranceOpt = Annotated[str | None, typer.Option(
     "--tolerance", metavar="X", help="The largest difference allowed between recorded "
-                                     "and replayed position (rad or m, e.g. 0.01 or "
-                                     "1deg); beyond it, exit 3.")]
+                                     "and replayed position: 1deg, 2mm, or a bare number "
+                                     "in rad (revolute) / m (prismatic); beyond it, exit 3.")]
 MaxDeviationOpt = Annotated[str | None, typer.Option(
     "--max-deviation", metavar="X",
-    help="While replaying, a joint further than this from its recorded position (rad or "
-         f"m) stops every block, exit 5 (default {MAX_DEVIATION:g}).")]
+    help="While replaying, a joint further than this from its recorded position (5deg, "
+         "10mm, or a bare number in rad (revolute) / m (prismatic)) stops every block, exit 5 "
+         f"(default {MAX_DEVIATION:g}).")]
 
 
 def replay(
@@ -73,11 +75,13 @@ def replay(
     from deltoctl.units import nonnegative
 
     opts = options(ctx)
-    limit = nonnegative(tolerance, "--tolerance")
-    deviation = nonnegative(max_deviation, "--max-deviation")
-    deviation = MAX_DEVIATION if deviation is None else deviation
+    nonnegative(tolerance, "--tolerance")
+    nonnegative(max_deviation, "--max-deviation")
     named = opts.load_profile() if opts.profile else None
     plan = plan_replay(recording, named, device, opts.hardware)
+    limit = _per_joint(plan, tolerance, "--tolerance")
+    deviation = _per_joint(plan, max_deviation, "--max-deviation")
+    deviation = MAX_DEVIATION if deviation is None else deviation
     run_opts = copy.copy(opts)  # only the blocks it commands, on the simulators unless --device
     run_opts.hardware, run_opts.sim = where_to_replay(plan, device, opts.hardware, opts.target,
                                                       opts.sim)
@@ -94,13 +98,20 @@ def replay(
         if opts.json:
             emit_json(report)  # the replay until it was stopped
         raise stopped
-    _show(opts, report)
+    _show(opts, report, plan.profile, tolerance)
     if report["exceeded"]:
-        warn(f"{', '.join(report['exceeded'])}: replayed more than {limit:g} from the "
+        warn(f"{', '.join(report['exceeded'])}: replayed more than {tolerance} from the "
              "recording")
     finish(robot.system)
     if report["exceeded"] or plan.notes:  # the notes: shown before the replay
         raise typer.Exit(WARNINGS)
+
+
+def _per_joint(plan: "ReplayPlan", text: str | None, what: str) -> float | None:
+    """A tolerance in SI, its unit that of every replayed joint (exit 2 otherwise)."""
+    from deltoctl.app.motion import joints_quantity
+
+    return joints_quantity(plan.profile, plan.recorded.joints, text, what)
 
 
 def _run(opts: Options, run_opts: Options, allow_model_mismatch: bool, plan: "ReplayPlan",
@@ -119,7 +130,12 @@ def _run(opts: Options, run_opts: Options, allow_model_mismatch: bool, plan: "Re
     return robot, result, stopped
 
 
-def _show(opts: Options, report: dict[str, Any]) -> None:
+def _show(opts: Options, report: dict[str, Any], profile: "Profile",
+          tolerance: str | None) -> None:
+    """The report; each joint's differences in the unit of --tolerance (else degrees or
+    millimetres)."""
+    from deltoctl.units import joint_dimension, parse_unit, shown
+
     if opts.json:
         emit_json(report)
         return
@@ -127,6 +143,11 @@ def _show(opts: Options, report: dict[str, Any]) -> None:
         f"{report['on']} in {report['seconds']:.2f} s (recorded: "
         f"{report['recorded_seconds']:.2f} s; latest command {report['late_max_ms']:.1f} ms "
         "late)")
-    table("recorded vs replayed position", ["joint", "block", "samples", "RMS", "max"],
-          [[j, d["block"], d["samples"], f"{d['rms']:.5f}", f"{d['max']:.5f}"]
-           for j, d in report["joints"].items()])
+    unit = parse_unit(tolerance).unit if tolerance else ""
+    rows = []
+    for j, d in report["joints"].items():
+        comp = profile.component(j)
+        dim = joint_dimension(comp.joint_type) if comp is not None else None
+        rows.append([j, d["block"], d["samples"], shown(d["rms"], dim, unit),
+                     shown(d["max"], dim, unit)])
+    table("recorded vs replayed position", ["joint", "block", "samples", "RMS", "max"], rows)

@@ -7,8 +7,8 @@ import typer
 
 from deltoctl.cli.context import options
 from deltoctl.cli.main import complete_profile
-from deltoctl.cli.output import emit_error, say
-from deltoctl.errors import USAGE
+from deltoctl.cli.output import emit_error, say, warn
+from deltoctl.errors import USAGE, InvalidInput
 
 if TYPE_CHECKING:
     from deltoctl.registry import SimOption
@@ -31,22 +31,34 @@ def serve(
     *,
     host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
     port: Annotated[int, typer.Option(help="Port to listen on (0: any free one).")] = 0,
+    env: Annotated[bool, typer.Option(
+        "--env", help="Print the targets as one line for a POSIX shell to source: export "
+                      "DELTOCTL_TARGET='BUS=URL …'.")] = False,
+    private: Annotated[bool, typer.Option(
+        "--private", help="Keep this simulator to -t: --sim does not use it.")] = False,
     **given: Any,
 ) -> None:
     """Serve every block's simulated device until Ctrl-C or SIGTERM, printing one target per
-    bus (BUS=URL, ready for --target).
+    bus (--target 'BUS=URL', quoted for a POSIX shell; --env: one export line).
 
     Each family's emulator serves its blocks behind a real link, with the faults and settings
     the family declares (below). --hardware serves some blocks only; --json prints one line.
     A device that can be turned or moved from outside answers control lines on the standard
-    input, one a line (face -x, tilt 10 0 0 …); the line help lists them."""
+    input, one a line (face -x, tilt 10 0 0 …); the line help lists them.
+
+    While it runs, --sim of the same profile (same content and faults) drives it instead of
+    starting a simulator of its own, so a robot homed by one command stays homed for the
+    next; --sim-fresh or --private keep them apart."""
     from deltoctl.sim.serve import ServeOptions, serve_until_stopped
 
     opts = options(ctx)
     prof = opts.load_profile(profile)
     faults = {name: value for name, value in given.items() if value not in (None, False, [])}
+    if env and opts.json:
+        raise InvalidInput("--env or --json, not both")
     serve_until_stopped(prof, ServeOptions(host=host, port=port, **faults), opts.hardware,
-                        opts.json, say, lambda m: emit_error(m, None, USAGE, opts.json))
+                        opts.json, say, lambda m: emit_error(m, None, USAGE, opts.json),
+                        env=env, private=private, note=warn)
 
 
 def _parameter(option: "SimOption") -> inspect.Parameter:
@@ -76,7 +88,7 @@ def _command() -> Any:
     from deltoctl.cmdline import GLOBAL_OPTIONS
 
     fixed = [p for p in inspect.signature(serve).parameters.values()
-             if p.kind != inspect.Parameter.VAR_KEYWORD]  # ctx, PROFILE, --host, --port
+             if p.kind != inspect.Parameter.VAR_KEYWORD]  # ctx, PROFILE, --host, --port …
     declared = [_parameter(o) for o in registry.sim_options().values()
                 if o.flag not in GLOBAL_OPTIONS]
 

@@ -129,7 +129,13 @@ class Driver:
         raise Unsupported(f"{self.hw.name} takes no command {name}")
 
     def stop(self) -> None:
-        """The safe state (duty 0, stop and disable, torque as found)."""
+        """The safe state (duty 0, stop and disable, torque as found) of what this session
+        commanded: a device it never commanded is left as it is."""
+
+    def make_safe(self) -> None:
+        """The safe state whatever this session sent: after another process that commanded
+        the device was killed before its own stop."""
+        self.stop()
 
     def deactivate(self) -> None:
         self.stop()

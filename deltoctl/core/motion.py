@@ -17,6 +17,25 @@ def _bound(value: float | None, none: str) -> str:
     return none if value is None else f"{value:.4f}"
 
 
+def _people(joint: Component, value: float, low: float | None = None,
+            high: float | None = None, *, bound: float | None = None) -> str:
+    """The SI unit of a position of ``joint`` and the values in degrees or millimetres:
+    `` rad (-17.19° outside [0.00°, 115.00°])``, `` rad (40.00° > 30.00°)``."""
+    from deltoctl.units import joint_dimension, shown
+
+    dim = joint_dimension(joint.joint_type)
+    if dim is None:
+        return ""
+    si = "rad" if dim == "angle" else "m"
+
+    def text(v: float | None) -> str:
+        return "none" if v is None else shown(v, dim)
+
+    if bound is not None:
+        return f" {si} ({text(value)} > {text(bound)})"
+    return f" {si} ({text(value)} outside [{text(low)}, {text(high)}])"
+
+
 def _limit(joint: Component, name: str) -> float | None:
     """The joint's ``velocity`` or ``effort`` limit (None: it has none)."""
     return None if joint.limits is None else getattr(joint.limits, name)
@@ -35,15 +54,18 @@ def check_target(profile: Profile, joint: Component, target: float, start: float
     lim = joint.limits
     if lim is not None and not lim.contains(target):
         raise Refused(f"{joint.name} target {target:.4f} is outside its limits "
-                      f"[{_bound(lim.lower, '-inf')}, {_bound(lim.upper, 'inf')}]")
+                      f"[{_bound(lim.lower, '-inf')}, {_bound(lim.upper, 'inf')}]"
+                      + _people(joint, target, lim.lower, lim.upper))
     soft = joint.soft_limits
     if soft is not None and not soft.contains(target):
         raise Refused(f"{joint.name} target {target:.4f} is outside its soft limits "
-                      f"[{soft.lower:.4f}, {soft.upper:.4f}] (<safety_controller>)")
+                      f"[{soft.lower:.4f}, {soft.upper:.4f}]"
+                      + _people(joint, target, soft.lower, soft.upper) + " (<safety_controller>)")
     step = profile.safety.max_jog_step
     if start is not None and step is not None and abs(target - start) > step + 1e-9:
         raise Refused(f"{joint.name}: a move of {abs(target - start):.4f} is larger than the "
-                      f"profile's max_jog_step {step:.4f}",
+                      f"profile's max_jog_step {step:.4f}"
+                      + _people(joint, abs(target - start), bound=step),
                       hint="jog in smaller steps, or raise safety.max_jog_step in the profile")
 
 

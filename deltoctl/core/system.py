@@ -88,7 +88,7 @@ def parse_targets(profile: Profile, targets: list[str] | tuple[str, ...]) -> tup
     bare: list[str] = []
     for item in targets:
         name, found, url = item.partition("=")
-        if found and "://" not in name:
+        if found and (":" not in name or name in profile.buses):
             if name not in profile.buses:
                 from deltoctl.suggest import did_you_mean
 
@@ -326,10 +326,20 @@ class System:
                                  m.driver.effort_cap())
         m.driver.write({name: value})
 
-    def stop(self) -> None:
+    def stop(self, blocks: Iterable[str] | None = None) -> None:
+        """Each block's safe state (every block's, or only those named in ``blocks``: a
+        block a command never reached is left as it is)."""
         self._followed.clear()
         for m in self.members:
-            m.driver.stop()
+            if blocks is None or m.name in blocks:
+                m.driver.stop()
+
+    def make_safe(self) -> None:
+        """Every block's safe state, whatever this session sent: what the fleet's agent does
+        after killing a motion verb that had no time for its own stop."""
+        self._followed.clear()
+        for m in self.members:
+            m.driver.make_safe()
 
     # -- motion ----------------------------------------------------------------------------
     def by_block(self, joints: list[str] | dict[str, float]) -> dict[str, list[str]]:
@@ -368,6 +378,12 @@ class System:
             motion.check_move(self.profile, self._joint(joint), target, present.get(joint),
                               velocity, jog)
 
+    def check_ready(self, joints: Iterable[str]) -> None:
+        """Refuse (``Refused``) a move of ``joints`` that a block's motion rules forbid now
+        (homed first …), before anything is sent."""
+        for names in self.by_block(list(joints)).values():
+            self.member(names[0]).driver.check_motion(names)
+
     def follow(self, setpoints: Mapping[str, Setpoint]) -> None:
         """One cycle's setpoints (a replay's row) to the blocks that hold their joints, once
         every one is within the envelope: its position a ``max_jog_step`` at most from the
@@ -395,11 +411,10 @@ class System:
         (``check_move``), and every block's motion rules (homed first): a refused one sends
         nothing to any block."""
         self.check_move(targets, velocity, jog=jog)
+        self.check_ready(targets)
         self._followed.clear()
         groups = self.by_block(targets)
         members = {m.name: m for m in self.members}
-        for name, joints in groups.items():
-            members[name].driver.check_motion(joints)
         for m in self.members:
             m.driver.halted.clear()
         if len(groups) == 1:

@@ -35,6 +35,9 @@ MOTION = verbs.Effects(verbs.MOVES)
 ACTUATING = verbs.Effects(verbs.MOVES, verbs.ACTUATES)
 # the agent's own verbs, and a benchmark that would load the robot's computer while it moves
 NOT_REMOTE = frozenset(name for name, verb in verbs.TABLE.items() if not verb.remote)
+# the first word of the command line the agent's verb process runs to set a robot's blocks
+# safe (a caller's command line starts with the robot's links, never with it)
+SET_SAFE = "deltoctl.set-safe"
 MAX_VERBS = 8  # verbs running at once on one robot's agent; more are refused (exit 5)
 HEARTBEAT = 0.05  # s between a caller's heartbeats
 DEADLINE = 0.2  # s without a heartbeat before the agent interrupts the verb

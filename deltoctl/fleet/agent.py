@@ -24,7 +24,18 @@ from collections.abc import Callable, Collection
 from typing import Any
 
 from deltoctl.errors import DeltoctlError, InvalidInput, Refused, Unreachable
-from deltoctl.fleet import ACTUATING, DEADLINE, ERR, EXIT, MAX_VERBS, MOTION, OUT, key, zenoh_module
+from deltoctl.fleet import (
+    ACTUATING,
+    DEADLINE,
+    ERR,
+    EXIT,
+    MAX_VERBS,
+    MOTION,
+    OUT,
+    SET_SAFE,
+    key,
+    zenoh_module,
+)
 from deltoctl.fleet.argv import _values, check_argv, fits, read_request
 from deltoctl.fleet.client import KEY_BYTES, sign
 from deltoctl.verbs import UNRESOLVED
@@ -484,7 +495,7 @@ class Agent:
             what = ("a command deltoctl cannot classify (it counts as motion)"
                     if verb == UNRESOLVED else f"'{verb}'")
             raise Refused(f"{what} refused: {self.why_not}",
-                          "see the README (Remote robots: security)")
+                          "`deltoctl help security` says how")
         fits(self.links, argv)  # before any bookkeeping: the zygote takes it in one message
         with self.lock:
             if rid in self.running:
@@ -595,9 +606,10 @@ class Agent:
     def _make_safe(self, r: Running) -> None:
         """A motion verb killed had no time for its safe stop (a gripper keeps its last
         duty): once it is gone, a ``connect`` of the robot's links leaves every block in its
-        safe state as every verb does on its way out."""
+        safe state, whatever that connect sent (a verb's own stop would spare a gripper it
+        never drove)."""
         r.proc.wait()
-        proc = self.launcher.take([*self.links, "connect", "--json"])
+        proc = self.launcher.take([SET_SAFE, *self.links, "connect", "--json"])
         try:
             collect(proc, MAKE_SAFE)
         except subprocess.TimeoutExpired:

@@ -25,8 +25,8 @@ MAX_ARG = 4096  # bytes in one argument
 
 # options the agent sets itself (the robot's profile and links), that name a local file, or
 # that would serve the robot's data beyond the agent's own transport
-FORBIDDEN = ("--profile", "--target", "--sim", "--sim-option", "--arg", "--package-path",
-             "--xacro", "--log-file", "--robot", "--zenoh-config", "--foxglove",
+FORBIDDEN = ("--profile", "--target", "--sim", "--sim-fresh", "--sim-option", "--arg",
+             "--package-path", "--xacro", "--log-file", "--robot", "--zenoh-config", "--foxglove",
              "--foxglove-host", "--foxglove-port")
 # options that write outside the agent's directory (the shell's start-up files)
 WRITES_OUTSIDE = ("--install-completion", "--show-completion")

@@ -34,8 +34,8 @@ def load(path: str | None, role: str, listen: list[str] | None = None,
             config = zenoh.Config.from_file(path)
         except Exception as exc:  # zenoh raises ZError with the parser's message
             raise InvalidInput(f"zenoh config {path}: {zenoh_message(exc)}",
-                               "a Zenoh JSON5 configuration file: see the README "
-                               "(Remote robots)") from None
+                               "a Zenoh JSON5 configuration file: `deltoctl help "
+                               "examples` ships some, `deltoctl help security` says why") from None
     else:
         config = zenoh.Config()
         config.insert_json5("scouting/multicast/enabled", "false")

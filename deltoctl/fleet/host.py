@@ -123,7 +123,7 @@ def served_links(links: list[str], sim: bool) -> Iterator[list[str]]:
         yield links
         return
     simulator, served = start_simulator(
-        [sys.executable, "-m", "deltoctl", *links, "sim", "serve", "--json"],
+        [sys.executable, "-m", "deltoctl", *links, "sim", "serve", "--json", "--private"],
         env={k: v for k, v in os.environ.items() if not k.startswith("DELTOCTL_")})
     try:
         links = [a for a in links if not a.startswith("--target=")]

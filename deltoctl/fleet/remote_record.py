@@ -342,6 +342,7 @@ class Recorded:
     code: int
     result: dict[str, Any]
     failure: DeltoctlError | None = None
+    profile: str | None = None  # the name of the robot's profile, as its agent sent it
 
     @property
     def not_received(self) -> int:
@@ -372,7 +373,8 @@ def record_remote(zenoh_config: str | None, robot: str, output: Path, rate: floa
             except DeltoctlError as exc:
                 failure, code = exc, exc.exit_code
     shown = rec.result and (failure is None or isinstance(failure, Unreachable))
-    done = Recorded(code, rec.result if shown else {}, failure)
+    done = Recorded(code, rec.result if shown else {}, failure,
+                    rec.profile.name if rec.profile else None)
     if done.not_received:
         done.code = done.code or WARNINGS
     return done

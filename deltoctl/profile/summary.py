@@ -91,6 +91,7 @@ def validation(spec: str, load: Callable[[str], Profile],
     code (0; 3 with warnings; the error's when it is invalid). ``strict``: warnings are
     errors."""
     from deltoctl.profile.validate import validate
+    from deltoctl.transport.adapters import stable_hint
 
     try:
         prof = load(spec)
@@ -99,5 +100,6 @@ def validation(spec: str, load: Callable[[str], Profile],
     except DeltoctlError as exc:
         return {"profile": spec, "ok": False, "error": exc.message}, exc.exit_code
     notes = [str(w) for w in prof.warnings]
-    return ({"profile": spec, "ok": True, **prof.counts(), "warnings": notes},
+    stable = [h for h in map(stable_hint, prof.buses.values()) if h]  # advice, no warning
+    return ({"profile": spec, "ok": True, **prof.counts(), "warnings": notes, "notes": stable},
             WARNINGS if notes else OK)

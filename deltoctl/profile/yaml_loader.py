@@ -30,7 +30,13 @@ from deltoctl.profile.model import (
     fill_transmission,
     merge_interface_limits,
 )
-from deltoctl.units import format_number, parse_quantity
+from deltoctl.units import (
+    format_number,
+    joint_dimension,
+    mismatch,
+    parse_quantity,
+    parse_unit,
+)
 
 
 def param_text(value: Any) -> str:
@@ -489,7 +495,31 @@ def profile_from_data(data: Any, source: str) -> Profile:
     if not blocks:
         raise r.fail("the profile needs at least one block under 'ros2_control'", d.line)
     profile.hardware = [_hardware(r, i, ln) for i, ln in zip(blocks, blocks.lines)]
+    if "safety" in d:
+        _check_safety_units(r, profile, d["safety"])
     return profile
+
+
+def _check_safety_units(r: _Reader, profile: Profile, safety: LineDict) -> None:
+    """A home pose in its joint's unit (no ``5mm`` on a revolute joint); ``max_jog_step``
+    and ``home_tolerance`` in the unit of every joint they bound (a bare number is SI for
+    each)."""
+    joints = {j.name: j for j in profile.joints()}
+    pose = safety.get("home_pose") or LineDict()
+    for name, value in pose.items():
+        if str(name) in joints:
+            _fits(r, value, joints[str(name)], f"safety.home_pose of {name}", pose.lines[name])
+    for key in ("max_jog_step", "home_tolerance"):
+        if safety.get(key) is not None:
+            for joint in joints.values():
+                _fits(r, safety[key], joint, f"safety.{key}", safety.lines[key])
+
+
+def _fits(r: _Reader, value: Any, joint: Component, what: str, line: int | None) -> None:
+    wrong = mismatch(parse_unit(value), joint_dimension(joint.joint_type))
+    if wrong:
+        raise r.fail(f"{what} ({value}): {joint.name} is a {joint.joint_type} joint, so it "
+                     f"takes {wrong}", line)
 
 
 def load_yaml_profile(path: Path) -> Profile:

@@ -56,7 +56,7 @@ def stream_grids(names: list[str]) -> dict[str, list[list[str]]]:
     return grids
 
 
-class _IntFields(struct.Struct):
+class IntFields(struct.Struct):
     """A layout some of whose values are integers filled from floats: each is rounded and
     saturated to its type's range (NaN, a missing value, gives 0)."""
 
@@ -153,7 +153,7 @@ class CdrTemplate:
 
     def done(self) -> CdrTemplate:
         fmt = "<" + "".join(self._tokens)
-        self.layout = _IntFields(fmt, self._ints) if self._ints else struct.Struct(fmt)
+        self.layout = IntFields(fmt, self._ints) if self._ints else struct.Struct(fmt)
         return self
 
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import os
+from itertools import chain
 from operator import itemgetter
 from typing import Any, BinaryIO
 
@@ -82,6 +83,7 @@ class McapRecorder:
         ``FoxgloveWriter``). ``commands``: a /joint_commands topic too, each cycle's
         setpoints (``record.commands``: ``<joint>/position_command`` …)."""
         from deltoctl import __version__
+        from deltoctl.record.mcap_cycles import CycleAppender
 
         if gpio_type not in GPIO_TYPES:
             raise ValueError(f"gpio_type {gpio_type!r}: one of {', '.join(GPIO_TYPES)}")
@@ -91,6 +93,7 @@ class McapRecorder:
 
             writer = Writer(stream, compression=CompressionType.LZ4)
         self.writer = writer
+        self._appender = CycleAppender.of(writer)  # a cycle's messages at once, where it can
         self.writer.start(profile="ros2", library=f"deltoctl {__version__}")
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, int] = {}
@@ -194,21 +197,36 @@ class McapRecorder:
     def set_keys(self, keys: list[str]) -> None:
         """The interfaces, in the order ``write_row`` gets their values. Each topic's fields
         become positions in a row: the values, then NaN (for a name not among the keys), the
-        stamp, and the templates' constant bytes."""
+        stamp, the templates' constant bytes and, with mcap's Writer, the records' constant
+        head fields, the log time and each topic's sequence number."""
         at = {key: i for i, key in enumerate(keys)}
         missing = len(keys)
         at[SEC], at[NANOSEC] = missing + 1, missing + 2
-        constants: list[bytes] = []
-        self._rows = []
+        constants: list[bytes | int] = []
+
+        def constant(value: bytes | int) -> int:
+            constants.append(value)
+            return missing + 2 + len(constants)
+
+        self._rows, picks = [], []
         for topic, template in self.topics:
-            picks = []
-            for f in template.fields:
-                if isinstance(f, bytes):
-                    picks.append(missing + 3 + len(constants))
-                    constants.append(f)
-                else:
-                    picks.append(at.get(f, missing))
-            self._rows.append((topic, template.layout.pack, itemgetter(*picks)))
+            fields = [constant(f) if isinstance(f, bytes) else at.get(f, missing)
+                      for f in template.fields]
+            self._rows.append((topic, template.layout.pack, itemgetter(*fields)))
+            picks.append(fields)
+        self._row_topics = [topic for topic, _, _ in self._rows]
+        self._cycle = None
+        if self._appender is not None and self.topics:
+            from deltoctl.record.mcap_cycles import cycle_layout, head_values
+
+            layout, self._cycle_starts = cycle_layout([t.layout for _, t in self.topics])
+            heads = [[constant(v) for v in head_values(t.layout, self.channels[topic])]
+                     for topic, t in self.topics]
+            stamp = missing + 3 + len(constants)  # then the sequence numbers, topic by topic
+            self._cycle = (layout.pack, itemgetter(*chain.from_iterable(
+                [*head, stamp + 1 + k, stamp, stamp, *fields]
+                for k, (head, fields) in enumerate(zip(heads, picks)))))
+            self._row_channels = [self.channels[topic] for topic in self._row_topics]
         self._constants = constants
         self._status_at = at.get("system/connection_status")
         self._block_status = [(key.rpartition("/")[0], i) for key, i in at.items()
@@ -229,8 +247,19 @@ class McapRecorder:
         self._watch_gap(t_ns)
         row += (NAN, t_ns // 1_000_000_000, t_ns % 1_000_000_000)
         row += self._constants
-        for topic, pack, pick in self._rows:
-            self._emit(topic, pack(*pick(row)), t_ns)
+        if self._cycle is not None:  # every record of the cycle in one pack and one write
+            sequence = self.sequence
+            row.append(t_ns)
+            for topic in self._row_topics:  # (two blocks' sensors may share a topic)
+                seq = sequence[topic]
+                row.append(seq)
+                sequence[topic] = seq + 1
+            pack, pick = self._cycle
+            self._appender.append(t_ns, self._row_channels, self._cycle_starts,
+                                  pack(*pick(row)))
+        else:
+            for topic, pack, pick in self._rows:
+                self._emit(topic, pack(*pick(row)), t_ns)
         if self._status_at is None:
             return
         status = row[self._status_at]

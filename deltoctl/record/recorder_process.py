@@ -23,7 +23,6 @@ import pickle
 import signal
 import struct
 import time
-from array import array
 from collections.abc import Iterator
 from operator import itemgetter
 from pathlib import Path
@@ -118,11 +117,13 @@ class RecorderProcess:
         results_out.close()
         self.keys: list[str] = []
         self._pick = _nothing
+        self._row = struct.Struct("<Q")  # a cycle's t_ns and values, as handed over
         self._batch = bytearray(b"v")  # cycles not yet handed over: t_ns and values each
         self._flushed = time.monotonic()
         self.counts: dict[str, int] = {}
         self.link_losses = 0
         self.cpu_seconds = 0.0  # the child's, once closed
+        self.setup_cpu_seconds = 0.0  # of which starting and finishing the file
         self.error: str | None = None
         self.closed = False
 
@@ -133,6 +134,17 @@ class RecorderProcess:
         self.close()
 
     def write(self, values: dict[str, float], t_ns: int) -> None:
+        keys = self.keys
+        if len(values) == len(keys) and list(values) == keys:  # the usual: as last cycle
+            self._batch += self._row.pack(t_ns, *values.values())
+        else:
+            self._write_picked(values, t_ns)
+        now = time.monotonic()
+        if now - self._flushed >= BATCH_SECONDS or len(self._batch) >= BATCH_BYTES:
+            self._flush(now)
+
+    def _write_picked(self, values: dict[str, float], t_ns: int) -> None:
+        """A cycle whose interfaces are not the last cycle's, or not in their order."""
         try:
             picked = self._pick(values)
         except KeyError:  # an interface went missing: NaN for it this cycle
@@ -142,14 +154,10 @@ class RecorderProcess:
             self.keys = list(values)
             self._pick = itemgetter(*self.keys) if len(self.keys) > 1 else \
                 (lambda v, k=self.keys[0]: (v[k],))
+            self._row = struct.Struct(f"<Q{len(self.keys)}d")
             self._send(b"k" + pickle.dumps(self.keys))
             picked = self._pick(values)
-        batch = self._batch
-        batch += t_ns.to_bytes(8, "little")
-        batch += array("d", picked).tobytes()
-        now = time.monotonic()
-        if now - self._flushed >= BATCH_SECONDS or len(batch) >= BATCH_BYTES:
-            self._flush(now)
+        self._batch += self._row.pack(t_ns, *picked)
 
     def _flush(self, now: float | None = None) -> None:
         """Hand the cycles gathered so far to the child (one write for several cycles)."""
@@ -192,6 +200,7 @@ class RecorderProcess:
         self.counts = result.get("counts", {})
         self.link_losses = result.get("link_losses", 0)
         self.cpu_seconds = result.get("cpu_seconds", 0.0)
+        self.setup_cpu_seconds = result.get("setup_cpu_seconds", 0.0)
         self.error = result.get("error")
         self._results.close()
         self.proc.join()
@@ -215,12 +224,15 @@ def _record(pipe: Connection, parent_end: Connection, results: Connection, path:
     from deltoctl.record.mcap_recorder import McapFile, McapRecorder
 
     error = recorder = out = None
+    cycles_cpu = 0.0  # the CPU time of the cycles, between starting and finishing the file
     summary = None
     try:
         out = McapFile(path)
         recorder = McapRecorder(out, profile, metadata, extra_states, gpio_type,
                                 commands=commands)
+        cycles_cpu = -time.process_time()
         summary = _receive(pipe, recorder, out, parent_pid)
+        cycles_cpu += time.process_time()
     except Exception as exc:  # the file failed (OSError), or a bug: finish what was recorded
         error = exc
     pipe.close()  # the parent's next hand-over fails at once: its loop stops
@@ -236,6 +248,7 @@ def _record(pipe: Connection, parent_end: Connection, results: Connection, path:
         with contextlib.suppress(OSError):
             out.close()
     report["cpu_seconds"] = time.process_time()
+    report["setup_cpu_seconds"] = report["cpu_seconds"] - max(cycles_cpu, 0.0)
     with contextlib.suppress(OSError):  # a parent killed cannot hear it
         results.send(report)
 

@@ -50,7 +50,9 @@ def run_lines(n: str, label: str, r: dict[str, Any]) -> list[str]:
         f"period jitter p99 {r['period_jitter_p99_ms']:.3f} ms, misses {r['deadline_misses']}, "
         f"errors {r['errors']}" + _steal(r),
         f"      µs per cycle: {stages}; CPU {r['cpu_us_per_cycle']:.1f} in the loop, "
-        f"{r['recorder_process_cpu_us_per_cycle']:.1f} in the recorder process",
+        f"{r['recorder_process_cpu_us_per_cycle']:.1f} in the recorder process "
+        f"({r['recorder_process_cycles_cpu_us_per_cycle']:.1f} its cycles', "
+        f"{r['recorder_process_setup_cpu_ms']:.1f} ms to start and finish the file)",
         f"      the loop thread: CPU {r['loop_thread_cpu_us_per_cycle']:.1f} µs per cycle, "
         f"{r['loop_cpu_us_per_hand_cycle']:.1f} per hand; "
         f"{r['loop_wakeups_per_cycle']:g} wake-ups per cycle"]

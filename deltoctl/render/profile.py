@@ -38,10 +38,16 @@ def limits_text(joint: Component) -> str:
 
 
 def heading(profile: Profile) -> list[str]:
-    """The profile's name and description, then its buses."""
+    """The profile's name and description, then its buses (a port named in plug-in order with
+    what names its adapter instead)."""
+    from deltoctl.transport.adapters import stable_hint
+
     discontinued = " (discontinued)" if profile.status == "discontinued" else ""
-    return [f"{profile.name}: {profile.description}{discontinued}",
-            *(f"  bus {bus}: {url}" for bus, url in profile.buses.items())]
+    lines = [f"{profile.name}: {profile.description}{discontinued}"]
+    for bus, url in profile.buses.items():
+        hint = stable_hint(url)
+        lines += [f"  bus {bus}: {url}"] + ([f"    note: {hint}"] if hint else [])
+    return lines
 
 
 def parts_table(profile: Profile) -> Table:

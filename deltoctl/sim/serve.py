@@ -136,17 +136,23 @@ def options_given(items: Sequence[str], what: str) -> dict[str, Any]:
 
 def serve_until_stopped(prof: Profile, options: ServeOptions, hardware: Sequence[str],
                         as_json: bool, announce: Callable[[str], None],
-                        complain: Callable[[str], None] = print) -> None:
+                        complain: Callable[[str], None] = print, *, env: bool = False,
+                        private: bool = False, note: Callable[[str], None] = print) -> None:
     """Serve the profile's simulated devices until Ctrl-C or SIGTERM (``deltoctl sim serve``).
-    Once they are up, ``announce`` is told the targets, a ``--target BUS=URL`` line each (with
-    ``as_json``: serve_profile's result on one line). When the devices answer control lines,
-    each line of the standard input runs one: ``announce`` is told its reply (with
-    ``as_json``, ``{"control", "reply"}`` on one line), ``complain`` a bad one."""
+    Once they are up, ``announce`` is told the targets (``target_lines``; with ``as_json``:
+    serve_profile's result on one line). Unless ``private``, ``--sim`` of the same profile
+    finds them while they run (sim/running.py); ``note`` is told what cannot be done.
+    When the devices answer control lines, each line of the standard input runs one:
+    ``announce`` is told its reply (with ``as_json``, ``{"control", "reply"}`` on one line),
+    ``complain`` a bad one."""
     import gc
     import json
     import signal
     import sys
     import threading
+
+    from deltoctl.core.system import select_blocks
+    from deltoctl.sim.running import registered
 
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -154,10 +160,10 @@ def serve_until_stopped(prof: Profile, options: ServeOptions, hardware: Sequence
     controls = Controls()
     with contextlib.ExitStack() as stack:
         info = serve_profile(stack, prof, options, list(hardware), controls)
-        if as_json:
-            announce(json.dumps(info))
-        else:
-            announce("\n".join(f"--target {bus}={url}" for bus, url in info["buses"].items()))
+        if not private:
+            blocks = [hw.name for hw in select_blocks(prof, hardware)]
+            stack.enter_context(registered(prof, options.faults, blocks, info["buses"], note))
+        announce(json.dumps(info) if as_json else target_lines(info["buses"], env))
 
         def reply(line: str, answer: str) -> None:
             announce(json.dumps({"control": line, "reply": answer}) if as_json else answer)
@@ -169,6 +175,18 @@ def serve_until_stopped(prof: Profile, options: ServeOptions, hardware: Sequence
                     signal.signal(signal.SIGTTIN, signal.SIG_IGN)
                 controls.follow(fd, stop, reply, complain)
             stop.wait()
+
+
+def target_lines(buses: dict[str, str], env: bool = False) -> str:
+    """The targets as a POSIX shell takes them: a ``--target BUS=URL`` line each, quoted (a
+    serial URL holds ``&``), or with ``env`` one ``export DELTOCTL_TARGET='BUS=URL …'`` line
+    (the targets apart by spaces, as the option reads its variable)."""
+    import shlex
+
+    pairs = [f"{bus}={url}" for bus, url in buses.items()]
+    if env:
+        return f"export DELTOCTL_TARGET={shlex.quote(' '.join(pairs))}"
+    return "\n".join(f"--target {shlex.quote(pair)}" for pair in pairs)
 
 
 def _input_fd(stream: Any) -> int | None:

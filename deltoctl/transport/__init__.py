@@ -21,6 +21,7 @@ if TYPE_CHECKING:
 BUILTIN = {
     "tcp": "deltoctl.transport.tcp:TRANSPORT",
     "serial": "deltoctl.transport.serial_port:TRANSPORT",
+    "usb": "deltoctl.transport.serial_port:USB",
     "i2c": "deltoctl.transport.i2c:KERNEL",
     "i2c+tcp": "deltoctl.transport.i2c:SIMULATED",
 }
@@ -37,6 +38,7 @@ class Target:
     url: str
     timeout: float = 1.0
     hints: tuple[str, ...] = ()
+    rate_hz: float = 0.0  # the cycle rate a profile's loop asks of the bus (0: none)
 
 
 def _no_checks(target: Target) -> list[Check]:

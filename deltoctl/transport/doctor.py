@@ -10,10 +10,13 @@ from __future__ import annotations
 
 import contextlib
 import os
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from deltoctl.errors import UNREACHABLE, USAGE
+from deltoctl.errors import FAILED, UNREACHABLE, USAGE, WARNINGS
 from deltoctl.transport import Check, Target
+
+if TYPE_CHECKING:
+    from deltoctl.transport.adapters import SerialAdapter
 
 LINK_LOCAL = "169.254."
 
@@ -126,24 +129,35 @@ def _permission(bus: str, path: str, st: Any, kind: str) -> Check:
 
 def holders_of(path: str) -> list[str]:
     """``PID (name)`` of the processes (that this user may see) with ``path`` open."""
-    real = os.path.realpath(path)
-    found = []
-    for pid in filter(str.isdigit, os.listdir("/proc")):
-        if int(pid) == os.getpid():
-            continue
+    return holders_of_each([path])[path]
+
+
+def holders_of_each(paths: list[str]) -> dict[str, list[str]]:
+    """path → ``PID (name)`` of the processes with it open, from one look through /proc."""
+    real = {os.path.realpath(p): p for p in paths}
+    found: dict[str, list[str]] = {p: [] for p in paths}
+    try:
+        pids = [p for p in os.listdir("/proc") if p.isdigit() and int(p) != os.getpid()]
+    except OSError:
+        return found
+    for pid in pids:
         with contextlib.suppress(OSError):
             fds = os.listdir(f"/proc/{pid}/fd")
-            if any(_points_to(f"/proc/{pid}/fd/{fd}", real) for fd in fds):
+            held = {real[t] for t in (_target(f"/proc/{pid}/fd/{fd}") for fd in fds)
+                    if t in real}
+            if held:
                 with open(f"/proc/{pid}/comm") as f:
-                    found.append(f"{pid} ({f.read().strip()})")
+                    name = f.read().strip()
+                for path in held:
+                    found[path].append(f"{pid} ({name})")
     return found
 
 
-def _points_to(link: str, real: str) -> bool:
+def _target(link: str) -> str | None:
     try:
-        return os.readlink(link) == real
+        return os.readlink(link)
     except OSError:
-        return False
+        return None
 
 
 def present_nodes(globs: tuple[str, ...], kind: str, none: str, fix: str,
@@ -156,3 +170,49 @@ def present_nodes(globs: tuple[str, ...], kind: str, none: str, fix: str,
         return [check("present", kind, False, none, fix)]
     return [c for node in nodes
             for c in device_checks(os.path.basename(node), node, kind, missing_fix, exclusive)]
+
+
+# -- a serial adapter -------------------------------------------------------------------------
+
+def adapter_checks(target: Target, path: str, adapter: SerialAdapter,
+                   baud: int | None) -> list[Check]:
+    """What the adapter behind a serial port tells: a name a reboot cannot swap, a rate its
+    driver sets, and a latency timer that lets a loop at the asked rate run."""
+    results = [_stable(target, path, adapter)]
+    if baud is not None:
+        why = adapter.refuses(baud)
+        results.append(check("baud", target.bus, why is None,
+                             why or f"{adapter.driver or 'its driver'} sets {baud} baud",
+                             "give the bus a rate the adapter sets, or change the adapter",
+                             FAILED))
+    if adapter.latency_timer_ms is not None:
+        results.append(_latency(target, adapter))
+    return results
+
+
+def _stable(target: Target, path: str, a: SerialAdapter) -> Check:
+    from deltoctl.transport.adapters import ENUMERATED, stable_targets
+
+    choices = stable_targets(target.url, a)
+    if not ENUMERATED.match(os.path.basename(path)) or not choices:
+        return check("stable name", target.bus, True, f"{path}")
+    return check("stable name", target.bus, False,
+                 f"{path} is named in plug-in order: after a reboot it may be another adapter",
+                 "name the adapter instead: " + " or ".join(choices), WARNINGS)
+
+
+def _latency(target: Target, a: SerialAdapter) -> Check:
+    from deltoctl.transport.adapters import SYNC_LATENCY_MS, latency_fix
+
+    ms = a.latency_timer_ms or 0
+    if ms <= SYNC_LATENCY_MS:
+        return check("latency timer", target.bus, True, f"{ms} ms")
+    limit = (f"the adapter holds each short reply up to {ms} ms: a loop that waits for one "
+             f"reply a cycle runs at most ~{1000 / ms:.0f} Hz")
+    if not target.rate_hz:
+        return check("latency timer", target.bus, True, f"{ms} ms: {limit} (a sync loop "
+                     f"needs {SYNC_LATENCY_MS} ms: deltoctl doctor --udev-rule)")
+    share = min(ms * target.rate_hz / 1000, 1.0)
+    return check("latency timer", target.bus, False,
+                 f"{ms} ms: {limit}, and waits up to {share:.0%} of each cycle of the "
+                 f"{target.rate_hz:g} Hz loop on this bus", latency_fix(a), FAILED)

@@ -165,10 +165,11 @@ def _simulated_checks(target: Target) -> list[Check]:
 
 
 def _host_checks() -> list[Check]:
-    """The host's I2C buses, each checked."""
+    """The host's I2C buses (under DELTOCTL_SYSFS_ROOT when it is set), each checked."""
+    from deltoctl.transport.adapters import root, under
     from deltoctl.transport.doctor import present_nodes
 
-    return present_nodes(("/dev/i2c-*",), "i2c", "no I2C bus (/dev/i2c-*)",
+    return present_nodes((under(root(), "/dev/i2c-*"),), "i2c", "no I2C bus (/dev/i2c-*)",
                          "sudo modprobe i2c-dev   (Raspberry Pi: dtparam=i2c_arm=on)",
                          _MODPROBE)
 

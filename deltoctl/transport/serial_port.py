@@ -18,11 +18,20 @@ _BOOL = {"1": True, "true": True, "yes": True, "0": False, "false": False, "no":
 
 def parse_serial_url(url: str) -> tuple[str, int, bool]:
     """``serial:///dev/PORT?baud=N&rs485=1`` → (path, baud, rs485); an unknown or repeated key,
-    a baud that is not a rate, or ``serial://dev/…`` (two slashes) is an error naming it."""
+    a baud that is not a rate, or ``serial://dev/…`` (two slashes) is an error naming it.
+    ``usb:VID:PID[:SERIAL]?baud=N`` names the adapter instead of its port: its path is that
+    spec, resolved to a port (``port_path``) only when the port is opened or checked."""
     parts = split_url(url)
-    if parts.scheme != "serial" or not parts.path or parts.netloc:
+    if parts.scheme == "usb":
+        from deltoctl.transport.adapters import parse_usb
+
+        spec = "usb:" + parts.path
+        parse_usb(spec)
+    elif parts.scheme != "serial" or not parts.path or parts.netloc:
         raise InvalidInput(f"{url!r} is not a serial target (expected "
                            "serial:///dev/PORT?baud=N[&rs485=1], three slashes)")
+    else:
+        spec = parts.path
     query = parse_qs(parts.query, keep_blank_values=True)
     for key, values in query.items():
         if key not in KEYS:
@@ -37,7 +46,17 @@ def parse_serial_url(url: str) -> tuple[str, int, bool]:
     flag = query.get("rs485", ["0"])[0].lower()
     if flag not in _BOOL:
         raise InvalidInput(f"{url!r}: rs485 must be 1 or 0, got {flag!r}")
-    return parts.path, int(text), _BOOL[flag]
+    return spec, int(text), _BOOL[flag]
+
+
+def port_path(path: str) -> str:
+    """The port to open: a path as it is, ``usb:VID:PID[:SERIAL]`` the one adapter's that
+    matches (deltoctl.transport.adapters.resolve_usb: exit 4 none, 2 several)."""
+    if not path.startswith("usb:"):
+        return path
+    from deltoctl.transport.adapters import resolve_usb
+
+    return resolve_usb(path)
 
 
 # errno of a port another process holds: its flock (pyserial's exclusive), or TIOCEXCL
@@ -97,7 +116,8 @@ def open_serial(url: str, timeout: float = 0.05) -> Any:
     mode through the kernel where the port supports it."""
     import serial
 
-    path, baud, rs485 = parse_serial_url(url)
+    spec, baud, rs485 = parse_serial_url(url)
+    path = port_path(spec)
     try:
         port = serial.Serial(path, baudrate=baud, timeout=timeout, exclusive=True)
     except (serial.SerialException, OSError) as exc:
@@ -128,12 +148,24 @@ _PLUG_IN = "plug the adapter in, then: ls /dev/serial/by-id/"
 
 
 def _checks(target: Target) -> list[Check]:
-    """The port is there, this user may open it, no process holds it, and (rs485=1) its
-    kernel RS-485 mode."""
-    from deltoctl.transport.doctor import device_checks
+    """The port is there (a ``usb:`` target: the one adapter it names), this user may open
+    it, no process holds it; its adapter (a stable name, the rate its driver sets, the
+    latency timer a loop at the asked rate needs); and (rs485=1) its kernel RS-485 mode."""
+    from deltoctl.errors import DeltoctlError
+    from deltoctl.transport.adapters import adapter_of
+    from deltoctl.transport.doctor import adapter_checks, check, device_checks
 
-    path, _, rs485 = parse_serial_url(target.url)
+    spec, baud, rs485 = parse_serial_url(target.url)
+    try:
+        path = port_path(spec)
+    except DeltoctlError as exc:
+        return [check("adapter", target.bus, False, exc.message, exc.hint, exc.exit_code)]
     checks = device_checks(target.bus, path, "serial", _PLUG_IN, exclusive=True)
+    if not checks[0]["ok"]:
+        return checks
+    adapter = adapter_of(path)
+    if adapter is not None:
+        checks += adapter_checks(target, path, adapter, baud)
     return checks + ([_rs485(target.bus, path)] if rs485 else [])
 
 
@@ -160,14 +192,22 @@ def _rs485(bus: str, path: str) -> Check:
 
 
 def _host_checks() -> list[Check]:
-    """The host's serial adapters, each checked."""
-    from deltoctl.transport.doctor import present_nodes
+    """The host's serial adapters (as sysfs lists them), each checked: present, ours, free,
+    and its latency timer."""
+    from deltoctl.transport.adapters import serial_adapters
+    from deltoctl.transport.doctor import adapter_checks, check, device_checks
 
-    return present_nodes(("/dev/ttyUSB*", "/dev/ttyACM*", "/dev/ttySC*", "/dev/ttyAMA*"),
-                         "serial", "no serial adapter (ttyUSB, ttyACM, ttySC, ttyAMA)",
-                         "plug the USB/RS-485 adapter in, then: ls /dev/serial/by-id/",
-                         _PLUG_IN, exclusive=True)
+    adapters = serial_adapters(holders=False)
+    if not adapters:
+        return [check("present", "serial", False,
+                      "no serial adapter (ttyUSB, ttyACM, ttySC, ttyAMA)",
+                      "plug the USB/RS-485 adapter in, then: deltoctl ports")]
+    return [c for a in adapters
+            for c in device_checks(a.name, a.device, "serial", _PLUG_IN, exclusive=True)
+            + adapter_checks(Target(a.name, f"serial://{a.device}"), a.device, a, None)]
 
 
 TRANSPORT = Transport("serial", "serial:///dev/PORT?baud=N", parse_serial_url, open_serial,
                       _checks, _host_checks)
+# the adapter by its USB vendor, product and serial number: a port that a reboot cannot swap
+USB = Transport("usb", "usb:VID:PID[:SERIAL]?baud=N", parse_serial_url, open_serial, _checks)

@@ -1,4 +1,6 @@
-"""TCP transport: keepalive to notice a pulled cable, NODELAY for small frames, timeouts."""
+"""TCP transport: keepalive to notice a pulled cable, NODELAY for small frames, timeouts.
+
+It moves bytes and knows no framing: a family's protocol session frames what it receives."""
 
 from __future__ import annotations
 
@@ -8,16 +10,16 @@ import socket
 import time
 
 from deltoctl import trace
-from deltoctl.errors import DeviceError, InvalidInput, Unreachable
+from deltoctl.errors import InvalidInput, LinkLost, Unreachable
 from deltoctl.transport import Check, Target, Transport, split_url
 
-DEFAULT_PORT = 502  # Modbus TCP's, which a Delto's developer mode keeps
-RECV_ROOM = 65536  # free bytes a receive asks for: any frame fits (its length is 2 bytes)
+__all__ = ["TRANSPORT", "LinkLost", "TcpLink", "parse_tcp_url", "tcp_transport"]
 
 
-def parse_tcp_url(url: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
-    """``tcp://HOST[:PORT]`` → (host, port); anything else in it (a query key, a path, a
-    port out of range) is an error naming it, never silently dropped."""
+def parse_tcp_url(url: str, default_port: int | None = None) -> tuple[str, int]:
+    """``tcp://HOST[:PORT]`` → (host, port), the port ``default_port`` (the caller's: its
+    device's) when the URL has none; anything else in it (a query key, a path, a port out of
+    range, no port and no default) is an error naming it, never silently dropped."""
     from urllib.parse import parse_qsl
 
     parts = split_url(url)
@@ -35,7 +37,10 @@ def parse_tcp_url(url: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]
     if port is not None and not 0 < port < 65536:
         raise InvalidInput(f"{url!r}: the port must be a number from 1 to 65535")
     _check_host(url, parts.hostname)
-    return parts.hostname, port or default_port
+    port = port or default_port
+    if port is None:
+        raise InvalidInput(f"{url!r}: no port (expected tcp://HOST:PORT)")
+    return parts.hostname, port
 
 
 def _check_host(url: str, host: str) -> None:
@@ -48,10 +53,6 @@ def _check_host(url: str, host: str) -> None:
         ipaddress.IPv4Address(host)
     except ValueError:
         raise InvalidInput(f"{url!r}: {host} is not an IPv4 address") from None
-
-
-class LinkLost(DeviceError):
-    """The connection dropped or timed out mid-exchange."""
 
 
 class TcpLink:
@@ -68,8 +69,7 @@ class TcpLink:
             trace.link("tcp %s:%d: cannot connect: %s", host, port, exc.strerror or exc)
             raise Unreachable(
                 f"cannot connect to {host}:{port}: {exc.strerror or exc}",
-                hint="check that the device is powered, cabled and at that address "
-                     "(Delto: developer mode, DIP switches 2 and 4)") from None
+                hint="check that the device is powered, cabled and at that address") from None
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
         for name, value in (("TCP_KEEPIDLE", 1), ("TCP_KEEPINTVL", 1), ("TCP_KEEPCNT", 3)):
@@ -80,9 +80,6 @@ class TcpLink:
         self._readable, self._writable = select.poll(), select.poll()
         self._readable.register(sock, select.POLLIN)
         self._writable.register(sock, select.POLLOUT)
-        self._buf = bytearray(2 * RECV_ROOM)  # received; not yet taken: [_start:_end]
-        self._view = memoryview(self._buf)
-        self._start = self._end = 0
         self._timeout = connect_timeout  # a send's, should it wait: the last receive's
         trace.link("tcp %s:%d: connected in %.1f ms", host, port,
                    (time.perf_counter() - started) * 1e3)
@@ -112,54 +109,25 @@ class TcpLink:
             except OSError as exc:
                 raise LinkLost(f"send to {self.host}:{self.port} failed: {exc}") from None
 
-    def recv_frame(self, timeout: float) -> bytes:
-        """One frame prefixed by its 2-byte big-endian total length: usually one recv_into
-        the link's own buffer, after a poll() when the frame has not arrived yet."""
+    def recv_into(self, buffer: memoryview | bytearray, timeout: float) -> int:
+        """What has arrived, into ``buffer``: usually one recv_into, after a poll() when
+        nothing has arrived yet. 0: nothing within ``timeout`` seconds."""
         self._timeout = timeout
         deadline = None
         while True:
-            frame = self._frame()
-            if frame is not None:
-                return frame
-            if self._receive():
+            try:
+                received = self.sock.recv_into(buffer)
+            except BlockingIOError:
+                if deadline is None:
+                    deadline = time.monotonic() + timeout
+                if not self._wait(self._readable, deadline):
+                    return 0
                 continue
-            if deadline is None:
-                deadline = time.monotonic() + timeout
-            if not self._wait(self._readable, deadline):
-                raise LinkLost(f"no complete reply from {self.host}:{self.port} within "
-                               f"{timeout:g} s ({self._end - self._start} bytes received)")
-
-    def _frame(self) -> bytes | None:
-        """The next whole frame of the buffer, taken out of it; None until it is all there."""
-        start, end, buf = self._start, self._end, self._buf
-        if end - start < 2:
-            return None
-        length = (buf[start] << 8) | buf[start + 1]
-        if length < 3:
-            raise LinkLost(f"bad frame length {length} from {self.host}:{self.port}")
-        if end - start < length:
-            return None
-        self._start = start + length
-        if self._start == end:  # all taken (the usual case): the buffer starts over
-            self._start = self._end = 0
-        return bytes(self._view[start:start + length])
-
-    def _receive(self) -> bool:
-        """What has arrived, appended to the buffer; False when nothing has."""
-        if self._end > RECV_ROOM:  # room for a whole frame: the unread bytes to the front
-            unread = self._end - self._start
-            self._buf[:unread] = self._buf[self._start:self._end]
-            self._start, self._end = 0, unread
-        try:
-            received = self.sock.recv_into(self._view[self._end:])
-        except BlockingIOError:
-            return False
-        except OSError as exc:
-            raise LinkLost(f"receive from {self.host}:{self.port} failed: {exc}") from None
-        if not received:
-            raise LinkLost(f"{self.host}:{self.port} closed the connection")
-        self._end += received
-        return True
+            except OSError as exc:
+                raise LinkLost(f"receive from {self.host}:{self.port} failed: {exc}") from None
+            if not received:
+                raise LinkLost(f"{self.host}:{self.port} closed the connection")
+            return received
 
     def _wait(self, poller: select.poll, deadline: float) -> bool:
         """Until the socket is ready as ``poller`` asks, or (False) the deadline passes."""
@@ -172,24 +140,33 @@ class TcpLink:
             self.sock.close()
 
 
-def _open(url: str, timeout: float = 3.0) -> TcpLink:
-    host, port = parse_tcp_url(url)
-    return TcpLink(host, port, connect_timeout=timeout)
+def tcp_transport(default_port: int | None = None) -> Transport:
+    """The ``tcp://`` transport, a URL without a port meaning ``default_port`` (its caller's
+    device's; None: the port is required)."""
+
+    def parse(url: str) -> tuple[str, int]:
+        return parse_tcp_url(url, default_port)
+
+    def open_link(url: str, timeout: float = 3.0) -> TcpLink:
+        host, port = parse(url)
+        return TcpLink(host, port, connect_timeout=timeout)
+
+    def checks(target: Target) -> list[Check]:
+        """A route from this host (a link-local device needs a link-local address here
+        too), and a connection the device accepts."""
+        from deltoctl.transport.doctor import reach, route
+
+        host, port = parse(target.url)
+        return [route(target.bus, host, port), reach(target, host, port)]
+
+    def trace_label(url: str, address: int | None) -> str:
+        host, port = parse(url)
+        return f"{host}:{port}"
+
+    return Transport("tcp", "tcp://HOST:PORT", parse, open_link, checks,
+                     trace_label=trace_label)
 
 
-def _checks(target: Target) -> list[Check]:
-    """A route from this host (a link-local device needs a link-local address here too),
-    and a connection the device accepts."""
-    from deltoctl.transport.doctor import reach, route
-
-    host, port = parse_tcp_url(target.url)
-    return [route(target.bus, host, port), reach(target, host, port)]
-
-
-def _trace_label(url: str, address: int | None) -> str:
-    host, port = parse_tcp_url(url)
-    return f"{host}:{port}"
-
-
-TRANSPORT = Transport("tcp", "tcp://HOST:PORT", parse_tcp_url, _open, _checks,
-                      trace_label=_trace_label)
+# doctor's and the trace's, by scheme: a URL without a port means Modbus TCP's registered
+# port, as it does to a device driver on plain TCP (which passes its own default)
+TRANSPORT = tcp_transport(502)

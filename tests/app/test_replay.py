@@ -27,7 +27,8 @@ def run_json(cli, *args):
     result = cli(*args, "--json")
     assert result.exit_code == 0, result.stderr
     document = json.loads(result.stdout)
-    return document.get("result", document)  # the data inside the envelope
+    data = document.get("result", document)  # the data inside the envelope
+    return {"blocks": document["blocks"], **data} if "blocks" in document else data
 
 
 def replayed(cli, path, *args):

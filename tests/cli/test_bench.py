@@ -54,6 +54,12 @@ def test_bench_loop_reports_its_own_cost_per_hand(cli):
     assert paced["loop_cpu_us_per_hand_cycle"] == \
         pytest.approx(paced["loop_thread_cpu_us_per_cycle"] / 2, abs=0.1)
     assert paced["loop_wakeups_per_cycle"] >= 0.5  # at 200 Hz the loop sleeps between cycles
+    # the recorder process's CPU: starting and finishing the file, and its cycles'
+    assert paced["recorder_process_setup_cpu_ms"] > 0
+    assert 0 < paced["recorder_process_cycles_cpu_us_per_cycle"] < \
+        paced["recorder_process_cpu_us_per_cycle"]
+    assert "its cycles'" in cli("bench", "loop", "--hands", "1", "--rate", "200", "--duration",
+                                "0.3", "--unpaced", "0").stdout
     calls = doc.get("result", doc)["hands"]["2"]["syscalls"]
     if shutil.which("strace") is None:
         assert calls is None

@@ -70,16 +70,16 @@ def test_a_log_file_that_cannot_be_written_is_a_usage_error(cli, tmp_path):
 
 
 def test_an_untraced_link_keeps_its_methods():
-    """Zero cost when off: the class's send and recv_frame, no wrapper, no check per packet."""
+    """Zero cost when off: the class's send and recv_into, no wrapper, no check per packet."""
     server = socket.create_server(("127.0.0.1", 0))
     port = server.getsockname()[1]
     try:
         link = TcpLink("127.0.0.1", port)
-        assert "send" not in vars(link) and "recv_frame" not in vars(link)
+        assert "send" not in vars(link) and "recv_into" not in vars(link)
         link.close()
         trace.configure(2, None)
         traced = TcpLink("127.0.0.1", port)
-        assert "send" in vars(traced) and "recv_frame" in vars(traced)
+        assert "send" in vars(traced) and "recv_into" in vars(traced)
         traced.close()
     finally:
         server.close()

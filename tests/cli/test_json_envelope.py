@@ -16,6 +16,7 @@ jsonschema = pytest.importorskip("jsonschema")
 DEVICE_VERBS = (("connect", "-n", "2"), ("identify",), ("detect",), ("gpio", "get"),
                 ("config", "snapshot", "-o", "-"), ("doctor",))
 KEYS = {"verb", "profile", "warnings", "exit_code"}
+DATA = {"blocks", "result"}  # where a verb's data goes: nothing else beside the envelope's keys
 
 
 def _valid(verb: str, document: dict) -> None:
@@ -30,7 +31,7 @@ def _check(result, verb: str) -> None:
         _valid("error", json.loads(result.stderr.strip().splitlines()[-1]))
         return
     document = json.loads(result.stdout)
-    assert set(document) >= KEYS and ("blocks" in document) != ("result" in document)
+    assert set(document) - DATA == KEYS and set(document) & DATA, sorted(document)
     assert document["exit_code"] == result.exit_code
     _valid(verb, document)
 
@@ -65,21 +66,44 @@ def test_record_home_and_jog(cli, tmp_path, profile):
 
 
 def test_home_and_jog_have_one_shape_for_every_family(cli):
+    """The envelope's keys, the blocks, and the move's outcome in ``result``."""
     shapes = set()
     for profile in ("bioscara-arm", "dg-5f-right", "rrbot-gpio"):
         result = cli("-p", profile, "--sim", "-y", "home", "--json")
         assert result.exit_code == 0, result.stderr
+        _check(result, "home")
         document = json.loads(result.stdout)
-        _valid("home", document)
-        shapes.add(tuple(sorted(document)))
-    assert len(shapes) == 1, shapes
+        shapes.add((tuple(sorted(document)), tuple(sorted(document["result"]))))
+    assert shapes == {(("blocks", "exit_code", "profile", "result", "verb", "warnings"),
+                       ("cannot_home", "seconds", "settled", "unsettled"))}, shapes
     jogs = set()
     for profile, joint in (("rrbot-gpio", "joint1"), ("dg-5f-right", "rj_dg_2_2")):
         jog = cli("-p", profile, "--sim", "-y", "jog", joint, "0.05", "--json")
         assert jog.exit_code == 0, jog.stderr
-        _valid("jog", json.loads(jog.stdout))
-        jogs.add(tuple(sorted(json.loads(jog.stdout))))
-    assert len(jogs) == 1, jogs
+        _check(jog, "jog")
+        document = json.loads(jog.stdout)
+        assert document["result"]["settled"] is True
+        jogs.add((tuple(sorted(document)), tuple(sorted(document["result"]))))
+    assert jogs == {(("blocks", "exit_code", "profile", "result", "verb", "warnings"),
+                     ("seconds", "settled", "unsettled"))}, jogs
+
+
+def test_every_schema_allows_the_envelope_keys_only():
+    """A key a verb adds beside the envelope's fails its schema."""
+    for path in SCHEMAS.glob("*.json"):
+        schema = json.loads(path.read_text())
+        if path.stem in ("error", "stream-frame"):
+            continue
+        assert schema["additionalProperties"] is False, path.name
+        assert set(schema["properties"]) - DATA == KEYS, path.name
+        assert set(schema["properties"]) & DATA, path.name
+
+
+def test_a_calibration_says_whether_it_passed_in_its_result(cli):
+    result = cli("-p", "dg-4f", "--sim", "calibrate", "ft", "--json")
+    assert result.exit_code == 0, result.stderr
+    _check(result, "calibrate ft")
+    assert json.loads(result.stdout)["result"] == {"pass": True}
 
 
 @pytest.mark.parametrize("args,verb", [(("profile", "list"), "profile list"),

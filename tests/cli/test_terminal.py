@@ -112,7 +112,7 @@ def test_yq_after_the_verb_runs(cli):
     result = cli("-p", "rrbot-gpio", "jog", "joint1", "--to", "0.1", "-yq")
     assert result.exit_code == 0, result.output
     result = cli("-p", "rrbot-gpio", "jog", "joint1", "--to", "0.2", "-yq", "--json")
-    assert json.loads(result.stdout)["settled"] is True
+    assert json.loads(result.stdout)["result"]["settled"] is True
 
 
 # -- one JSON shape ---------------------------------------------------------------------------
@@ -174,6 +174,19 @@ def test_tables_fit_80_columns_without_cutting_a_value():
         assert joint in text
 
 
+def test_a_stream_on_an_80x24_terminal_fits_it():
+    pexpect = pytest.importorskip("pexpect")
+    child = pexpect.spawn(DELTOCTL, ["-p", "mh5", "--sim", "stream", "-d", "0.5"],
+                          dimensions=(24, 80), encoding="utf-8", timeout=60,
+                          env=dict(os.environ, TERM="xterm"))
+    child.expect(pexpect.EOF)
+    lines = ANSI.sub("", child.before).replace("\r", "").splitlines()
+    text = "\n".join(lines)
+    assert "linear_acceleration.z" in text and "Ctrl-C to stop" in text  # the IMU in view
+    assert "more rows (" in text and "narrow with -i 'PATTERN'" in text
+    assert "..." not in lines  # nothing cut at the bottom of the screen
+
+
 def test_piped_tables_are_never_cut(cli):
     lines = cli("profile", "show", "dg-5f-right").stdout.splitlines()
     assert any("position, velocity, effort, temperature" in line for line in lines)
@@ -216,11 +229,12 @@ def test_tcp_urls_are_strict():
     from deltoctl.transport.tcp import parse_tcp_url
 
     assert parse_tcp_url("tcp://169.254.186.72:502") == ("169.254.186.72", 502)
-    assert parse_tcp_url("tcp://gripper") == ("gripper", 502)
+    assert parse_tcp_url("tcp://gripper", 502) == ("gripper", 502)  # the caller's default
     for url, what in (("tcp://h:502?baud=9600", "unknown key 'baud'"),
                       ("tcp://h:70000", "1 to 65535"), ("tcp://h:0", "1 to 65535"),
                       ("tcp://169.254.186.720:502", "not an IPv4 address"),
-                      ("tcp://h:502/x", "nothing else"), ("udp://h:1", "not a TCP target")):
+                      ("tcp://h:502/x", "nothing else"), ("udp://h:1", "not a TCP target"),
+                      ("tcp://gripper", "no port")):
         with pytest.raises(InvalidInput, match=re.escape(what)):
             parse_tcp_url(url)
 

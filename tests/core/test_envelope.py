@@ -20,7 +20,7 @@ from deltoctl.families.dynamixel.control_table import item_named as dynamixel_it
 from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
 from deltoctl.profile.catalog import load_profile
 from deltoctl.sim.i2c_bus import I2CSocketServer
-from tests.conftest import mh5_targets, sim_i2c_bus
+from tests.conftest import eventually, mh5_targets, sim_i2c_bus
 
 NAN = float("nan")
 DELTO_WRITES = {delto.SET_DUTY, delto.SET_GPIO, delto.SET_FT_SENSOR_OFFSET}
@@ -310,3 +310,207 @@ def test_a_snapshot_cannot_put_a_mock_joint_outside_its_envelope(cli, tmp_path):
     result = cli("-p", "rrbot-gpio", "config", "restore", str(path), "-y")
     assert result.exit_code == 5, result.stderr
     assert "joint1 target 5.0000 is outside its limits" in result.stdout
+
+
+# -- a refusal has no effect: no command and no stop, through the library and the CLI -------
+
+def refused_without_an_effect(system: System, received: Received, calls, match: str) -> None:
+    """Each of ``calls`` (a Robot's move, jog or home) is Refused, and the device got nothing
+    for it: no command, and no stop either (a held command stays held)."""
+    system.read()
+    before = received.count()
+    for call in calls:
+        with pytest.raises(Refused, match=match):
+            call()
+    system.read()
+    assert received.count() == before
+
+
+def test_a_refused_move_leaves_a_gripper_holding_its_grasp(hand):
+    from deltoctl.app.robot import Robot
+
+    system, received = hand
+    robot = Robot(system)
+    system.set_command("rj_dg_2_2/effort", 0.1)  # a grasp, held by its duty
+    refused_without_an_effect(system, received, [
+        lambda: robot.move({"rj_dg_2_2": -0.3}),
+        lambda: robot.move({"rj_dg_2_3": 0.2, "rj_dg_2_2": -0.3}),
+        lambda: robot.jog({"rj_dg_2_2": 0.6}),
+        lambda: robot.move({"rj_dg_2_2": 0.2}, velocity=4.0),
+        lambda: robot.home(velocity=4.0)], "outside its limits|max_jog_step|beyond its limit")
+    system.stop()  # this session drove a duty: a stop still sends duty 0
+    system.read()
+    assert received.codes.count(delto.SET_DUTY) == 2
+
+
+def test_a_refused_move_leaves_servos_following_their_goals(servos):
+    from deltoctl.app.robot import Robot
+
+    system, received = servos
+    robot = Robot(system)
+    start = system.read()["head_y/position"]
+    system.follow({"head_y": (start + 0.1, 1.0, NAN)})  # goals being followed
+    refused_without_an_effect(system, received, [
+        lambda: robot.move({"head_y": 3.5}),
+        lambda: robot.jog({"head_y": 0.4}),
+        lambda: robot.move({"head_y": start}, velocity=6.0)],
+        "outside its limits|max_jog_step|beyond its limit")
+    system.stop()
+
+
+def test_a_refused_move_leaves_an_arm_joint_running(arm):
+    from deltoctl.app.robot import Robot
+
+    system, received = arm
+    robot = Robot(system)
+    start = system.read()["j4/position"]
+    assert system.member("j2").driver.home(["j2"]) == {"j2": "homed"}
+    system.set_command("j2/velocity", -0.01)  # j2 running at a speed
+    refused_without_an_effect(system, received, [
+        lambda: robot.move({"j4": start + 0.2}),
+        lambda: robot.jog({"j4": -0.6}),
+        lambda: robot.move({"j4": start - 0.2}, velocity=11.0)],
+        "outside its limits|max_jog_step|beyond its limit")
+    system.stop()
+
+
+def test_a_refused_move_leaves_the_mock_as_it_was(monkeypatch):
+    from deltoctl.app.robot import Robot
+    from deltoctl.families.generic.driver import GenericDriver
+
+    calls = count_calls(monkeypatch, GenericDriver)
+    with System(load_profile("rrbot-gpio")) as system:
+        robot = Robot(system)
+        system.set_command("joint1/position", 0.3)
+        before, reached = dict(system.read()), len(calls)
+        for call in (lambda: robot.move({"joint1": 1.5}), lambda: robot.jog({"joint1": 0.6}),
+                     lambda: robot.move({"joint1": 0.4}, velocity=100.0)):
+            with pytest.raises(Refused):
+                call()
+        assert len(calls) == reached and system.read() == before
+
+
+def count_calls(monkeypatch, cls, methods=("set_command", "move", "stop")) -> list[str]:
+    """The calls of ``methods`` (commands and stops) that reach drivers of ``cls``."""
+    calls: list[str] = []
+    for method in methods:
+        original = getattr(cls, method)
+
+        def counted(self, *args, _original=original, _name=method, **kwargs):
+            calls.append(_name)
+            return _original(self, *args, **kwargs)
+
+        monkeypatch.setattr(cls, method, counted)
+    return calls
+
+
+def test_a_move_of_the_arm_leaves_the_gripper_holding(cli):
+    """Only the blocks that moved are stopped: the cell's gripper keeps its grasp while the
+    arm moves."""
+    from deltoctl.app.robot import Robot
+
+    profile = load_profile("bioscara-dg-3f-m")
+    firmware = firmware_for_block(profile.hardware[1])
+    hand = Received({delto.SET_DUTY})
+    hand.spy(firmware, "handle", lambda data: data[2])
+    with I2CSocketServer(sim_i2c_bus(profile)) as i2c, DeltoServer(firmware) as tcp, \
+            System(profile, [f"i2c={i2c.url}", f"gripper={tcp.endpoint}"]) as system:
+        robot = Robot(system)
+        assert system.member("j4").driver.home(["j4"]) == {"j4": "homed"}
+        system.set_command("j_dg_1_2/effort", 0.1)
+        system.read()
+        grasp = hand.count()
+        assert robot.jog({"j4": -0.1})["settled"]
+        system.read()
+        assert hand.count() == grasp
+
+
+# the CLI: a refused jog or home reaches nothing, from start to exit
+
+def test_a_refused_jog_on_the_cli_sends_a_gripper_nothing(cli):
+    profile = load_profile("dg-5f-right")
+    firmware = firmware_for_block(profile.hardware[0])
+    received = Received(DELTO_WRITES)
+    received.spy(firmware, "handle", lambda data: data[2])
+    with DeltoServer(firmware) as server:
+        for args in (["jog", "rj_dg_2_2", "--to", "-0.3"], ["jog", "rj_dg_2_2", "0.6"],
+                     ["jog", "rj_dg_2_2", "0.1", "--velocity", "4"],
+                     ["home", "--velocity", "4"]):
+            result = cli("-p", "dg-5f-right", "-t", server.endpoint, *args, "--yes")
+            assert result.exit_code == 5, result.output + result.stderr
+        assert eventually(lambda: len(received.codes) > 0)
+        assert received.count() == 0
+
+
+def test_a_refused_jog_on_the_cli_sends_servos_nothing(cli, mh5_buses):
+    bus = mh5_buses["upper_body"].bus
+    received = Received(DYNAMIXEL_WRITES)
+    received.spy(bus, "handle", lambda device_id, instruction, params: instruction)
+    for args in (["jog", "head_y", "--to", "3.5"], ["jog", "head_y", "0.4"],
+                 ["jog", "head_y", "0.1", "--velocity", "6"]):
+        result = cli("-p", "mh5", *mh5_targets(mh5_buses), "--hardware", "upper_body", *args,
+                     "--yes")
+        assert result.exit_code == 5, result.output + result.stderr
+    assert received.codes and received.count() == 0
+
+
+def test_a_refused_jog_on_the_cli_sends_an_arm_nothing(cli):
+    profile = load_profile("bioscara-arm")
+    smbus = sim_i2c_bus(profile)
+    received = Received(set(bioscara.COMMANDS) - BIOSCARA_READS)
+    for joint in smbus.devices.values():
+        received.spy(joint, "write", lambda data: data[0] if data else -1)
+    with I2CSocketServer(smbus) as server:
+        for args in (["jog", "j4", "0.1"], ["jog", "j4", "--to", "3.5"]):  # not homed
+            result = cli("-p", "bioscara-arm", "-t", server.url, *args, "--yes")
+            assert result.exit_code == 5, result.output + result.stderr
+        assert received.codes and received.count() == 0
+
+
+def test_a_refused_jog_on_the_cli_reaches_no_mock(cli, monkeypatch):
+    """(Closing stops the mock as it stops every block: the mock holds its last command.)"""
+    from deltoctl.families.generic.driver import GenericDriver
+
+    calls = count_calls(monkeypatch, GenericDriver, ("set_command", "move"))
+    for args in (["jog", "joint1", "--to", "1.5"], ["jog", "joint1", "0.6"],
+                 ["home", "--velocity", "100"]):
+        result = cli("-p", "rrbot-gpio", *args, "--yes")
+        assert result.exit_code == 5, result.output + result.stderr
+    assert calls == []
+
+
+def test_a_replay_of_the_arm_leaves_the_gripper_holding(cli, tmp_path):
+    """A replay stops the blocks it commands on the way out, no others."""
+    from deltoctl.app.robot import Robot
+
+    profile = load_profile("bioscara-dg-3f-m")
+    firmware = firmware_for_block(profile.hardware[1])
+    hand = Received({delto.SET_DUTY})
+    hand.spy(firmware, "handle", lambda data: data[2])
+    out = tmp_path / "arm.mcap"
+    with I2CSocketServer(sim_i2c_bus(profile)) as i2c, DeltoServer(firmware) as tcp:
+        targets = [f"i2c={i2c.url}", f"gripper={tcp.endpoint}"]
+        cell = ["-p", "bioscara-dg-3f-m", *(a for t in targets for a in ("-t", t)), "--yes"]
+        assert cli(*cell, "home", "-j", "j4").exit_code == 0
+        result = cli(*cell, "jog", "j4", "-0.2", "--record", str(out))
+        assert result.exit_code == 0, result.stderr
+        with System(profile, targets) as system:
+            system.set_command("j_dg_1_2/effort", 0.1)
+            system.read()
+            grasp = hand.count()
+            assert set(Robot(system).replay(out)["joints"]) == {"j4"}
+            system.read()
+            assert hand.count() == grasp
+
+
+def test_a_gripper_never_driven_is_left_as_it_is_unless_set_safe(hand):
+    """Closing a session that sent no duty sends none; setting the blocks safe (what the
+    fleet's agent does after killing a motion verb) sends duty 0 all the same."""
+    system, received = hand
+    system.read()
+    system.stop()
+    system.read()
+    assert received.codes.count(delto.SET_DUTY) == 0
+    system.make_safe()
+    system.read()
+    assert received.codes.count(delto.SET_DUTY) == 1

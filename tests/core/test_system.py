@@ -55,7 +55,7 @@ def test_jog_finds_the_block_from_the_joint(cli, deltoctl_sim):
                      delta)
         assert result.exit_code == 0, result.stderr
         report = json.loads(result.stdout)
-        assert report["settled"]
+        assert report["result"]["settled"]
         assert [b["name"] for b in report["blocks"]] == [RIGHT if joint[0] == "r" else LEFT]
         moved = report["blocks"][0]["joints"][joint]
         assert abs(moved["position"] - moved["target"]) < math.radians(2)
@@ -65,7 +65,7 @@ def test_home_moves_both_hands_at_once(cli):
     result = cli("-p", BIMANUAL, "--sim", "--yes", "--json", "home")
     assert result.exit_code == 0, result.stderr
     report = json.loads(result.stdout)
-    assert report["settled"] and report["cannot_home"] == []
+    assert report["result"]["settled"] and report["result"]["cannot_home"] == []
     assert [b["name"] for b in report["blocks"]] == [LEFT, RIGHT]
     assert sum(len(b["joints"]) for b in report["blocks"]) == 40
 
@@ -78,11 +78,11 @@ def test_cell_homes_the_arm_by_its_routine_then_jogs_both(cli, deltoctl_sim):
     arm, gripper = report["blocks"]
     assert arm["name"] == "bioscara_arm"
     assert {j["outcome"] for j in arm["joints"].values()} == {"homed"}
-    assert gripper["name"] == "dg3f_m_driver" and report["settled"]
+    assert gripper["name"] == "dg3f_m_driver" and report["result"]["settled"]
     for joint, delta in (("j1", "-0.1"), ("j_dg_1_2", "5deg")):  # I2C, then TCP
         result = cli("-p", CELL, *t, "--yes", "--json", "jog", joint, "--", delta)
         assert result.exit_code == 0, (joint, result.stderr)
-        assert json.loads(result.stdout)["settled"]
+        assert json.loads(result.stdout)["result"]["settled"]
 
 
 def test_gpio_by_name_on_either_hand(cli, deltoctl_sim):
@@ -194,7 +194,7 @@ def test_calibrate_tares_every_hand_and_writes_a_report_each(cli, tmp_path):
                  "-o", str(tmp_path))
     assert result.exit_code == 0, result.stderr
     report = json.loads(result.stdout)
-    assert report["pass"] and [r["block"] for r in report["blocks"]] == [LEFT, RIGHT]
+    assert report["result"]["pass"] and [r["block"] for r in report["blocks"]] == [LEFT, RIGHT]
     assert len(list(tmp_path.glob("calibration-*.json"))) == 2
     assert all(len(r["sensors"]) == 5 for r in report["blocks"])
 

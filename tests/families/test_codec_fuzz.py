@@ -18,6 +18,7 @@ from deltoctl.errors import ProtocolError
 from deltoctl.families.bioscara import codec as bioscara
 from deltoctl.families.delto import codec as delto
 from deltoctl.families.delto.models import MODELS
+from deltoctl.families.delto.session import NEED_DATA, Role, Session
 from deltoctl.families.dynamixel import codec as dxl
 from deltoctl.families.lsm6ds3 import codec as imu
 
@@ -58,22 +59,31 @@ def delto_frames(cmd: int) -> st.SearchStrategy[bytes]:
     )
 
 
+def delto_requests(session: Session, data: bytes) -> list[bytes]:
+    """The request frames ``data`` completes, as the device's session gives them."""
+    session.receive_data(data)
+    frames = []
+    while (event := session.next_event()) is not NEED_DATA:
+        frames.append(event.frame)
+    return frames
+
+
 @quick
 @given(st.lists(st.binary(max_size=48), max_size=12))
-def test_delto_frame_reader_takes_any_stream(pieces):
-    reader = delto.FrameReader()
+def test_delto_session_takes_any_stream(pieces):
+    session = Session(Role.DEVICE)
     for piece in pieces:
-        frames = decoded(reader.feed, piece) or []
+        frames = decoded(delto_requests, session, piece) or []
         for f in frames:
             assert len(f) == (f[0] << 8 | f[1]) >= 3
 
 
 @quick
 @given(st.lists(st.binary(max_size=40), max_size=6), st.lists(st.integers(0, 4096)))
-def test_delto_frame_reader_gives_back_frames_however_split(payloads, cuts):
+def test_delto_session_gives_back_frames_however_split(payloads, cuts):
     frames = [delto.frame(delto.GET_DATA, p) for p in payloads]
-    reader = delto.FrameReader()
-    got = [f for piece in chunks(b"".join(frames), cuts) for f in reader.feed(piece)]
+    session = Session(Role.DEVICE)
+    got = [f for piece in chunks(b"".join(frames), cuts) for f in delto_requests(session, piece)]
     assert got == frames
 
 

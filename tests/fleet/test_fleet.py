@@ -126,6 +126,24 @@ def test_remote_connect_and_stream_have_the_local_shape(bench):
         {tuple(json.loads(line)["values"]) for line in local.stdout.splitlines()}
 
 
+def test_a_remote_stream_on_a_terminal_draws_the_live_table(bench):
+    import re
+
+    pexpect = pytest.importorskip("pexpect")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("DELTOCTL_")}
+    command = [*lab.deltoctl_command(), "--zenoh-config", str(bench.config), "--robot",
+               bench.robot, "stream", "--duration", "0.5"]
+    child = pexpect.spawn(command[0], command[1:], dimensions=(24, 80), encoding="utf-8",
+                          timeout=60, env={**env, "TERM": "xterm"})
+    child.expect(pexpect.EOF)
+    child.close()
+    text = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", child.before).replace("\r", "")
+    assert child.exitstatus == 0, text
+    assert "samples from robot hand-1 · links up" in text and "Ctrl-C to stop" in text
+    assert "right_fingertip_finger_5" in text and "input_1" in text
+    assert '"values"' not in text  # the frames drawn, not printed
+
+
 def test_a_remote_stream_publishes_its_frames(bench):
     frames, states = [], []
     with bench.session.declare_subscriber("deltoctl/hand-1/frames/*",
@@ -191,7 +209,7 @@ def test_remote_motion_needs_yes_and_the_robot_keeps_its_state(bench):
     moved = bench.remote("jog", JOINT, "5deg", "--yes", "--json")
     assert moved.returncode == 0, moved.stderr
     report = json.loads(moved.stdout)
-    assert report["settled"]
+    assert report["result"]["settled"]
     probe = bench.probe()
     try:  # the same simulator: the joint stays where the remote jog left it
         assert probe.position() == pytest.approx(report["blocks"][0]["joints"][JOINT]["position"],

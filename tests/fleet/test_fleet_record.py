@@ -57,8 +57,10 @@ def test_a_remote_record_writes_the_file_on_the_callers_computer(hand, tmp_path)
     assert result.returncode == 0, result.stderr
     assert out.stat().st_size > 0
     assert not (hand.workdir / "here.mcap").exists()  # not on the robot's side
-    report = json.loads(result.stdout)["result"]
+    document = json.loads(result.stdout)
+    report = document["result"]
     assert set(report) >= LOCAL_KEYS and report["robot"] == "hand-rec"
+    assert document["profile"] == "dg-5f-right"  # the robot's, as a local record names it
     assert report["loop"]["cycles"] == report["loop"]["robot_cycles"] > 10
     assert report["messages"]["/joint_states"] == report["loop"]["cycles"]
     # `deltoctl info` sees the robot's profile and blocks, as in a recording made there
@@ -72,6 +74,7 @@ def test_a_remote_record_writes_the_file_on_the_callers_computer(hand, tmp_path)
     local = hand.local("record", str(tmp_path / "local.mcap"), "--duration", "0.3", "--json")
     assert local.returncode == 0, local.stderr
     assert set(json.loads(local.stdout)["result"]["messages"]) == set(report["messages"])
+    assert json.loads(local.stdout)["profile"] == document["profile"]
     # rosbags reads it; each message at the robot's cycle time, increasing, in the window
     messages = _read(out)
     stamps = [t for topic, t, _ in messages if topic == "/joint_states"]
@@ -88,7 +91,9 @@ def test_a_remote_record_of_a_robot_of_two_blocks(arm, tmp_path):
     result = arm.remote("record", "arm.mcap", "--duration", "0.5", "--rate", "50", "--json",
                         cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    report = json.loads(result.stdout)["result"]
+    document = json.loads(result.stdout)
+    report = document["result"]
+    assert document["profile"] == "bioscara-dg-3f-m"
     summary = _info(tmp_path / "arm.mcap")
     assert summary["profile"]["name"] == "bioscara-dg-3f-m"
     local = arm.local("record", str(tmp_path / "local.mcap"), "--duration", "0.3", "--json")

@@ -16,7 +16,15 @@ from typing import Any
 from deltoctl import registry
 from deltoctl.core.driver import Block, Driver, HomeProgress, MoveResult, Progress
 from deltoctl.core.exchange import ExchangePolicy
-from deltoctl.errors import DeltoctlError, DeviceError, DeviceFault, InvalidInput, NoAnswer, Refused
+from deltoctl.errors import (
+    DeltoctlError,
+    DeviceError,
+    DeviceFault,
+    InvalidInput,
+    NoAnswer,
+    NotHomed,
+    Refused,
+)
 from deltoctl.families.bioscara import codec
 from deltoctl.profile.model import Component
 from deltoctl.transport.i2c import I2CBus  # what every I2C link gives
@@ -153,7 +161,7 @@ class Joint:
             raise Refused(f"{self.name} is commanded through {self.mode}; stop it before "
                           f"commanding {mode}")
         if mode != "home" and not self.homed:
-            raise Refused(f"{self.name} is not homed: position and velocity commands are "
+            raise NotHomed(f"{self.name} is not homed: position and velocity commands are "
                           "refused", hint="run `deltoctl home` first")
         if self.busy:
             raise Refused(f"{self.name} is busy with a blocking command ({codec.ERRORS[-109]})")
@@ -371,7 +379,7 @@ class BioscaraDriver(Driver):
         for name in names:
             joint = self.joint(name)
             if not joint.homed:
-                raise Refused(f"{name} is not homed: it may not move",
+                raise NotHomed(f"{name} is not homed: it may not move",
                               hint="run `deltoctl home` first")
 
     def move(self, targets: dict[str, float], velocity: float | None = None,

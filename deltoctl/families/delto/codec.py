@@ -2,7 +2,8 @@
 
 Frames in both directions are ``[LEN_HI][LEN_LO][CMD] payload``, LEN counting the whole frame;
 every field is big-endian; there is no checksum. Only GET_VERSION and GET_DATA are answered.
-The same functions serve the driver and the emulator. Bad bytes raise ProtocolError.
+The same functions serve the driver and the emulator, and the conversation they hold is
+session.py's. Bad bytes raise ProtocolError.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 import math
 import re
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
 from itertools import chain
@@ -33,7 +35,8 @@ COMMANDS = {GET_DATA: "GET_DATA", SET_DUTY: "SET_DUTY", SET_GPIO: "SET_GPIO",
 # GET_DATA selectors
 JOINT, CURRENT, TEMPERATURE, VELOCITY, FINGERTIP_SENSOR, GPIO = 1, 2, 3, 4, 5, 6
 
-MAX_FRAME = 4096
+DEFAULT_PORT = 502  # Modbus TCP's, which developer mode keeps
+MAX_FRAME = 4096  # bytes, either way (the longest reply is 347)
 RPM_TO_RAD_S = math.pi / 30
 
 
@@ -44,30 +47,6 @@ def frame_name(data: bytes) -> str | None:
 
 def frame(cmd: int, payload: bytes = b"") -> bytes:
     return struct.pack(">HB", 3 + len(payload), cmd) + payload
-
-
-class FrameReader:
-    """Reassembles frames from a byte stream: ``feed(data)`` returns the complete ones."""
-
-    def __init__(self) -> None:
-        self._buffer = bytearray()
-
-    def feed(self, data: bytes) -> list[bytes]:
-        if not self._buffer and len(data) >= 3 and (data[0] << 8) | data[1] == len(data):
-            return [data]  # the usual case: exactly one frame
-        self._buffer += data
-        frames = []
-        while len(self._buffer) >= 2:
-            length = (self._buffer[0] << 8) | self._buffer[1]
-            if length < 3 or length > MAX_FRAME:
-                self._buffer.clear()
-                raise ProtocolError(f"frame length {length} is not possible "
-                                    f"(3..{MAX_FRAME})")
-            if len(self._buffer) < length:
-                break
-            frames.append(bytes(self._buffer[:length]))
-            del self._buffer[:length]
-        return frames
 
 
 def _check(data: bytes, cmd: int, what: str) -> None:
@@ -230,6 +209,23 @@ def unpack_data_reply(data: bytes, model: DeltoModel, codes: tuple[int, ...],
         raise ProtocolError(f"GET_DATA reply: {len(data)} bytes, expected {3 + layout.size} for "
                             f"{model.name} with codes {list(codes)}")
     return layout.unpack_from(data, 3)
+
+
+def data_reply_unpacker(model: DeltoModel, codes: tuple[int, ...],
+                        sensor_type: int) -> Callable[[bytes], tuple[int, ...]]:
+    """``unpack_data_reply`` for one shape of reply, its layout worked out once: a cycle's
+    reply is a length, a command byte and one unpack; a bad one gets the same errors."""
+    layout = _reply_layout(model, codes, sensor_type)
+    size = 3 + layout.size
+    head = bytes([size >> 8 & 0xFF, size & 0xFF, GET_DATA])
+    unpack_from = layout.unpack_from
+
+    def unpack(data: bytes) -> tuple[int, ...]:
+        if len(data) != size or data[:3] != head:
+            return unpack_data_reply(data, model, codes, sensor_type)  # raises: says why
+        return unpack_from(data, 3)
+
+    return unpack
 
 
 def decode_data_reply(data: bytes, model: DeltoModel, codes: tuple[int, ...],

@@ -1,9 +1,11 @@
-"""The Delto driver: the codec over a TCP link, mapped to ros2_control interface names.
+"""The Delto driver: the host side of the protocol session over a TCP link, mapped to
+ros2_control interface names.
 
 Packet sizes come from the model the gripper *reports* (a configured model that differs is an
 error unless allowed). A lost link sets ``system/connection_status`` to 0 and starts a
-background reconnect (1 s apart, 10 tries a round, rounds repeating); reads meanwhile return
-the last values and writes are skipped, so a loop keeps its rate and a recording goes on.
+background reconnect, timed by the exchange policy's reopener (1 s apart, 10 tries a round,
+rounds repeating); reads meanwhile return the last values and writes are skipped, so a loop
+keeps its rate and a recording goes on. A reopened link gets duty 0 before anything else.
 """
 
 from __future__ import annotations
@@ -18,7 +20,16 @@ from operator import itemgetter, mul
 from typing import Any
 
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
-from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Unreachable
+from deltoctl.core.exchange import ExchangePolicy, Reopener
+from deltoctl.errors import (
+    DeltoctlError,
+    DeviceError,
+    InvalidInput,
+    LinkLost,
+    NoAnswer,
+    ProtocolError,
+    Unreachable,
+)
 from deltoctl.families.delto import codec
 from deltoctl.families.delto.models import (
     DUTY_WIRE_LIMIT,
@@ -34,13 +45,16 @@ from deltoctl.families.delto.models import (
     model_label,
     sensor_label,
 )
-from deltoctl.transport.tcp import LinkLost, TcpLink, parse_tcp_url
+from deltoctl.families.delto.motion import effort_cap, move_to
+from deltoctl.families.delto.session import NEED_DATA, Reply, Role, Session
+from deltoctl.transport.tcp import TcpLink, parse_tcp_url
 
 VERSION_TIMEOUT = 3.0
 STOP_TIMEOUT = 0.3  # s: the one quick reconnection a stop tries on a lost link
-DATA_TIMEOUT = 0.5
-RECONNECT_PERIOD = 1.0
-RECONNECT_TRIES = 10
+# one try of a GET_DATA (a link that misses a reply is reopened); a lost link tried again
+# every second, 10 tries a round, rounds repeating until it is back
+POLICY = ExchangePolicy(tries=1, timeout=0.5, reopen_period=1.0, reopen_tries=10)
+DIP_SWITCHES = "DIP switches 2 and 4"  # developer mode's
 
 
 @dataclass
@@ -73,7 +87,7 @@ class DeltoDriver(Driver):
     def __init__(self, block: Block) -> None:
         super().__init__(block)
         hw = block.hw
-        self.host, self.port = parse_tcp_url(block.url)
+        self.host, self.port = parse_tcp_url(block.url, codec.DEFAULT_PORT)
         try:
             self.configured_model = int(hw.params.get("delto_model", "0"), 0)
         except ValueError:
@@ -83,18 +97,24 @@ class DeltoDriver(Driver):
         self.io = hw.params.get("IO") == "true"
         self.allow_model_mismatch = block.allow_model_mismatch
         self.link: TcpLink | None = None
+        self.session: Session | None = None  # the link's conversation
         self.identity: Identity | None = None
         self.model = MODELS.get(self.configured_model)
         self.codes: tuple[int, ...] = ()
         self.limiters = [CurrentLimiter() for _ in hw.joints]
         self._duty_plan: tuple = (None, [])
+        self._last_duty: tuple[list[int], bytes] = ([], b"")  # duties, their SET_DUTY
         self._request = b""  # GET_DATA with this connection's data codes
         self._reply_plan: tuple = ()
         self._pending: TcpLink | None = None  # a GET_DATA sent by start_read, reply not yet read
         self._lock = threading.RLock()
+        self.policy = POLICY
+        self.reopener = Reopener(POLICY)
         self._reconnecting = False
         self._connecting = threading.Lock()  # one connection attempt at a time
         self._closed = False
+        self._driving = False  # a duty was sent since the last stop: only then is there one
+        self._closing = threading.Event()  # wakes the reconnect thread to end it
         self._last_read = 0.0
         joints = [j.name for j in hw.joints]
         self._effort_keys = frozenset(f"{j}/effort" for j in joints)
@@ -127,16 +147,25 @@ class DeltoDriver(Driver):
         assert self.identity is not None
         return self.identity.as_dict()
 
-    def _connect(self, timeout: float = VERSION_TIMEOUT) -> None:
-        link = TcpLink(self.host, self.port, connect_timeout=timeout)
+    def _connect(self, timeout: float = VERSION_TIMEOUT, reopening: bool = False) -> None:
+        """A link, its GET_VERSION exchange and what it says; ``reopening`` a lost link: duty 0
+        goes out and the reconnect is counted before the link is anyone else's."""
         try:
-            link.send(codec.encode_version_request())
-            info = codec.decode_version_reply(link.recv_frame(timeout))
-        except LinkLost as exc:  # something listens there, but it is not a gripper answering
-            link.close()
+            link = TcpLink(self.host, self.port, connect_timeout=timeout)
+        except Unreachable as exc:
+            exc.hint = f"{exc.hint} (Delto: developer mode, {DIP_SWITCHES})"
+            raise
+        session = Session(Role.HOST)
+        try:
+            link.send(session.send(codec.encode_version_request()))
+            reply = receive(link, session, timeout)
+        except (LinkLost, NoAnswer, ProtocolError) as exc:  # something listens there, but
+            link.close()  # it is not a gripper answering
             raise Unreachable(f"no version reply: {exc}", hint="check that the gripper is in "
-                              "developer mode (DIP switches 2 and 4): in operator mode it "
-                              "speaks Modbus TCP on the same port") from None
+                              f"developer mode ({DIP_SWITCHES}): in operator "
+                              "mode it speaks Modbus TCP on the same port") from None
+        try:
+            info = codec.decode_version_reply(reply.frame)
         except DeviceError:
             link.close()
             raise
@@ -163,8 +192,16 @@ class DeltoDriver(Driver):
             mask = (1 << actual.fingers) - 1 if self.fingertip_sensor else 0
         direction = actual.direction(info.firmware)
         revised = all(d == 1 for d in direction) or actual.revised_from is None
+        if reopening:  # motion never resumes by itself after a loss
+            try:
+                link.send(session.send(codec.encode_duty([0] * actual.motors)))
+            except DeviceError:
+                link.close()
+                raise
         with self._lock:
-            self.link = link
+            if reopening:
+                self._count_reopened()
+            self.link, self.session = link, session
             self.model = actual
             self.codes = codec.data_codes(actual, self.fingertip_sensor, self.io and actual.gpio)
             self._request = codec.encode_data_request(self.codes)
@@ -310,10 +347,11 @@ class DeltoDriver(Driver):
 
     def cleanup(self) -> None:
         self._closed = True
+        self._closing.set()
         with self._lock:
             if self.link:
                 self.link.close()
-                self.link = None
+                self.link, self.session = None, None
 
     # -- cyclic I/O ------------------------------------------------------------------------------
     def _plan_reply(self, model: DeltoModel, sensor_type: int) -> None:
@@ -335,19 +373,21 @@ class DeltoDriver(Driver):
                     name = f"cell_{k // grid.cols}_{k % grid.cols}"
                     if sensor.state(name):
                         plan.append((f"{sensor.name}/{name}", cells[f * grid.cells + k]))
+        gpio = [i for i, _ in fields.get("gpio", ())]
         self._reply_plan = (model, sensor_type, [key for key, _ in plan],
                             itemgetter(*(i for _, (i, _) in plan)),
                             [scale for _, (_, scale) in plan],
-                            [i for i, _ in fields.get("gpio", ())])
+                            _picker(gpio) if gpio else None,
+                            codec.data_reply_unpacker(model, self.codes, sensor_type))
 
     def start_read(self) -> None:
         """Send GET_DATA; ``read`` takes the reply (another gripper's request goes out
         meanwhile)."""
-        link = self.link
-        if link is None or self._pending is not None:
+        link, session = self.link, self.session
+        if link is None or session is None or self._pending is not None:
             return
         try:
-            link.send(self._request)
+            link.send(session.send(self._request))
         except DeviceError as exc:
             self.stats["errors"] += 1
             self._lost(exc)
@@ -357,21 +397,21 @@ class DeltoDriver(Driver):
     def read(self) -> dict[str, float]:
         """One GET_DATA exchange; on a lost link, the last values (``connected`` false)."""
         with self._lock:
-            link, identity = self.link, self.identity
+            link, session, identity = self.link, self.session, self.identity
         pending, self._pending = self._pending, None
-        if link is None or identity is None:
+        if link is None or session is None or identity is None:
             self._start_reconnect()
             return self.values
         self.stats["packets"] += 1
-        model, sensor_type = self._reply_plan[:2]
+        unpack = self._reply_plan[6]
         timing = self.timing
         try:
             t0 = time.perf_counter()
             if pending is not link:
-                link.send(self._request)
-            reply = link.recv_frame(DATA_TIMEOUT)
+                link.send(session.send(self._request))
+            reply = receive(link, session, self.policy.timeout)
             t1 = time.perf_counter()
-            raw = codec.unpack_data_reply(reply, model, self.codes, sensor_type)
+            raw = unpack(reply.frame)
         except DeviceError as exc:
             self.stats["errors"] += 1
             self._lost(exc)
@@ -384,15 +424,15 @@ class DeltoDriver(Driver):
 
     def _store(self, raw: tuple[int, ...]) -> None:
         v = self.values
-        model, _, keys, pick, scales, gpio = self._reply_plan
+        model, _, keys, pick, scales, gpio, _ = self._reply_plan
         if model.legacy:  # the DG-3F-B sends no velocity: differentiate the position
             now = time.monotonic()
             dt = now - self._last_read if self._last_read else 0.0
             self._last_read = now
             before = [v.get(k) for k in self._keys["position"]]
         v.update(zip(keys, map(mul, pick(raw), scales)))
-        if gpio:
-            v.update(zip(self._keys["gpio"], (1.0 if raw[i] else 0.0 for i in gpio)))
+        if gpio is not None:  # each input and output: 1.0 or 0.0
+            v.update(zip(self._keys["gpio"], map(float, map(bool, gpio(raw)))))
         if model.legacy:
             for key, pos_key, previous in zip(self._keys["velocity"], self._keys["position"],
                                               before):
@@ -422,19 +462,24 @@ class DeltoDriver(Driver):
         identity, model = self.identity, self.model
         if identity is None or model is None:
             return
-        if self._duty_plan[0] is not identity:  # per joint, worked out once per connection
+        plan = self._duty_plan
+        if plan[0] is not identity:  # per joint, worked out once per connection
             joints = self.hw.joints[: model.motors]
-            self._duty_plan = (identity, [(j.name, f"{j.name}/effort", self.limiters[i],
-                                           identity.direction[i])
-                                          for i, j in enumerate(joints)])
+            steps = [(j.name, f"{j.name}/effort", self.limiters[i], identity.direction[i])
+                     for i, j in enumerate(joints)]
+            plan = self._duty_plan = (identity, steps, ([s[0] for s in steps],
+                                                        [s[1] for s in steps]),
+                                      codec.encode_duty([0] * model.motors))
+        targets = list(map(get, plan[2][by]))
+        if not any(targets):  # no joint commanded, or 0 for each: duty 0 on every motor
+            self._send(plan[3])
+            return
         values = self.values
         duties = []
-        for plan in self._duty_plan[1]:
-            target = get(plan[by])
+        for target, (_, effort_key, limiter, direction) in zip(targets, plan[1]):
             if not target or not isfinite(target):  # NaN would clamp to full duty: stop
                 duties.append(0)
                 continue
-            _, effort_key, limiter, direction = plan
             limited = limiter(target, values.get(effort_key, 0.0))
             if (limited > 0) != (target > 0):
                 duties.append(0)  # the limiter shrinks a command, never reverses it
@@ -442,20 +487,19 @@ class DeltoDriver(Driver):
             duty = int(effort_to_duty_percent(limited) * 10)
             duties.append(max(-DUTY_WIRE_LIMIT, min(DUTY_WIRE_LIMIT, duty)) * direction)
         duties += [0] * (model.motors - len(duties))
-        self._send(codec.encode_duty(duties))
+        self._driving = True
+        if duties != self._last_duty[0]:  # a command held from cycle to cycle: encoded once
+            self._last_duty = (duties, codec.encode_duty(duties))
+        self._send(self._last_duty[1])
 
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:
         """A current-bounded position loop on the effort interface (motion.py)."""
-        from deltoctl.families.delto.motion import move_to
-
         return move_to(self, targets, velocity=velocity, progress=progress)
 
     def effort_cap(self) -> float:
         """The profile's current cap as an effort: what a move commands at most."""
-        from deltoctl.families.delto.motion import effort_cap
-
-        return effort_cap(self)
+        return effort_cap(self.profile)
 
     def follow(self, setpoints: dict[str, tuple[float, float, float]]) -> None:
         """Recorded efforts (``replay``), clamped to the current cap as a move's are; a joint
@@ -465,9 +509,10 @@ class DeltoDriver(Driver):
                             if isfinite(sp[2])})
 
     def stop(self) -> None:
-        """The safe state: duty 0 on every motor. With the link down (a gripper keeps its
+        """The safe state: duty 0 on every motor, once this session sent a duty (a gripper
+        it never drove keeps what holds it, a grasp). With the link down (a gripper keeps its
         last duty), one immediate reconnection is tried first: a stop must reach it."""
-        if self.model is None:
+        if self.model is None or not self._driving:
             return
         if self.link is None and not self._closed and self._connecting.acquire(timeout=1.0):
             try:
@@ -479,6 +524,13 @@ class DeltoDriver(Driver):
             finally:
                 self._connecting.release()
         self._send(codec.encode_duty([0] * self.model.motors))
+        self._driving = self.link is None  # not sent: the next stop (closing) tries again
+
+    def make_safe(self) -> None:
+        """Duty 0 on every motor, though this session sent none (a gripper keeps the last
+        duty of a process that was killed)."""
+        self._driving = True
+        self.stop()
 
     def set_gpio(self, outputs: tuple[bool, bool, bool]) -> None:
         if self.model is None or not self.model.gpio:
@@ -510,11 +562,11 @@ class DeltoDriver(Driver):
 
     def _send(self, data: bytes) -> None:
         with self._lock:
-            link = self.link
-        if link is None:
+            link, session = self.link, self.session
+        if link is None or session is None:
             return
         try:
-            link.send(data)
+            link.send(session.send(data))
         except DeviceError as exc:
             self._lost(exc)
 
@@ -523,7 +575,7 @@ class DeltoDriver(Driver):
         with self._lock:
             if self.link is not None:
                 self.link.close()
-                self.link = None
+                self.link, self.session = None, None
             self.connected = False
         self._start_reconnect()
 
@@ -532,26 +584,60 @@ class DeltoDriver(Driver):
             if self._reconnecting or self._closed:
                 return
             self._reconnecting = True
+            self.reopener.lost()
         threading.Thread(target=self._reconnect_loop, name="delto-reconnect", daemon=True).start()
 
     def _reconnect_loop(self) -> None:
+        """Reopen the link when the reopener says, until it is back or the driver closes."""
+        reopener, closing = self.reopener, self._closing
         try:
-            while not self._closed:
-                for _ in range(RECONNECT_TRIES):
-                    time.sleep(RECONNECT_PERIOD)
-                    if self._closed:
+            while not closing.wait(self.policy.reopen_period):
+                while not reopener.due():  # a period is over; the clock may say not quite
+                    if closing.wait(0.01):
                         return
-                    with self._connecting:
-                        try:
-                            if self.link is None:
-                                self._connect()
-                        except DeltoctlError:
-                            continue
-                    self.stop()  # duty 0 first: motion never resumes by itself after a loss
-                    self.stats["reconnects"] += 1
-                    return
+                with self._connecting:
+                    try:
+                        if self.link is None:
+                            self._connect(reopening=True)
+                        else:  # a stop reopened it meanwhile
+                            with self._lock:
+                                self._count_reopened()
+                    except DeltoctlError:
+                        reopener.failed()  # the next round starts as the last one did
+                        continue
+                return
         finally:
             self._reconnecting = False
+
+    def _count_reopened(self) -> None:
+        self.reopener.reopened()
+        self.stats["reconnects"] += 1
+
+
+def receive(link: TcpLink, session: Session, timeout: float) -> Reply:
+    """The reply ``session`` expects next, received over ``link``: NoAnswer when none
+    arrives within ``timeout`` seconds (nor the rest of one within ``timeout`` of its first
+    bytes); ProtocolError, from then on, when the bytes break the protocol."""
+    event = session.next_event()
+    deadline = 0.0
+    while event is NEED_DATA:
+        count = link.recv_into(session.room(), timeout)
+        if not count:
+            raise NoAnswer(f"no complete reply from {link.host}:{link.port} within "
+                           f"{timeout:g} s ({session.buffered} bytes received)")
+        session.received(count)
+        event = session.next_event()
+        if event is NEED_DATA:  # a reply in pieces (rare): the rest within what is left
+            deadline = deadline or time.monotonic() + timeout
+            timeout = deadline - time.monotonic()
+    return event  # type: ignore[return-value]  # a host's session gives replies
+
+
+def _picker(indices: list[int]) -> Callable[[tuple[int, ...]], tuple[int, ...]]:
+    """The values at ``indices``, always as a tuple (``itemgetter`` of one gives the value)."""
+    if len(indices) == 1:
+        return lambda raw, i=indices[0]: (raw[i],)
+    return itemgetter(*indices)
 
 
 TOPIC_PART = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")

@@ -19,6 +19,7 @@ import socket
 import socketserver
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from operator import add, sub
 from typing import TYPE_CHECKING, Any
@@ -39,6 +40,7 @@ from deltoctl.families.delto.models import (
     DeltoModel,
     TactileGrid,
 )
+from deltoctl.families.delto.session import NEED_DATA, Role, Session
 
 if TYPE_CHECKING:
     from deltoctl.profile.model import Hardware, Profile
@@ -271,23 +273,30 @@ def profile_sensor_type(hw: Hardware) -> int | None:
     return None
 
 
+def _replies(session: Session, firmware: DeltoFirmware, data: bytes) -> Iterator[bytes]:
+    """The replies due to the requests ``data`` completes, in turn; ProtocolError when the
+    client's bytes break the protocol (its connection is then closed)."""
+    session.receive_data(data)
+    while (request := session.next_event()) is not NEED_DATA:
+        reply = firmware.handle(request.frame)  # type: ignore[union-attr]
+        if reply is not None:
+            yield session.send(reply)
+
+
 class _Handler(socketserver.BaseRequestHandler):
     server: DeltoServer
 
     def handle(self) -> None:
         sock: socket.socket = self.request
         self.server.track(sock, True)
-        reader = codec.FrameReader()
+        session = Session(Role.DEVICE)
         firmware = self.server.firmware
         try:
             while True:
                 data = sock.recv(4096)
                 if not data:
                     return
-                for request in reader.feed(data):
-                    reply = firmware.handle(request)
-                    if reply is None:
-                        continue
+                for reply in _replies(session, firmware, data):
                     if firmware.faults.delay:
                         time.sleep(firmware.faults.delay)
                     if firmware.faults.truncate_next:
@@ -356,10 +365,10 @@ class DeltoHub:
             added, self._added = self._added, []
         for sock, server in added:
             sock.setblocking(False)
-            self.selector.register(sock, selectors.EVENT_READ, (server, codec.FrameReader()))
+            self.selector.register(sock, selectors.EVENT_READ, (server, Session(Role.DEVICE)))
 
     def _answer(self, sock: socket.socket, server: DeltoServer,
-                reader: codec.FrameReader) -> list[tuple[socket.socket, DeltoServer, bytes]]:
+                session: Session) -> list[tuple[socket.socket, DeltoServer, bytes]]:
         """The replies due now to what the client sent; its connection closed when it
         closed it or sent what is not a frame (after the replies to the frames before)."""
         try:
@@ -371,10 +380,7 @@ class DeltoHub:
         replies, alive = [], bool(data)
         firmware = server.firmware
         try:
-            for request in reader.feed(data) if alive else ():
-                reply = firmware.handle(request)
-                if reply is None:
-                    continue
+            for reply in _replies(session, firmware, data) if alive else ():
                 if firmware.faults.delay:
                     self._count += 1
                     heapq.heappush(self._due, (time.monotonic() + firmware.faults.delay,

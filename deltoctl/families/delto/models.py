@@ -97,7 +97,7 @@ MODELS: dict[int, DeltoModel] = {
     for m in (
         DeltoModel(0x1F02, "DG-1F", 3, 1, gpio=False),
         DeltoModel(0x2F03, "DG-2F", 6, 2, gpio=False),
-        # GPIO per the README, but developer mode sends no GPIO block and refuses SET_GPIO
+        # GPIO per Tesollo's README, but developer mode sends no GPIO block and refuses SET_GPIO
         DeltoModel(0x3F01, "DG-3F-B", 12, 3, bytes_per_motor=5, gpio=False,
                    revised_from=(3, 6), legacy_direction=-1),
         DeltoModel(0x3F02, "DG-3F-M", 12, 3, revised_from=(2, 8), legacy_direction=-1),
@@ -116,8 +116,8 @@ MODELS: dict[int, DeltoModel] = {
 
 
 # The fingertip sensors each model is sold with (TCP README's table; the first is what the
-# emulator fits when a profile declares none). The README lists no F/T for the S15, though the
-# vendor's driver allows it; the GET_VERSION reply says what a given gripper has.
+# emulator fits when a profile declares none). Tesollo's README lists no F/T for the S15,
+# though the vendor's driver allows it; the GET_VERSION reply says what a given gripper has.
 MODEL_SENSORS: dict[int, tuple[int, ...]] = {
     0x3F02: (FT_6AXIS, TACTILE_M), 0x4F02: (FT_6AXIS, TACTILE_M),
     0x5F12: (FT_6AXIS, TACTILE_M), 0x5F22: (FT_6AXIS, TACTILE_M),

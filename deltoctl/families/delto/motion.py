@@ -10,16 +10,13 @@ hook when a verb set one (``jog --record``); ``replay`` sends the recorded effor
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
-from deltoctl.core.driver import MoveResult, Progress
+from deltoctl.core.driver import CycleHook, MoveResult, Progress
 from deltoctl.core.loop import CycleLoop
 from deltoctl.core.motion import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
 from deltoctl.errors import DeviceError
 from deltoctl.families.delto.models import KT
-
-if TYPE_CHECKING:
-    from deltoctl.families.delto.driver import DeltoDriver
 
 DEFAULT_CURRENT_CAP = 150.0  # mA
 SETTLE_CYCLES = 10
@@ -28,14 +25,31 @@ RATE = 200.0  # Hz
 NAN = float("nan")
 
 
-def effort_cap(driver: DeltoDriver) -> float:
+class EffortDriver(Protocol):
+    """What a move needs of a driver (the Delto driver's, which knows nothing of moves but
+    ``move`` calling ``move_to``)."""
+
+    profile: Any
+    hw: Any
+    connected: bool
+    halted: Any  # threading.Event
+    on_cycle: CycleHook | None
+
+    @property
+    def stats(self) -> dict[str, int]: ...
+    def read(self) -> dict[str, float]: ...
+    def write_efforts(self, efforts: dict[str, float]) -> None: ...
+    def stop(self) -> None: ...
+
+
+def effort_cap(profile: Any) -> float:
     """The effort (N·m) the profile's current cap allows a motion command."""
-    return (driver.profile.safety.current_cap or DEFAULT_CURRENT_CAP) / 1000.0 * KT
+    return (profile.safety.current_cap or DEFAULT_CURRENT_CAP) / 1000.0 * KT
 
 
-def move_to(driver: DeltoDriver, targets: dict[str, float], velocity: float | None = None,
+def move_to(driver: EffortDriver, targets: dict[str, float], velocity: float | None = None,
             timeout: float | None = None, progress: Progress | None = None) -> MoveResult:
-    max_effort = effort_cap(driver)
+    max_effort = effort_cap(driver.profile)
     tolerance = driver.profile.safety.home_tolerance or DEFAULT_TOLERANCE
     speed = velocity or DEFAULT_VELOCITY
     kp = max_effort / tolerance  # full effort at one tolerance of error

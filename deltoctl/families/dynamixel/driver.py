@@ -39,6 +39,16 @@ NAN = float("nan")
 LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}  # default Hz
 
 
+def refused_rates(url: str, bauds: list[int]) -> dict[int, str]:
+    """The rates of ``bauds`` the bus's adapter cannot set (its driver's), each with why:
+    a scan leaves them out rather than fail in the middle."""
+    from deltoctl.transport.adapters import adapter_of_target
+
+    adapter = adapter_of_target(url)
+    why = {b: adapter.refuses(b) for b in bauds} if adapter is not None else {}
+    return {b: f"{b} ({reason})" for b, reason in why.items() if reason}
+
+
 def _amps_per_step(number: int) -> float | None:
     model = by_number(number)
     return None if model is None or model.current_unit is None else model.current_unit / 1000
@@ -404,11 +414,12 @@ class DynamixelDriver(Driver):
         expected = self.expected
         missing = sorted(set(expected) - set(found))
         elsewhere: dict[int, int] = {}
+        unscanned = refused_rates(self.url, SCAN_BAUDS) if missing else {}
         if missing:
             own = self.port.baudrate
             try:
                 for baud in SCAN_BAUDS:
-                    if baud != own:
+                    if baud != own and baud not in unscanned:
                         self.port.baudrate = baud
                         # time for about 30 ping replies (14 bytes) at that rate
                         for i in self._broadcast_ping(max(0.1, 30 * 140 / baud)):
@@ -429,8 +440,11 @@ class DynamixelDriver(Driver):
         if elsewhere:
             summary += "; at another baud rate: " + ", ".join(
                 f"{name.get(i, i)} ({baud})" for i, baud in sorted(elsewhere.items()))
+        if unscanned:
+            summary += "; not scanned: " + "; ".join(unscanned.values())
         return {"bus": self.url, "found": found, "missing": missing, "unexpected": unexpected,
                 "wrong_model": wrong, "wrong_baud": {str(i): b for i, b in elsewhere.items()},
+                "unscanned": {str(b): why for b, why in unscanned.items()},
                 "checks": checks, "summary": summary}
 
     def _servo_check(self, servo_id: int, joint: str | None, model: int | None,

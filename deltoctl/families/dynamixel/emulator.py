@@ -376,11 +376,14 @@ class DynamixelPtyServer:
 
     With ``pace``, the bus takes the time a real one would at the baud rate the host set: the
     instruction's bytes arrive, each servo waits its Return Delay Time, and its status packet
-    leaves when its last byte would have crossed the wire (10 bits a byte)."""
+    leaves when its last byte would have crossed the wire (10 bits a byte). ``latency``: seconds
+    each reply is held before the host sees it, as a USB adapter's latency timer holds a short
+    packet (an FTDI's: 16 ms unless set)."""
 
-    def __init__(self, bus: DynamixelBus, pace: bool = False) -> None:
+    def __init__(self, bus: DynamixelBus, pace: bool = False, latency: float = 0.0) -> None:
         self.bus = bus
         self.pace = pace
+        self.latency = latency
         self.master, self.slave = os.openpty()
         tty.setraw(self.master)
         tty.setraw(self.slave)
@@ -424,6 +427,8 @@ class DynamixelPtyServer:
                 if self.pace and self.bus.line_baud:
                     self._paced(arrived, 10 + len(params), reply)
                 elif reply:
+                    if self.latency:
+                        time.sleep(self.latency)
                     os.write(self.master, reply)
 
     def _spin_read(self, spin: float = 0.002) -> bytes:

@@ -104,10 +104,8 @@ def open_link(url: str, **options: Any) -> Any:
 
 
 def _checks(target: Any) -> list[dict[str, Any]]:
-    """doctor: the URL, the interface present (SocketCAN: the network interface), and a bus
-    that opens."""
-    from pathlib import Path
-
+    """doctor: the URL, the interface present (SocketCAN: the network interface, up, at the
+    target's bit rate and not bus-off), and a bus that opens."""
     from deltoctl.errors import DeltoctlError
     from deltoctl.transport.doctor import check
 
@@ -115,14 +113,42 @@ def _checks(target: Any) -> list[dict[str, Any]]:
         parsed = parse_can_url(target.url)
     except DeltoctlError as exc:
         return [check("can bus", target.bus, False, exc.message, None, exc.exit_code)]
-    if parsed.interface == "socketcan" and not Path(f"/sys/class/net/{parsed.channel}").exists():
-        return [check("can bus", target.bus, False, f"no network interface {parsed.channel}",
-                      f"sudo ip link set {parsed.channel} up type can bitrate {parsed.bitrate}")]
+    if parsed.interface == "socketcan":
+        problem = _interface_problem(target.bus, parsed)
+        if problem is not None:
+            return [problem]
     try:
         open_bus(parsed).shutdown()
     except DeltoctlError as exc:
         return [check("can bus", target.bus, False, exc.message, exc.hint)]
     return [check("can bus", target.bus, True, f"{parsed.interface} bus {parsed.channel} opens")]
+
+
+def _interface_problem(bus: str, parsed: CanTarget) -> dict[str, Any] | None:
+    """What keeps a SocketCAN interface from running the target's bus, with the command that
+    brings it up at the target's rate; None when nothing does (as far as sysfs and netlink
+    tell)."""
+    from deltoctl.errors import FAILED
+    from deltoctl.transport.adapters import can_fix, can_interface
+    from deltoctl.transport.doctor import check
+
+    name, rate = parsed.channel, parsed.bitrate
+    found = can_interface(name)
+    fix = can_fix(name, rate)
+    if found is None:
+        return check("can bus", bus, False, f"no network interface {name}",
+                     f"plug the adapter in (deltoctl ports lists them), then: {fix}")
+    virtual = found.kind == "vcan"
+    if not found.up:
+        return check("can bus", bus, False, f"{name} is down",
+                     f"sudo ip link set {name} up" if virtual else fix)
+    if found.state == "BUS-OFF":
+        return check("can bus", bus, False, f"{name} is bus-off (tx errors {found.tx_errors})",
+                     f"check the bit rate, termination and wiring, then: {fix}", FAILED)
+    if not virtual and parsed.bitrate_given and found.bitrate and found.bitrate != rate:
+        return check("can bus", bus, False, f"{name} runs at {found.bitrate} bit/s, the "
+                     f"target at {rate}", fix, FAILED)
+    return None
 
 
 TRANSPORT = Transport(SCHEME, "can://INTERFACE/CHANNEL?bitrate=N", parse_can_url, open_link,

@@ -95,7 +95,7 @@ def test_jog_is_refused_until_homed_then_moves(cli, arm):
     assert devices[J4].requests < 20 and devices[J4].target is None  # nothing was commanded
     assert cli("-p", "bioscara-arm", "-t", target, "home", "--yes", "-j", "j4").exit_code == 0
     moved = run_json(cli, "-t", target, "jog", "j4", "-0.2", "--yes")
-    assert moved["settled"] and joints_of(moved, "position")["j4"] == pytest.approx(
+    assert moved["result"]["settled"] and joints_of(moved, "position")["j4"] == pytest.approx(
         J4_MAX - 0.2, abs=1e-3)
     too_far = cli("-p", "bioscara-arm", "-t", target, "jog", "j4", "-0.6", "--yes")
     assert too_far.exit_code == 5  # the profile's max_jog_step

@@ -15,7 +15,7 @@ def test_tare_removes_the_offset_and_writes_a_report(cli, tmp_path):
                      "-n", "20", "-o", str(tmp_path))
     assert result.exit_code == 0, result.stderr
     result = json.loads(result.stdout)
-    assert result["pass"] is True
+    assert result["result"]["pass"] is True
     (report,) = result["blocks"]  # the gripper's one block
     assert report["pass"] is True and report["block"] == load_profile("dg-4f").hardware[0].name
     assert set(report["sensors"]) == {f"fingertip_finger_{n}" for n in range(1, 5)}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 
@@ -79,6 +80,22 @@ def test_data_reply_dg3f_b_and_s_scale():
     assert math.isclose(rec.position[0], math.radians(1.0))
 
 
+@pytest.mark.parametrize("model,sensor", [(DG5F_R, FT_6AXIS), (DG3F_B, SENSOR_NONE),
+                                          (DG5F_S, TACTILE_S)])
+def test_a_connections_unpacker_reads_and_refuses_as_unpack_data_reply(model, sensor):
+    codes = codec.data_codes(model, True, True)
+    unpack = codec.data_reply_unpacker(model, codes, sensor)
+    size = codec.data_reply_length(model, codes, sensor)
+    good = size.to_bytes(2, "big") + b"\x01" + bytes(i % 251 for i in range(size - 3))
+    assert unpack(good) == codec.unpack_data_reply(good, model, codes, sensor)
+    for bad in (good[:2], good[:-1], good + b"\x00", good[:2] + b"\x02" + good[3:],
+                (size + 1).to_bytes(2, "big") + good[2:], bytes.fromhex("000401ff")):
+        with pytest.raises(ProtocolError) as expected:
+            codec.unpack_data_reply(bad, model, codes, sensor)
+        with pytest.raises(ProtocolError, match=re.escape(str(expected.value))):
+            unpack(bad)
+
+
 @pytest.mark.parametrize("sensor,size", [(TACTILE_M, 15), (TACTILE_S, 36), (FT_6AXIS, 12)])
 def test_sensor_block_sizes(sensor, size):
     codes = codec.data_codes(DG5F_R, True, False)
@@ -93,19 +110,8 @@ def test_bad_bytes_raise_protocol_error():
         codec.decode_version_reply(bytes.fromhex("0009015f220300011f"))
     with pytest.raises(ProtocolError, match="LEN says"):
         codec.decode_version_reply(bytes.fromhex("0010085f220300011f"))
-    with pytest.raises(ProtocolError, match="not possible"):
-        codec.FrameReader().feed(b"\x00\x01")
     with pytest.raises(ProtocolError, match="multiple of 3"):
         codec.decode_duty(bytes.fromhex("00050501ff"))
-
-
-def test_frame_reader_reassembles_split_and_joined_frames():
-    reader = codec.FrameReader()
-    a, b = codec.encode_version_request(), codec.encode_gpio((True, True, False))
-    stream = a + b
-    assert reader.feed(stream[:2]) == []
-    assert reader.feed(stream[2:5]) == [a]
-    assert reader.feed(stream[5:]) == [b]
 
 
 def test_direction_maps_follow_firmware():

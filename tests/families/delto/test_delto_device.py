@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import socket
 import subprocess
 import sys
@@ -92,10 +93,11 @@ def test_the_live_table_has_a_row_per_part(cli):
     lines = [line for line in console.export_text().splitlines() if line.strip()]
     assert "3 samples at 50 Hz · links up" in lines[0]
     assert lines[1].split() == ["position", "velocity", "effort", "temperature"]
+    assert lines[2].split() == ["(°C)"]  # the joints' types not given: no unit for position
     rows = {line.split()[0]: line.split()[1:] for line in lines if line.strip()[:3] in
             ("rj_", "rig", "gpi")}
     assert len(rows) == 20 + 5 + 1  # joints, fingertips, the GPIO block
-    assert rows["rj_dg_1_1"][3] == f"{sample['rj_dg_1_1/temperature']:.4g}"
+    assert rows["rj_dg_1_1"][3] == f"{sample['rj_dg_1_1/temperature']:.1f}"
     assert len(rows["right_fingertip_finger_3"]) == 6 and len(rows["gpio"]) == 4
 
 
@@ -206,6 +208,39 @@ def test_reconnect_after_the_link_drops(gripper):
     assert driver.stats["reconnects"] == 1
 
 
+def test_a_reopened_link_is_stopped_and_counted_before_it_is_used(gripper, monkeypatch):
+    """The moment a read sees the link back, its reconnect is counted and duty 0 has
+    reached the gripper (however slowly the stop is built): motion never resumes by itself,
+    and nothing reads a link whose reconnect is not yet counted."""
+    from deltoctl.families.delto import codec
+
+    server = gripper("dg-5f-right")
+    with System(load_profile("dg-5f-right"), [server.endpoint]) as system:
+        driver = system.members[0].driver
+        driver.write_efforts({"rj_dg_2_2": 0.5})
+        system.read()
+        assert server.firmware.duty[5] != 0
+        encode_duty = codec.encode_duty
+
+        def slow_encode_duty(duties: list[int]) -> bytes:
+            time.sleep(0.3)
+            return encode_duty(duties)
+
+        monkeypatch.setattr(codec, "encode_duty", slow_encode_duty)
+        server.drop_connections()
+        deadline = time.monotonic() + 10
+        seen_down = False
+        while time.monotonic() < deadline:
+            status = system.read()["system/connection_status"]
+            seen_down = seen_down or status == 0.0
+            if seen_down and status == 1.0:
+                break
+            time.sleep(0.02)
+        assert seen_down and status == 1.0
+        assert driver.stats["reconnects"] == 1
+        assert server.firmware.duty == [0] * 20  # a reply on the new link: its stop came first
+
+
 def test_leaving_a_system_sets_duty_zero(gripper):
     server = gripper("dg-5f-right")
     with System(load_profile("dg-5f-right"), [server.endpoint]) as system:
@@ -214,6 +249,28 @@ def test_leaving_a_system_sets_duty_zero(gripper):
         assert server.firmware.duty[5] != 0
     time.sleep(0.05)
     assert server.firmware.duty == [0] * 20
+
+
+def test_each_cycles_efforts_reach_the_gripper_held_changed_or_zero(gripper):
+    """The cycle's write by interface: a held effort, a change, zero everywhere and a NaN
+    each reach the gripper as the duties they stand for."""
+    from deltoctl.families.delto.models import effort_to_duty_percent
+    from tests.conftest import eventually
+
+    server = gripper("dg-5f-right")
+    with System(load_profile("dg-5f-right"), [server.endpoint]) as system:
+        driver = system.members[0].driver
+        keys = [f"{j.name}/effort" for j in driver.hw.joints]
+        zero = dict.fromkeys(keys, 0.0)
+        for efforts, joint, effort in [({keys[3]: 0.2}, 3, 0.2), ({keys[3]: 0.2}, 3, 0.2),
+                                       ({keys[3]: -0.1}, 3, -0.1), ({}, 3, 0.0),
+                                       ({keys[7]: 0.2}, 7, 0.2), ({keys[7]: math.nan}, 7, 0.0),
+                                       ({keys[7]: 0.2}, 7, 0.2)]:
+            server.firmware.duty[:] = [99] * 20  # what the gripper had: each write resets it
+            driver.write({**zero, **efforts})
+            duty = int(effort_to_duty_percent(effort) * 10)
+            expected = [duty if i == joint else 0 for i in range(20)]
+            assert eventually(lambda expected=expected: server.firmware.duty == expected)
 
 
 def test_sim_serve_in_another_process(tmp_path):

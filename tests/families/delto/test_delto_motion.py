@@ -28,7 +28,7 @@ def test_jog_moves_the_joint(cli, server):
     result = cli(*target, "jog", "rj_dg_2_2", "15deg", "--yes", "--json")
     assert result.exit_code == 0, result.stderr
     report = json.loads(result.stdout)
-    assert report["settled"] is True
+    assert report["result"]["settled"] is True
     assert joints_of(report, "position")["rj_dg_2_2"] == pytest.approx(math.radians(15),
                                                                       abs=math.radians(2))
     assert server.firmware.position[5] == pytest.approx(math.radians(15), abs=math.radians(2))

@@ -10,14 +10,33 @@ import pytest
 
 from deltoctl.core.system import System
 from deltoctl.families.delto import codec
+from deltoctl.families.delto.driver import receive
 from deltoctl.families.delto.emulator import DeltoHub, DeltoServer, firmware_for_profile
+from deltoctl.families.delto.session import Role, Session
 from deltoctl.profile.catalog import load_profile
 from deltoctl.sim.serve import ServeOptions, serve_profile
 from deltoctl.transport.tcp import LinkLost, TcpLink, parse_tcp_url
 
 
-def _link(server: DeltoServer) -> TcpLink:
-    return TcpLink(*parse_tcp_url(server.endpoint))
+class _Host:
+    """A link to a gripper and the host's side of its session, as the driver holds them."""
+
+    def __init__(self, server: DeltoServer) -> None:
+        self.link = TcpLink(*parse_tcp_url(server.endpoint))
+        self.session = Session(Role.HOST)
+
+    def send(self, frame: bytes) -> None:
+        self.link.send(self.session.send(frame))
+
+    def recv_frame(self, timeout: float) -> bytes:
+        return receive(self.link, self.session, timeout).frame
+
+    def close(self) -> None:
+        self.link.close()
+
+
+def _link(server: DeltoServer) -> _Host:
+    return _Host(server)
 
 
 def _data_request(firmware) -> bytes:

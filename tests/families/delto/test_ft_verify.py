@@ -34,7 +34,7 @@ def test_verify_and_watch_report_each_check(cli, gripper, tmp_path):
     result = cli("-p", "dg-4f", "-t", gripper.endpoint, "calibrate", "ft", "--json", "-n", "20",
                  "--watch", "0.3", "-o", str(tmp_path))
     assert result.exit_code == 0, result.stderr
-    checks = by_id(json.loads(result.stdout)["checks"])
+    checks = by_id(json.loads(result.stdout)["result"]["checks"])
     residual = checks["fingertip_finger_1.residual_force"]
     assert residual["verdict"] == "pass" and residual["limit"] == {"min": None, "max": 0.3}
     assert residual["unit"] == "N"
@@ -59,7 +59,7 @@ def test_one_creeping_axis_fails_and_the_others_pass(deltoctl_sim, cli, tmp_path
             "--drift-limit", "tz=0.05", "-o", str(tmp_path))
     result = cli(*args, "--json")
     assert result.exit_code == 1, result.stderr
-    checks = by_id(json.loads(result.stdout)["checks"])
+    checks = by_id(json.loads(result.stdout)["result"]["checks"])
     for finger in range(1, 5):
         verdicts = {a: checks[f"fingertip_finger_{finger}.drift.{a}"]["verdict"] for a in AXES}
         assert verdicts == {a: "fail" if a == "fz" else "pass" for a in AXES}

@@ -57,7 +57,7 @@ def test_jog_turns_torque_on_and_reaches_the_goal(cli, mh5_buses):
     result = cli("-p", "mh5", *mh5_targets(mh5_buses), "jog", "head_y", "10deg", "--velocity",
                  "40deg", "--yes", "--json")
     assert result.exit_code == 0, result.stderr
-    assert json.loads(result.stdout)["settled"] is True
+    assert json.loads(result.stdout)["result"]["settled"] is True
     assert eventually(lambda: servo.memory[64] == 1 and servo.memory[10] & 0x04)
     assert servo.get("Goal Position") == round(0.17453292519943295 / 0.001533980787886 + 2047)
     refused = cli("-p", "mh5", *mh5_targets(mh5_buses), "jog", "head_y", "30deg", "--yes")
@@ -210,7 +210,7 @@ def test_a_move_with_torque_already_on_follows_the_servos_drive_mode(cli, mh5_bu
     result = cli("-p", "mh5", *targets, "jog", "head_y", "15deg", "--velocity", "30deg",
                  "--yes", "--json")
     assert result.exit_code == 0, result.stderr
-    assert 0.3 < json.loads(result.stdout)["seconds"] < 2.0
+    assert 0.3 < json.loads(result.stdout)["result"]["seconds"] < 2.0
     assert servos[52].get("Drive Mode") == 0 and servos[52].get("Profile Velocity") == 22
     refused = cli("-p", "mh5", *targets, "jog", "head_p", "5deg", "--yes")
     assert refused.exit_code == 5  # inverse in the profile, not reversed in the servo
