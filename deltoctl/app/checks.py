@@ -56,7 +56,8 @@ def _figure(c: dict[str, Any]) -> str:
         return ""
     limit = f"≥ {low:g}" if high is None else f"≤ {high:g}" if low is None \
         else f"{low:g} … {high:g}"
-    return f" is {value:g} {c['unit']}, not {limit}".replace("  ", " ")
+    unit = f" {c['unit']}" if c["unit"] else ""
+    return f" is {value:g}{unit}, not {limit}"
 
 
 def _slug(text: str) -> str:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import re
+from pathlib import Path
 
 from tests.app.test_report import RELAXED, hand, parse_html, unwrap
 from tests.conftest import REPO, mh5_targets
@@ -67,12 +68,12 @@ def test_detect_and_report_judge_a_missing_servo_alike(cli, tmp_path):
     assert detect.exit_code == 1, detect.stderr
     assert f"{HEAD_Y}: head_y (ID 52) does not answer" in detect.stderr
     found = json.loads(detect.stdout)
-    assert found["failed"] == [HEAD_Y] and found["exit_code"] == 1
+    assert found["result"]["failed"] == [HEAD_Y] and found["exit_code"] == 1
     result = cli("-p", mh5(tmp_path), *MISSING, "report", "-o", str(tmp_path / "r.html"),
                  "--json")
     doc = unwrap(json.loads(result.stdout))
     in_report = [c for c in doc["checks"] if c["id"].startswith("detect.")]
-    assert sorted(in_report, key=lambda c: c["id"]) == sorted(found["checks"],
+    assert sorted(in_report, key=lambda c: c["id"]) == sorted(found["result"]["checks"],
                                                              key=lambda c: c["id"])
 
 
@@ -153,3 +154,13 @@ def test_motion_checks_leave_out_a_servo_that_does_not_answer(cli, tmp_path):
     assert checks["motion.head_y"]["verdict"] == "skip"
     assert checks["motion.head_p.following_error"]["verdict"] == "pass"
     assert doc["failed"] == [HEAD_Y]
+
+
+def test_a_figure_out_of_its_limit_is_named_with_its_value_and_limit(cli, tmp_path):
+    strict = tmp_path / "strict.yaml"  # a round trip under a nanosecond: never met
+    strict.write_text(Path(hand(tmp_path)).read_text().replace("rtt_p50_ms: 1000",
+                                                               "rtt_p50_ms: 1e-6"))
+    result = cli("-p", str(strict), "--sim", "report", "-o", str(tmp_path / "r.html"))
+    assert result.exit_code == 1, result.stderr
+    assert re.search(r"acceptance failed: link\.dg4f_driver\.rtt_p50: dg4f_driver: round trip, "
+                     r"median is [0-9.e-]+ ms, not ≤ 1e-06", result.stderr), result.stderr

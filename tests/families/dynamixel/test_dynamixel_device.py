@@ -30,7 +30,7 @@ def test_detect_names_a_missing_servo(cli, mh5_buses):
     assert result.exit_code == 1  # a servo the profile declares does not answer
     report = json.loads(result.stdout)
     assert block_of(report, "lower_body")["details"]["missing"] == [24]
-    assert report["failed"] == ["detect.lower_body.r_kne_p"]
+    assert report["result"]["failed"] == ["detect.lower_body.r_kne_p"]
     assert "detect.lower_body.r_kne_p: r_kne_p (ID 24) does not answer" in result.stderr
     identify = cli("-p", "mh5", *mh5_targets(mh5_buses), "identify")
     assert identify.exit_code == 3 and "r_kne_p" in identify.stderr
