@@ -234,19 +234,23 @@ class Robot:
         return {"profile": self.profile.name, "blocks": blocks}
 
     def detect(self) -> dict[str, Any]:
-        """What is on each block's device or bus, against the profile; a difference is a
-        warning."""
+        """What is on each block's device or bus, against the profile, judged
+        (deltoctl.app.checks.detect_checks): ``checks`` and ``failed``; a part that does not
+        answer fails, another difference is a warning."""
+        from deltoctl.app.checks import WARN, detect_checks, failed
+
         blocks = []
         for m in self.system.able("detect"):
             found = m.driver.detect()
             blocks.append(block_entry(m, summary=found.pop("summary"),
                                       checks=found.pop("checks"), details=found))
-        differ = [f"{b['name']}: {c['what']}" for b in blocks for c in b["checks"]
-                  if not c["match"]]
+        checks = detect_checks(blocks)
+        differ = [f"{c['id']}: {c['what']}" for c in checks if c["verdict"] == WARN]
         if differ:
-            self.system.notes.append("the device differs from the profile in: "
-                                     + ", ".join(differ))
-        return {"profile": self.profile.name, "blocks": blocks}
+            self.system.notes.append("the device differs from the profile: "
+                                     + "; ".join(differ))
+        return {"profile": self.profile.name, "blocks": blocks, "checks": checks,
+                "failed": failed(checks)}
 
     # -- GPIO ----------------------------------------------------------------------------------
 

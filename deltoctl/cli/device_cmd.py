@@ -71,12 +71,16 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
         raise
 
 
-def finish(system: Any, extra: list[str] | None = None) -> None:
+def finish(system: Any, extra: list[str] | None = None,
+           failures: list[dict[str, Any]] | None = None) -> None:
     """Exit 3 when the verb finished but with warnings (a block left out, a model mismatch
-    allowed, reconnects)."""
+    allowed, reconnects); exit 1 naming each check of ``failures`` that failed."""
+    from deltoctl.app.checks import fail_on
+
     warnings = system.warnings() + (extra or [])
     for w in warnings:
         warn(w)
+    fail_on(failures or [])
     if warnings:
         raise typer.Exit(WARNINGS)
 
@@ -139,7 +143,7 @@ def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> N
         from deltoctl.render.identity import detect_parts
 
         show(detect_parts(result))
-    finish(robot.system)
+    finish(robot.system, failures=result["checks"])
 
 
 def gpio_get(ctx: typer.Context) -> None:

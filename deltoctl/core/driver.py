@@ -157,7 +157,9 @@ class Driver:
         raise Unsupported(f"{self.hw.name} cannot identify")
 
     def detect(self) -> dict[str, Any]:
-        """``{"checks": [{what, profile, device, match}], "summary": str, ...}``."""
+        """``{"checks": [{what, profile, device, match}], "summary": str, ...}``; a check
+        about one part of the profile names it (``part``: its id in the report) and says
+        when it does not answer (``missing``: a failure; other differences warn)."""
         raise Unsupported(f"{self.hw.name} cannot detect")
 
     def check_motion(self, joints: list[str]) -> None:

@@ -73,7 +73,7 @@ def test_a_sound_gripper_passes_and_both_files_agree(cli, tmp_path):
         assert set(c) >= KEYS and set(c["limit"]) == {"min", "max"}, c
     ids = {c["id"] for c in doc["checks"]}
     assert {"link.dg4f_driver.rtt_p99", "link.dg4f_driver.error_rate",
-            "fingertip_finger_1.residual_force", "detect.dg4f_driver.1"} <= ids
+            "fingertip_finger_1.residual_force", "detect.dg4f_driver.fingertip_f_t_sensors"} <= ids
     assert next(c for c in doc["checks"] if c["id"] == "motion")["verdict"] == "skip"
     (block,) = doc["sections"]["identity"]["blocks"]
     assert block["identity"]["firmware"] == "3.0" and block["simulated"] is True

@@ -362,8 +362,9 @@ class BioscaraDriver(Driver):
         missing = [expected[a] for a in sorted(set(expected) - set(found))]
         unexpected = [f"{a:#04x}" for a in found if a not in expected]
         checks = [{"what": f"{name} at {addr:#04x}", "profile": "joint",
-                   "device": "answers" if addr in found else "no answer",
-                   "match": addr in found} for addr, name in sorted(expected.items())]
+                   "device": "answers" if addr in found else "no answer", "part": name,
+                   "match": addr in found, "missing": addr not in found}
+                  for addr, name in sorted(expected.items())]
         checks += [{"what": f"device at {a}", "profile": "—", "device": "answers",
                     "match": False} for a in unexpected]
         return {"bus": self.url, "found": [f"{a:#04x}" for a in found], "missing": missing,

@@ -305,11 +305,10 @@ class DynamixelDriver(Driver):
         wrong = sorted(i for i in set(found) & set(expected)
                        if expected[i] is not None and found[i] != expected[i])
         name = {i: j.name for i, j in self.joints.items()}
-        checks = [{"what": f"{self.hw.name}: servos", "profile": sorted(expected),
-                   "device": sorted(found),
-                   "match": not (missing or unexpected or wrong)}]
-        checks += [{"what": f"{name.get(i, i)} (ID {i}) baud rate", "profile": self.port.baudrate,
-                    "device": baud, "match": False} for i, baud in sorted(elsewhere.items())]
+        checks = [self._servo_check(i, name.get(i), model, found.get(i), elsewhere.get(i))
+                  for i, model in sorted(expected.items())]
+        checks += [{"what": f"ID {i}", "profile": "no servo", "device": label(found[i]),
+                    "match": False} for i in unexpected]
         summary = (f"{self.hw.name}: {len(found)} servos answer ({len(missing)} missing, "
                    f"{len(unexpected)} unexpected)")
         if elsewhere:
@@ -321,6 +320,18 @@ class DynamixelDriver(Driver):
                 "wrong_model": wrong, "wrong_baud": {str(i): b for i, b in elsewhere.items()},
                 "unscanned": {str(b): why for b, why in unscanned.items()},
                 "checks": checks, "summary": summary}
+
+    def _servo_check(self, servo_id: int, joint: str | None, model: int | None,
+                     answer: int | None, baud: int | None) -> dict:
+        """A servo the profile declares, as the bus answers for it: its model, no answer, or
+        an answer at another baud rate only (``missing``: not at the bus's rate)."""
+        device = "no answer" if answer is None else label(answer)
+        if baud is not None:
+            device = f"found at {baud} baud, not {self.port.baudrate}"
+        return {"what": f"{joint or 'servo'} (ID {servo_id})", "part": joint,
+                "profile": "a servo" if model is None else label(model), "device": device,
+                "match": answer is not None and model in (None, answer),
+                "missing": answer is None}
 
     def send_goals(self, goals: dict[str, float], seconds: float) -> None:
         """Torque on, then a profile to each goal through the PV writer (108, 12):

@@ -168,7 +168,8 @@ class Lsm6ds3Driver(Driver):
     def detect(self) -> dict:
         check = {"what": f"{self.sensor.name} at {self.address:#04x}",
                  "profile": "LSM6DS3 or LSM6DS3TR-C", "device": self.chip or "no answer",
-                 "match": bool(self.chip)}
+                 "match": bool(self.chip), "part": self.sensor.name,
+                 "missing": not self.chip}
         return {"bus": self.url, "chip": self.chip, "checks": [check],
                 "summary": f"{self.sensor.name}: {self.chip} at {self.address:#04x}"}
 

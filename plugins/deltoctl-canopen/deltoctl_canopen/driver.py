@@ -648,7 +648,8 @@ class CanopenDriver(Driver):
                 "ok" if ok else "wrong identity: " + ", ".join(
                     f"{k} {axis.identity.get(k):#x}" for k in ident.get("mismatch", [])))
             checks.append({"what": f"node {node_id} ({axis.joint})", "profile": "CiA 402 drive",
-                           "device": device, "match": ok})
+                           "device": device, "match": ok, "part": axis.joint,
+                           "missing": node_id not in found})
         for node_id in sorted(set(found) - set(expected)):
             checks.append({"what": f"node {node_id}", "profile": "absent",
                            "device": "unexpected node", "match": False})
