@@ -3,8 +3,8 @@ it, what it does to the robot (reads, actuates an output or a setting, moves a j
 a robot's agent runs it for a remote caller, and the example its help shows.
 
 The CLI loads verbs and teaches their help from this table; the fleet agent judges a remote
-command line by it. A command's effect may depend on its options (``report`` reads, and moves
-the joints with ``--yes``): the options a command line gives, as the CLI parses them, raise its
+command line by it. A command's effect may depend on its options (``report`` actuates, tares
+the F/T sensors and runs the IMUs' self-tests, and moves the joints with ``--yes``): the options a command line gives, as the CLI parses them, raise its
 effect. Fail-closed: a command whose effect is not declared here counts as one that moves the
 robot. No typer or click here: the fleet reads the table without loading the CLI,
 and finds which command a command line runs through the resolver the CLI provides
@@ -92,7 +92,8 @@ TABLE: dict[str, Verb] = {
     # with --device it moves the robot along the recording
     "replay": Verb(MOVES, "deltoctl replay fault.mcap --tolerance 1deg --json", "replay_cmd"),
     # the acceptance sequence: with --yes its motion checks move the joints
-    "report": Verb(READS, "deltoctl -p dg-5f-right report -o acceptance.html --record 5",
+    # report tares each F/T sensor and runs each IMU's self-test (calibrate ft / imu)
+    "report": Verb(ACTUATES, "deltoctl -p dg-5f-right report -o acceptance.html --record 5",
                    "report_cmd", when={YES: MOVES}),
     "torque": Verb(ACTUATES, "deltoctl -p mh5 torque off left_arm", "servo_cmd"),
     "reboot": Verb(ACTUATES, "deltoctl -p mh5 reboot head_y", "servo_cmd"),
@@ -110,7 +111,7 @@ TABLE: dict[str, Verb] = {
     }),
     "ports": Verb(READS, "deltoctl ports --json", "ports_cmd"),
     "doctor": Verb(READS, "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 doctor",
-                   "doctor_cmd"),
+                   "doctor_cmd", when={("--write-udev-rule",): ACTUATES}),  # the host's udev
     "completion": Verb(READS, "deltoctl completion bash > "
                               "~/.local/share/bash-completion/completions/deltoctl",
                        "completion_cmd", remote=False),
