@@ -59,6 +59,9 @@ def _encoded(request: codec.Request) -> tuple[codec.Request, tuple[bytes, int]]:
     return request, codec.Host.encode(request)
 
 
+FLOAT32_MAX = 3.4028234663852886e38  # the largest value a joint's float register holds
+
+
 class Joint:
     """The master side of one joint: its register commands, flags and transmission."""
 
@@ -79,6 +82,13 @@ class Joint:
                                "(i2c_address, reduction, min, max, drive_current, hold_current, "
                                "stall_threshold, max_acceleration, max_velocity, and the home "
                                "interface's speed, threshold, current, acceleration)") from None
+        wide = {k: v for k, v in (("max_acceleration", self.max_acceleration),
+                                  ("max_velocity", self.max_velocity), *self.homing.items())
+                if not abs(v) <= FLOAT32_MAX}
+        if wide:
+            named = ", ".join(f"{k} {v:g}" for k, v in wide.items())
+            raise InvalidInput(f"joint {comp.name}: {named}: the joint takes a 32-bit float, "
+                               f"up to {FLOAT32_MAX:.3g}")
         self.bus, self.name = bus, comp.name
         self.offset = 0.0
         self.flags = codec.INITIAL_FLAGS

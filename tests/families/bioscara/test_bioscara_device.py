@@ -187,3 +187,17 @@ def test_detect_still_draws_a_bus_where_no_joint_answers(cli, arm):
     assert result.exit_code == 3, result.stderr
     report = block_of(json.loads(result.stdout))["details"]
     assert report["found"] == [] and report["missing"] == ["j1", "j2", "j3", "j4"]
+
+
+def test_a_limit_past_a_32_bit_float_is_one_clear_error(cli, tmp_path):
+    """max_velocity: 1e40 is finite (the profile takes it) but no joint register holds it."""
+    from deltoctl.profile.catalog import resolve
+
+    text = resolve("bioscara-arm").read_text()
+    assert "max_velocity: 1.0}" in text
+    path = tmp_path / "wide.yaml"
+    path.write_text(text.replace("max_velocity: 1.0}", "max_velocity: 1e40}", 1))
+    result = cli("-p", str(path), "--sim", "home", "-j", "j1", "--yes")
+    assert result.exit_code == 2, result.output
+    assert "max_velocity 1e+40: the joint takes a 32-bit float" in result.stderr
+    assert "internal error" not in result.stderr
