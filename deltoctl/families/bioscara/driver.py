@@ -27,6 +27,7 @@ from deltoctl.errors import (
 )
 from deltoctl.families.bioscara import codec
 from deltoctl.profile.model import Component
+from deltoctl.transport import i2c
 from deltoctl.transport.i2c import I2CBus  # what every I2C link gives
 
 POLL_HOMING = 0.1  # s between flag polls while homing, as the Bioscara driver does
@@ -38,21 +39,9 @@ POLICY = ExchangePolicy(tries=3, pause=50e-6)  # as the Bioscara driver's I2C la
 
 
 def transfer(bus: I2CBus, address: int, data: bytes, length: int) -> bytes:
-    """One combined transaction under the joints' exchange policy: the bus counts it once in
-    ``packets`` and each failed try in ``errors``."""
-    failed: dict[str, int] = {}
-    bus.stats["packets"] += 1
-    try:
-        return POLICY.run(lambda: bus.transfer(address, data, length), f"{address:#04x}",
-                          failed)
-    except NoAnswer:
-        raise NoAnswer(f"no answer from {address:#04x} on {bus.url} ({POLICY.tries} tries)",
-                       hint="check the device's power, wiring and address") from None
-    except DeviceError:
-        failed["errors"] = failed.get("errors", 0) + 1
-        raise
-    finally:
-        bus.stats["errors"] += failed.get("errors", 0)
+    """One combined transaction under the joints' exchange policy (i2c.exchange)."""
+    return i2c.exchange(bus, address, lambda: bus.transfer(address, data, length), POLICY.run,
+                        POLICY.tries)
 
 
 def _encoded(request: codec.Request) -> tuple[codec.Request, tuple[bytes, int]]:
