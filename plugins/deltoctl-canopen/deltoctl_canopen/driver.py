@@ -600,6 +600,16 @@ class CanopenDriver(Driver):
                 except DeltoctlError as exc:
                     self.warnings.append(f"{axis.joint}: no quick stop ({exc.message})")
 
+    def make_safe(self) -> None:
+        """Quick stop to every configured axis that answers, whatever this session enabled:
+        a drive a killed process left enabled stops too."""
+        for axis in self.axes.values():
+            if axis.identity and not self.lost:
+                try:
+                    self.quick_stop(axis)
+                except DeltoctlError as exc:
+                    self.warnings.append(f"{axis.joint}: no quick stop ({exc.message})")
+
     def deactivate(self) -> None:
         """Every axis left in Switch On Disabled (a quick stop first where it was enabled)."""
         was = [a for a in self.axes.values() if a.enabled]
