@@ -500,6 +500,15 @@ class BioscaraDriver(Driver):
                 self.warnings.append(f"{name} did not answer the stop; its deadman stops it")
         self.touched.clear()
 
+    def make_safe(self) -> None:
+        """STOP to every joint, whatever this session commanded: a move or homing a killed
+        process started ends."""
+        for name, joint in self.joints.items():
+            try:
+                joint.stop()
+            except DeltoctlError:
+                self.warnings.append(f"{name} did not answer the stop; its deadman stops it")
+
     def cleanup(self) -> None:
         self.bus = None  # the System closes the shared bus
         self.connected = False
