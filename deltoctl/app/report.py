@@ -304,17 +304,29 @@ def _block_motion(robot: Robot, block: str, ranges: dict[str, tuple[float, float
 
 # -- sensors -------------------------------------------------------------------------------------
 
-def sensor_checks(robot: Robot) -> list[dict[str, Any]]:
-    """Each IMU's self-test and gravity check; each F/T sensor's residual after a tare."""
+def sensor_checks(robot: Robot, actuate: bool) -> list[dict[str, Any]]:
+    """Each IMU's gravity check, and with ``actuate`` (--yes) its self-test; each F/T
+    sensor's residual after a tare, with ``actuate`` only: a tare and a self-test write to
+    the devices, and a report without --yes only reads."""
     from deltoctl.app import imu_calibration
     from deltoctl.app.calibrate import tare_ft, verify_ft
 
-    checks = []
+    checks, skipped = [], []
     for m in robot.system.able("calibrate_imu"):
-        checks += imu_calibration.self_test_checks(m.driver)
+        if actuate:
+            checks += imu_calibration.self_test_checks(m.driver)
+        else:
+            skipped.append("each IMU's self-test")
         checks += imu_calibration.gravity_checks(m.driver, 50)
     if any(s.state("force.x") for m in robot.system.able("calibrate_ft") for s in m.hw.sensors):
-        checks += verify_ft(robot.system, tare_ft(robot.system, samples=20))
+        if actuate:
+            checks += verify_ft(robot.system, tare_ft(robot.system, samples=20))
+        else:
+            skipped.append("each F/T sensor's tare")
+    if skipped:
+        runs = " and ".join(sorted(set(skipped)))
+        checks.append(check("sensors.actuated", "sensor checks that write", None, verdict=SKIP,
+                            note=f"not asked for (--yes runs {runs})"))
     return checks
 
 
@@ -425,7 +437,7 @@ def run_report(robot: Robot, plan: Plan, said: Said | None = None) -> dict[str, 
         checks.append(check("motion", "motion checks", None, verdict=SKIP,
                             note="not asked for (--yes runs them where the profile allows)"))
     steps.stage("sensors")
-    checks += _stage("sensors", lambda: sensor_checks(robot), checks) or []
+    checks += _stage("sensors", lambda: sensor_checks(robot, plan.motion), checks) or []
     if plan.record_seconds is not None and plan.record_path is not None:
         steps.stage(f"recording {plan.record_seconds:g} s")
         sections["recording"] = _stage(

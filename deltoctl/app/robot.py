@@ -57,7 +57,7 @@ def open_robot(profile: str | Path | Profile,
                sim: bool | Mapping[str, Any] = False, hardware: Sequence[str] = (),
                allow_model_mismatch: bool = False, probe: bool = False,
                notice: Callable[[str], None] | None = None,
-               served_by: str | None = None) -> Iterator[Robot]:
+               served_by: str | None = None, allow_motion: bool = True) -> Iterator[Robot]:
     """The robot of ``profile`` (a catalog name, a file, or a loaded Profile), configured and
     active, its blocks left safe and released on the way out.
 
@@ -67,7 +67,9 @@ def open_robot(profile: str | Path | Profile,
     ``{"missing": ("head_y",)}``); ``hardware``: only these blocks; ``probe``: a bus where
     nothing answers is still opened (detect); ``notice``: told first when a block runs on its
     simulator because its profile asks for mock hardware; ``served_by``: the targets are
-    simulators another process serves (``deltoctl agent --sim``), said so on every block."""
+    simulators another process serves (``deltoctl agent --sim``), said so on every block;
+    without ``allow_motion``, every move, command and actuation is refused (``Refused``)
+    before a byte is sent."""
     from deltoctl.core.system import System, mock_blocks, select_blocks
 
     prof = load(profile)
@@ -86,7 +88,7 @@ def open_robot(profile: str | Path | Profile,
             simulated = {hw.name: simulated.get(hw.name, served_by)
                          for hw in select_blocks(prof, hardware)}
         with System(prof, urls, hardware, probe=probe, allow_model_mismatch=allow_model_mismatch,
-                    simulated=simulated) as system:
+                    simulated=simulated, allow_motion=allow_motion) as system:
             yield Robot(system)
 
 
@@ -312,6 +314,7 @@ class Robot:
         ``settled``, ``seconds``, ``unsettled``, in one dict)."""
         from deltoctl.app.motion import joint_positions, joint_speed, move
 
+        self.system.check_allowed(f"moving {', '.join(targets)}")
         positions = joint_positions(self.profile, targets)
         speed = joint_speed(self.profile, list(positions), velocity, "velocity")
         return move(self.system, positions, speed, progress)
@@ -323,6 +326,7 @@ class Robot:
         in rad/s or m/s)."""
         from deltoctl.app.motion import home, joint_speed, plan_home
 
+        self.system.check_allowed("homing")
         hardware = [m.name for m in self.system]
         plan = plan_home(self.profile, hardware, joints)
         speed = joint_speed(self.profile, list(plan.targets), velocity, "velocity")
@@ -363,6 +367,7 @@ class Robot:
 
     def write_register(self, joint: str, item: str, value: int) -> int:
         """Write one item and read it back; a different read-back is a DeviceError."""
+        self.system.check_allowed(f"writing {item} of {joint}")
         after = self._registers(joint).write_register(joint, item, value)
         if after != value:
             raise DeviceError(f"{item} reads back {after} after writing {value}")
@@ -379,12 +384,14 @@ class Robot:
     def torque(self, joints: Sequence[str] | str, on: bool) -> list[str]:
         """Switch the joints' torque (``joints``: their names, or a joint, a group such as
         ``left_arm`` or ``all``); returns those done."""
+        self.system.check_allowed("switching torque")
         return [j for driver, js in self._per_block(joints, "torque").items()
                 for j in driver.set_torque(js, on)]
 
     def reboot(self, joints: Sequence[str] | str) -> list[str]:
         """Reboot the joints' servos (their names, or a joint, a group or ``all``); returns
         those that acknowledged."""
+        self.system.check_allowed("rebooting servos")
         return [j for driver, js in self._per_block(joints, "reboot").items()
                 for j in driver.reboot(js)]
 
@@ -411,6 +418,7 @@ class Robot:
         names them), each item verified by reading it back; returns each item's fate."""
         from deltoctl.app import config
 
+        self.system.check_allowed("restoring a configuration")
         permitted = frozenset(config.permission(a) for a in allow)
         rows, notes = config.plan_restore(self.system, config.load_snapshot(Path(snapshot)),
                                           permitted)

@@ -50,7 +50,7 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
     if opts.sim and opts.sim_options:
         from deltoctl.sim.serve import options_given
 
-        sim = options_given(opts.sim_options, "--sim-option")
+        sim = options_given(opts.sim_options, "--sim-option", prof, opts.hardware)
     found = (running.find(prof, sim if isinstance(sim, dict) else {}, opts.hardware, warn)
              if opts.sim and not opts.sim_fresh else None)
     if found is not None:

@@ -446,12 +446,16 @@ def udev_rule(adapters: list[tuple[str, SerialAdapter]]) -> str:
              f"# install: sudo deltoctl doctor --write-udev-rule   (or copy to {RULES_FILE};",
              "# then: sudo udevadm control --reload && sudo udevadm trigger)"]
     for name, a in adapters:
-        if not a.vid or not a.pid:
+        # every string here but the rule's own words comes from the device (sysfs) or the
+        # profile: only safe characters reach the rule, a comment line included
+        if not _USB_ID.match(a.vid or "") or not _USB_ID.match(a.pid or ""):
             continue
         match = f'ATTRS{{idVendor}}=="{a.vid}", ATTRS{{idProduct}}=="{a.pid}"'
         if a.serial and _SAFE.match(a.serial):  # a serial udev could not match is left out
             match += f', ATTRS{{serial}}=="{a.serial}"'
-        lines.append(f"# {name}: {a.known or a.product or 'USB serial adapter'} ({a.usb})")
+        what = _UNSAFE_COMMENT.sub("_", f"{name}: {a.known or a.product or 'USB serial adapter'}"
+                                        f" ({a.usb})")
+        lines.append(f"# {what}")
         lines.append(f'SUBSYSTEM=="tty", {match}, SYMLINK+="{_SAFE_NAME.sub("_", name)}"')
         if a.driver == "ftdi_sio":
             lines.append(f'ACTION=="add", SUBSYSTEM=="usb-serial", DRIVER=="ftdi_sio", {match}, '
@@ -459,7 +463,9 @@ def udev_rule(adapters: list[tuple[str, SerialAdapter]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-_SAFE = re.compile(r"^[A-Za-z0-9_.+-]+$")
+_SAFE = re.compile(r"^[A-Za-z0-9_.+-]+\Z")
+_USB_ID = re.compile(r"^[0-9a-fA-F]{4}\Z")
+_UNSAFE_COMMENT = re.compile(r"[^A-Za-z0-9 _.,:;()/+-]")
 _SAFE_NAME = re.compile(r"[^A-Za-z0-9_.+-]")
 
 

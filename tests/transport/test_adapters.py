@@ -317,3 +317,32 @@ def test_profile_show_and_validate_suggest_the_stable_name_of_a_ttyusb_bus(cli, 
     (tree.root / "sys/class/tty/ttyUSB0").unlink()  # unplugged: what would name one
     shown = cli("profile", "show", "koch-arm").stdout
     assert "its /dev/serial/by-id/ link or usb:VID:PID[:SERIAL] (deltoctl ports" in shown
+
+
+HOSTILE = Usb("1-7", "1234", "5678", "ACME", 'Cable\nACTION=="add", RUN+="/bin/sh -c id"',
+              'S1\nRUN+="/bin/touch /tmp/owned"', "ch341")
+
+
+def test_the_udev_rule_keeps_only_safe_characters_of_what_the_device_says(cli, tree):
+    """An adapter's product and serial come from the device: a newline in them would start a
+    rule line of its own (RUN+=…), comments included."""
+    tree.serial("ttyUSB0", HOSTILE)
+    result = cli("doctor", "--udev-rule")
+    assert result.exit_code == 0, result.output
+    for line in result.stdout.splitlines():
+        assert line.startswith(("#", 'SUBSYSTEM=="tty"', 'ACTION=="add", SUBSYSTEM=="usb-serial"'))
+    assert "RUN+=" not in result.stdout and '"/bin/sh' not in result.stdout
+    assert 'ATTRS{idVendor}=="1234", ATTRS{idProduct}=="5678", SYMLINK+=' in result.stdout
+
+
+def test_ports_shows_no_control_character_a_device_sends(cli, tree):
+    """Manufacturer, product and serial come from the device: an escape sequence in them
+    does not reach the terminal (in --json they are JSON strings)."""
+    tree.serial("ttyUSB0", Usb("1-8", "1234", "5678", "\x1b]0;owned\x07ACME",
+                               "Cable\x1b[2J", "S\x1b[31m1", "ch341"))
+    result = cli("ports")
+    assert result.exit_code == 0, result.output
+    assert "\x1b" not in result.stdout and "\x07" not in result.stdout
+    assert "?]0;owned?ACME" in result.stdout and "Cable?[2J" in result.stdout
+    (a,) = _doc(cli("ports", "--json"))["serial"]
+    assert a["product"] == "Cable\x1b[2J"

@@ -27,6 +27,7 @@ from deltoctl.errors import (
 )
 from deltoctl.families.bioscara import codec
 from deltoctl.profile.model import Component
+from deltoctl.transport import i2c
 from deltoctl.transport.i2c import I2CBus  # what every I2C link gives
 
 POLL_HOMING = 0.1  # s between flag polls while homing, as the Bioscara driver does
@@ -38,25 +39,16 @@ POLICY = ExchangePolicy(tries=3, pause=50e-6)  # as the Bioscara driver's I2C la
 
 
 def transfer(bus: I2CBus, address: int, data: bytes, length: int) -> bytes:
-    """One combined transaction under the joints' exchange policy: the bus counts it once in
-    ``packets`` and each failed try in ``errors``."""
-    failed: dict[str, int] = {}
-    bus.stats["packets"] += 1
-    try:
-        return POLICY.run(lambda: bus.transfer(address, data, length), f"{address:#04x}",
-                          failed)
-    except NoAnswer:
-        raise NoAnswer(f"no answer from {address:#04x} on {bus.url} ({POLICY.tries} tries)",
-                       hint="check the device's power, wiring and address") from None
-    except DeviceError:
-        failed["errors"] = failed.get("errors", 0) + 1
-        raise
-    finally:
-        bus.stats["errors"] += failed.get("errors", 0)
+    """One combined transaction under the joints' exchange policy (i2c.exchange)."""
+    return i2c.exchange(bus, address, lambda: bus.transfer(address, data, length), POLICY.run,
+                        POLICY.tries)
 
 
 def _encoded(request: codec.Request) -> tuple[codec.Request, tuple[bytes, int]]:
     return request, codec.Host.encode(request)
+
+
+FLOAT32_MAX = 3.4028234663852886e38  # the largest value a joint's float register holds
 
 
 class Joint:
@@ -79,6 +71,13 @@ class Joint:
                                "(i2c_address, reduction, min, max, drive_current, hold_current, "
                                "stall_threshold, max_acceleration, max_velocity, and the home "
                                "interface's speed, threshold, current, acceleration)") from None
+        wide = {k: v for k, v in (("max_acceleration", self.max_acceleration),
+                                  ("max_velocity", self.max_velocity), *self.homing.items())
+                if not abs(v) <= FLOAT32_MAX}
+        if wide:
+            named = ", ".join(f"{k} {v:g}" for k, v in wide.items())
+            raise InvalidInput(f"joint {comp.name}: {named}: the joint takes a 32-bit float, "
+                               f"up to {FLOAT32_MAX:.3g}")
         self.bus, self.name = bus, comp.name
         self.offset = 0.0
         self.flags = codec.INITIAL_FLAGS
@@ -501,6 +500,15 @@ class BioscaraDriver(Driver):
             except DeltoctlError:
                 self.warnings.append(f"{name} did not answer the stop; its deadman stops it")
         self.touched.clear()
+
+    def make_safe(self) -> None:
+        """STOP to every joint, whatever this session commanded: a move or homing a killed
+        process started ends."""
+        for name, joint in self.joints.items():
+            try:
+                joint.stop()
+            except DeltoctlError:
+                self.warnings.append(f"{name} did not answer the stop; its deadman stops it")
 
     def cleanup(self) -> None:
         self.bus = None  # the System closes the shared bus

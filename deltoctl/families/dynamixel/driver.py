@@ -644,6 +644,12 @@ class DynamixelDriver(Driver):
         self.warnings.append(f"{self.hw.name}: no present position from "
                              f"{', '.join(self.joints[i].name for i in ids)} to stop them at")
 
+    def make_safe(self) -> None:
+        """Every servo of the block stops where it is (goal = present position), whatever
+        this session moved; the torque stays on (an arm must not fall)."""
+        self.moving.update(self.joints)
+        self.stop()
+
     def cleanup(self) -> None:
         self.link.close()
         self.connected = False

@@ -448,10 +448,10 @@ class CanopenDriver(Driver):
         """Profile position: mode 1, enabled, the profile velocity and target written, a new
         set-point (controlword bit 4) acknowledged (statusword bit 12); then done when each
         drive says target reached (bit 10), read back by SDO so a word sent before the
-        set-point cannot end it, and its position read then. The move's time is the
-        profile's ``home_timeout``, else its ramp's own (the trapezoid of the profile
-        velocity and the drive's acceleration) and 5 s; when it runs out, or the System halts
-        the move, the joints not there are unsettled."""
+        set-point cannot end it, and its position read then. The move's time is its ramp's
+        own (the trapezoid of the profile velocity and the drive's acceleration) and the
+        profile's ``home_timeout`` (else 5 s); when it runs out, or the System halts the move,
+        the joints not there are unsettled."""
         from deltoctl.core.motion import DEFAULT_VELOCITY
 
         speed = velocity or DEFAULT_VELOCITY
@@ -465,7 +465,7 @@ class CanopenDriver(Driver):
                 here = values.get(f"{joint}/position", target)
                 seconds = max(seconds, self._start_move(self._axis(joint), here, target, speed))
             start = time.monotonic()
-            limit = self.profile.safety.home_timeout or seconds + 5.0
+            limit = seconds + (self.profile.safety.home_timeout or 5.0)
             while pending and time.monotonic() - start < limit and not self.halted.is_set():
                 self.start_read()
                 values = self.read()
@@ -595,6 +595,16 @@ class CanopenDriver(Driver):
         """Quick stop to every axis this driver enabled: one frame each by RPDO."""
         for axis in self.axes.values():
             if axis.enabled and not self.lost:
+                try:
+                    self.quick_stop(axis)
+                except DeltoctlError as exc:
+                    self.warnings.append(f"{axis.joint}: no quick stop ({exc.message})")
+
+    def make_safe(self) -> None:
+        """Quick stop to every configured axis that answers, whatever this session enabled:
+        a drive a killed process left enabled stops too."""
+        for axis in self.axes.values():
+            if axis.identity and not self.lost:
                 try:
                     self.quick_stop(axis)
                 except DeltoctlError as exc:
