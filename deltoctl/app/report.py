@@ -354,7 +354,7 @@ def _stage(name: str, run: Any, checks: list[dict[str, Any]]) -> Any:
 
 def run_report(robot: Robot, plan: Plan) -> dict[str, Any]:
     """The acceptance sequence; the report's JSON, its own hash last."""
-    from deltoctl import __version__
+    from deltoctl.version import __version__
 
     check_plan(plan)
     limits = limits_of(robot)
