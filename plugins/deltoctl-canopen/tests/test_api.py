@@ -73,3 +73,13 @@ def test_a_node_that_never_answers_is_no_answer():
     with open_robot(str(PROFILE), sim={"missing": ("axis_2",)}) as robot, \
             pytest.raises(NoAnswer, match=r"axis_2 \(node \d+\) does not answer"):
         robot.registers("axis_2", ["0x6041"])
+
+
+def test_a_can_bus_gone_while_in_use_is_link_lost():
+    from deltoctl import LinkLost
+
+    with open_robot(str(PROFILE), sim=True) as robot, \
+            pytest.raises(LinkLost, match=r"axis_1 \(node \d+\) did not answer a read of "
+                                          r"0x6041:00 \(local CAN hub lost"):
+        robot.blocks[0].driver.network.bus.shutdown()  # as an adapter that is unplugged
+        robot.registers("axis_1", ["0x6041"])
