@@ -130,14 +130,14 @@ def _positional(args: list[str]) -> int | None:
 def record_options(args: list[str]) -> dict[str, Any]:
     """The record's own options, parsed as ``deltoctl record`` parses them, and checked as
     it checks them; those that make no sense remotely refused."""
-    from typer._click import exceptions as typer_exceptions
+    from typer._click import exceptions as click_exceptions
 
     from deltoctl.app.robot import check_loop
     from deltoctl.record.ros2_msgs import GPIO_TYPES
 
     try:
         params = _record_command().make_context("record", list(args)).params
-    except typer_exceptions.ClickException as exc:
+    except click_exceptions.ClickException as exc:
         raise InvalidInput(f"record: {exc.format_message()}") from None
     check_loop(params["rate"], params["duration"])
     if params["gpio_type"] not in GPIO_TYPES:

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs
 
 from deltoctl import trace
-from deltoctl.errors import InvalidInput, Unreachable
+from deltoctl.errors import DeltoctlError, InvalidInput, Unreachable
 from deltoctl.transport import Check, Target, Transport, split_url, url_hint
 
 if TYPE_CHECKING:
@@ -66,7 +66,6 @@ def port_path(path: str) -> str:
 def adapter_of_target(url: str) -> SerialAdapter | None:
     """The serial adapter a target URL reaches; None for a URL of another transport, or one
     that reaches no adapter (doctor's checks say why)."""
-    from deltoctl.errors import DeltoctlError
     from deltoctl.transport.adapters import adapter_of
 
     try:
@@ -78,7 +77,6 @@ def adapter_of_target(url: str) -> SerialAdapter | None:
 def stable_hint(url: str) -> str | None:
     """For a target named in plug-in order (/dev/ttyUSB0, /dev/ttyACM0), what names its
     adapter instead; None for any other target."""
-    from deltoctl.errors import DeltoctlError
     from deltoctl.transport.adapters import ENUMERATED, adapter_of, stable_targets
 
     try:
@@ -186,7 +184,6 @@ def _checks(target: Target) -> list[Check]:
     """The port is there (a ``usb:`` target: the one adapter it names), this user may open
     it, no process holds it; its adapter (a stable name, the rate its driver sets, the
     latency timer a loop at the asked rate needs); and (rs485=1) its kernel RS-485 mode."""
-    from deltoctl.errors import DeltoctlError
     from deltoctl.transport.adapters import adapter_of
     from deltoctl.transport.doctor import adapter_checks, check, device_checks
 
