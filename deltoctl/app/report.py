@@ -452,7 +452,7 @@ def _document(robot: Robot, plan: Plan, checks: list[dict[str, Any]],
               started: tuple[str, int]) -> dict[str, Any]:
     """The report's JSON, its own hash last: SIMULATED when a block was simulated, so that
     a rehearsal is never taken for an acceptance."""
-    from deltoctl import __version__
+    from deltoctl.version import __version__
 
     start, start_ns = started
     warnings = robot.warnings()

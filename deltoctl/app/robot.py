@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from deltoctl.core.runner import check_loop
 from deltoctl.errors import DeviceError, InvalidInput
 
 if TYPE_CHECKING:
@@ -495,11 +496,3 @@ class Robot:
             raise stopped
         return replay_report(path, self.system, plan.recorded, result, tolerance,
                              not simulated, max_deviation)
-
-
-def check_loop(rate: float, duration: float | None) -> None:
-    """A loop's rate and duration: finite and positive."""
-    if not (math.isfinite(rate) and 0 < rate <= 100_000):
-        raise InvalidInput(f"--rate must be a positive number of Hz up to 100000, got {rate:g}")
-    if duration is not None and not (math.isfinite(duration) and duration > 0):
-        raise InvalidInput(f"--duration must be a positive number of seconds, got {duration:g}")

@@ -10,7 +10,8 @@ and releases its link.
 The safety envelope is the System's, whoever calls it: a move, a command to a joint's
 position, velocity or effort interface and a replayed setpoint are checked against the joint's
 limits and soft limits, its velocity and effort limits and ``max_jog_step`` (core/motion.py)
-before a byte is sent to any block; a target outside is ``Refused`` (exit 5).
+before a byte is sent to any block; a target outside is ``OutsideEnvelope`` (a ``Refused``,
+exit 5).
 """
 
 from __future__ import annotations
@@ -388,8 +389,8 @@ class System:
 
     def check_move(self, targets: Mapping[str, float], velocity: float | None = None, *,
                    jog: bool = True) -> None:
-        """Refuse (``Refused``, exit 5) a move that leaves the envelope, before anything is
-        sent: a target outside a joint's limits or soft limits, a velocity beyond its limit,
+        """Refuse (``OutsideEnvelope``, exit 5) a move that leaves the envelope, before anything
+        is sent: a target outside a joint's limits or soft limits, a velocity beyond its limit,
         a step beyond ``max_jog_step`` from where the joint is (its last read). ``jog``
         False: a move to a known pose (``home``, a replay's start pose), within the limits
         but not bounded by ``max_jog_step``."""

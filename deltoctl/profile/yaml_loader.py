@@ -202,7 +202,7 @@ def parse_yaml(text: str, source: str) -> Any:
 def read_text(path: Path, what: str, limit: int | None = None, kind: str = "profile") -> str:
     """The text of a ``kind`` of file (a profile, a snapshot …), refusing one larger than
     ``limit`` (MAX_PROFILE_BYTES by default) or not a regular file, before reading it."""
-    from deltoctl.profile.catalog import MAX_PROFILE_BYTES
+    from deltoctl.profile.files import MAX_PROFILE_BYTES
 
     limit = MAX_PROFILE_BYTES if limit is None else limit
     source = str(path)

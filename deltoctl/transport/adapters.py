@@ -10,6 +10,7 @@ but sysfs files and directory links; no byte reaches a device.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 from dataclasses import asdict, dataclass, field
@@ -185,8 +186,6 @@ def serial_adapters(base: str | None = None, holders: bool = True) -> list[Seria
         found.append(_adapter(base, name, real, usb, driver, by_id.get(name, []),
                               by_path.get(name, [])))
     if holders and found:
-        from deltoctl.transport.doctor import holders_of_each
-
         held = holders_of_each([a.device for a in found])
         for a in found:
             a.holders = held[a.device]
@@ -236,18 +235,6 @@ def adapter_of(path: str, base: str | None = None) -> SerialAdapter | None:
     return next((adapters[n] for n in _chain(path) if n in adapters), None)
 
 
-def adapter_of_target(url: str) -> SerialAdapter | None:
-    """The serial adapter a target URL reaches; None for a URL of another transport, or one
-    that reaches no adapter (doctor's checks say why)."""
-    from deltoctl.errors import DeltoctlError
-    from deltoctl.transport.serial_port import parse_serial_url, port_path
-
-    try:
-        return adapter_of(port_path(parse_serial_url(url)[0]))
-    except DeltoctlError:
-        return None
-
-
 ENUMERATED = re.compile(r"^tty(USB|ACM)\d+$")  # names the kernel hands out in plug-in order
 
 
@@ -257,25 +244,6 @@ def stable_targets(url: str, a: SerialAdapter) -> list[str]:
     query = url.partition("?")[2]
     tail = f"?{query}" if query else ""
     return [f"serial://{p}{tail}" for p in a.by_id[:1]] + ([a.usb + tail] if a.usb else [])
-
-
-def stable_hint(url: str) -> str | None:
-    """For a target named in plug-in order (/dev/ttyUSB0, /dev/ttyACM0), what names its
-    adapter instead; None for any other target."""
-    from deltoctl.errors import DeltoctlError
-    from deltoctl.transport.serial_port import parse_serial_url
-
-    try:
-        path = parse_serial_url(url)[0]
-    except DeltoctlError:
-        return None
-    if not ENUMERATED.match(os.path.basename(path)):
-        return None
-    adapter = adapter_of(path)
-    choices = stable_targets(url, adapter) if adapter is not None else []
-    return (f"{path} is named in plug-in order (a reboot may swap it): name the adapter by "
-            + (" or ".join(choices) if choices else "its /dev/serial/by-id/ link or "
-               "usb:VID:PID[:SERIAL] (deltoctl ports lists them)"))
 
 
 # -- usb:VID:PID[:SERIAL] ---------------------------------------------------------------------
@@ -474,3 +442,31 @@ def latency_fix(a: SerialAdapter, base: str | None = None) -> str:
     path = under(base or root(), f"/sys/bus/usb-serial/devices/{a.name}/latency_timer")
     return (f"echo {SYNC_LATENCY_MS} | sudo tee {path}   (until it is unplugged; for good: "
             "deltoctl doctor --write-udev-rule)")
+
+
+def holders_of_each(paths: list[str]) -> dict[str, list[str]]:
+    """path → ``PID (name)`` of the processes with it open, from one look through /proc."""
+    real = {os.path.realpath(p): p for p in paths}
+    found: dict[str, list[str]] = {p: [] for p in paths}
+    try:
+        pids = [p for p in os.listdir("/proc") if p.isdigit() and int(p) != os.getpid()]
+    except OSError:
+        return found
+    for pid in pids:
+        with contextlib.suppress(OSError):
+            fds = os.listdir(f"/proc/{pid}/fd")
+            held = {real[t] for t in (_target(f"/proc/{pid}/fd/{fd}") for fd in fds)
+                    if t in real}
+            if held:
+                with open(f"/proc/{pid}/comm") as f:
+                    name = f.read().strip()
+                for path in held:
+                    found[path].append(f"{pid} ({name})")
+    return found
+
+
+def _target(link: str) -> str | None:
+    try:
+        return os.readlink(link)
+    except OSError:
+        return None

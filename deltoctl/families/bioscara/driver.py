@@ -266,7 +266,7 @@ class BioscaraDriver(Driver):
     def joint(self, name: str) -> Joint:
         joint = self.joints.get(name)
         if joint is None or joint not in self.present:
-            raise DeviceError(f"joint {name!r} does not answer on {self.url}")
+            raise NoAnswer(f"joint {name!r} does not answer on {self.url}")
         return joint
 
     def set_command(self, name: str, value: float) -> None:

@@ -34,8 +34,8 @@ FAMILY = Family(
         hint="switch the torque off first (deltoctl torque off), or pass --allow torque-off "
              "to have it switched off for the writes and on again (support the robot)"),),
     identity_fields=(("servos", "{} Dynamixel servos"),),
-    register_items="deltoctl.families.dynamixel.control_table:item_names",
-    config_rules="deltoctl.families.dynamixel.control_table:config_rules",
+    register_items="deltoctl.families.dynamixel.models:item_names",
+    config_rules="deltoctl.families.dynamixel.models:config_rules",
 )
 
 

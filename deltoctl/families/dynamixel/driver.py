@@ -45,7 +45,7 @@ LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}
 def refused_rates(url: str, bauds: list[int]) -> dict[int, str]:
     """The rates of ``bauds`` the bus's adapter cannot set (its driver's), each with why:
     a scan leaves them out rather than fail in the middle."""
-    from deltoctl.transport.adapters import adapter_of_target
+    from deltoctl.transport.serial_port import adapter_of_target
 
     adapter = adapter_of_target(url)
     why = {b: adapter.refuses(b) for b in bauds} if adapter is not None else {}
@@ -464,7 +464,7 @@ class DynamixelDriver(Driver):
         for device_id, comp in self.joints.items():
             if comp.name == joint:
                 if device_id not in self.present:
-                    raise DeviceError(f"{joint} (ID {device_id}) does not answer on {self.url}")
+                    raise NoAnswer(f"{joint} (ID {device_id}) does not answer on {self.url}")
                 return device_id
         raise InvalidInput(f"{joint!r} is not a servo joint of {self.hw.name}")
 

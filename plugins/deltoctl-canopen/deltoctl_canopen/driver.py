@@ -24,7 +24,16 @@ from typing import Any
 from deltoctl import trace
 from deltoctl.core.driver import Block, Driver, HomeProgress, MoveResult, Progress
 from deltoctl.core.loop import CommLoop
-from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Refused, Unreachable
+from deltoctl.errors import (
+    DeltoctlError,
+    DeviceError,
+    DeviceFault,
+    InvalidInput,
+    LinkLost,
+    NoAnswer,
+    Refused,
+    Unreachable,
+)
 
 from deltoctl_canopen import (
     codec,
@@ -147,6 +156,7 @@ class CanopenDriver(Driver):
 
     # -- SDO ---------------------------------------------------------------------------------
     def sdo_read(self, axis: Axis, index: int, sub: int = 0) -> Any:
+        from can import CanError
         from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
         self.stats["packets"] += 1
@@ -154,14 +164,19 @@ class CanopenDriver(Driver):
             return _decode(axis.node, index, sub, axis.node.sdo.upload(index, sub))
         except SdoAbortedError as exc:
             self.stats["errors"] += 1
-            raise DeviceError(f"{axis.joint} (node {axis.id}) refused to read "
-                              f"{index:#06x}:{sub:02x}: {_abort(exc)}") from None
-        except (SdoCommunicationError, OSError) as exc:
+            raise DeviceFault(f"{axis.joint} (node {axis.id}) refused to read "
+                              f"{index:#06x}:{sub:02x}: {_abort(exc)}", exc.code) from None
+        except SdoCommunicationError as exc:
             self.stats["errors"] += 1
-            raise DeviceError(f"{axis.joint} (node {axis.id}) did not answer a read of "
-                              f"{index:#06x}:{sub:02x} ({exc})") from None
+            raise NoAnswer(f"{axis.joint} (node {axis.id}) did not answer a read of "
+                           f"{index:#06x}:{sub:02x} ({exc})") from None
+        except (CanError, OSError) as exc:
+            self.stats["errors"] += 1
+            raise LinkLost(f"{axis.joint} (node {axis.id}) did not answer a read of "
+                           f"{index:#06x}:{sub:02x} ({exc})") from None
 
     def sdo_write(self, axis: Axis, index: int, sub: int, value: Any) -> None:
+        from can import CanError
         from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
         self.stats["packets"] += 1
@@ -172,12 +187,16 @@ class CanopenDriver(Driver):
                 axis.commands[index] = value
         except SdoAbortedError as exc:
             self.stats["errors"] += 1
-            raise DeviceError(f"{axis.joint} (node {axis.id}) refused to write {value!r} to "
-                              f"{index:#06x}:{sub:02x}: {_abort(exc)}") from None
-        except (SdoCommunicationError, OSError) as exc:
+            raise DeviceFault(f"{axis.joint} (node {axis.id}) refused to write {value!r} to "
+                              f"{index:#06x}:{sub:02x}: {_abort(exc)}", exc.code) from None
+        except SdoCommunicationError as exc:
             self.stats["errors"] += 1
-            raise DeviceError(f"{axis.joint} (node {axis.id}) did not answer a write of "
-                              f"{index:#06x}:{sub:02x} ({exc})") from None
+            raise NoAnswer(f"{axis.joint} (node {axis.id}) did not answer a write of "
+                           f"{index:#06x}:{sub:02x} ({exc})") from None
+        except (CanError, OSError) as exc:
+            self.stats["errors"] += 1
+            raise LinkLost(f"{axis.joint} (node {axis.id}) did not answer a write of "
+                           f"{index:#06x}:{sub:02x} ({exc})") from None
         except (KeyError, TypeError, ValueError, OverflowError, struct.error):
             raise InvalidInput(f"{value!r} does not fit {index:#06x}:{sub:02x} of "
                                f"{axis.joint}'s EDS") from None
@@ -376,7 +395,7 @@ class CanopenDriver(Driver):
                 return
             except Exception as exc:
                 self._lose(str(exc))
-                raise DeviceError(f"{self.url} lost ({exc})") from None
+                raise LinkLost(f"{self.url} lost ({exc})") from None
         self.sdo_write(axis, 0x6040, 0, value)
 
     def enable(self, axis: Axis) -> None:
@@ -431,7 +450,7 @@ class CanopenDriver(Driver):
         if axis is None:
             raise InvalidInput(f"{joint!r} is not a CANopen joint of {self.hw.name}")
         if not axis.identity:
-            raise DeviceError(f"{joint} (node {axis.id}) does not answer on {self.url}")
+            raise NoAnswer(f"{joint} (node {axis.id}) does not answer on {self.url}")
         return axis
 
     def check_motion(self, joints: list[str]) -> None:
