@@ -33,6 +33,10 @@ from deltoctl.transport.i2c import I2CBus  # what every I2C link gives
 POLL_HOMING = 0.1  # s between flag polls while homing, as the Bioscara driver does
 POLL_MOVE = 0.02
 TOLERANCE = 1e-3  # rad or m: the closed-loop steppers settle far closer than this
+# a position move raises no flag: a joint has arrived when it is within tolerance, not BUSY,
+# and its encoder says it is still (under STILL of its profile's speed) this many reads in a row
+SETTLE_READS = 3
+STILL = 0.05
 SCAN = range(0x08, 0x78)  # the addresses i2cdetect scans
 NAN = float("nan")
 POLICY = ExchangePolicy(tries=3, pause=50e-6)  # as the Bioscara driver's I2C layer
@@ -383,7 +387,9 @@ class BioscaraDriver(Driver):
 
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:
-        """Position moves (the joints run their own profiles); fails naming a stalled joint,
+        """Position moves (the joints run their own profiles); settled once every joint is
+        within tolerance, not BUSY and still for SETTLE_READS reads, no sooner than its
+        profile could end; unsettled when the timeout passes. Fails naming a stalled joint,
         which is left disabled."""
         profile = self.profile
         self.check_motion(list(targets))
@@ -391,18 +397,20 @@ class BioscaraDriver(Driver):
         start = self.read()
         first = max((abs(t - start[f"{j}/position"]) for j, t in targets.items()),
                     default=0.0) or 1.0
+        speeds = {j: min(velocity or math.inf, self.joint(j).max_velocity) for j in targets}
         for name, target in targets.items():
-            self._goal(name, target, min(velocity, self.joint(name).max_velocity)
-                       if velocity else None)
+            self._goal(name, target, speeds[name] if velocity else None)
+        # no profile ends sooner than its distance at full speed
+        soonest = {j: abs(t - start[f"{j}/position"]) / speeds[j] for j, t in targets.items()}
         hook = self.on_cycle
         # the setpoint each cycle: the goal, and the speed limit of its profile
-        setpoints = {j: (t, min(velocity or math.inf, self.joints[j].max_velocity), NAN)
-                     for j, t in targets.items()} if hook is not None else {}
+        setpoints = {j: (t, speeds[j], NAN) for j, t in targets.items()} if hook is not None else {}
         if hook is not None:  # the state the goals were sent from
             hook(time.time_ns(), start, setpoints)
         began = time.monotonic()
         timeout = profile.safety.home_timeout or 30.0
         errors: dict[str, float] = {}
+        still = dict.fromkeys(targets, 0)  # reads in a row each joint has been still
         while True:
             values = self.read()
             if hook is not None:
@@ -415,10 +423,14 @@ class BioscaraDriver(Driver):
             if progress:
                 progress(max(0.0, 1.0 - worst / first))
             elapsed = time.monotonic() - began
-            if worst <= tolerance or elapsed > timeout or self.halted.is_set():
+            for j in targets:
+                here = (errors[j] <= tolerance and not self.joints[j].busy
+                        and abs(values.get(f"{j}/velocity", math.inf)) <= STILL * speeds[j])
+                still[j] = still[j] + 1 if here else 0
+            unsettled = [j for j in targets if still[j] < SETTLE_READS or elapsed < soonest[j]]
+            if not unsettled or elapsed > timeout or self.halted.is_set():
                 break
             time.sleep(POLL_MOVE)
-        unsettled = [j for j, e in errors.items() if e > tolerance]
         return MoveResult(not unsettled, elapsed, errors, unsettled)
 
     def _goal(self, name: str, target: float, speed: float | None) -> None:

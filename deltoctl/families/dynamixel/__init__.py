@@ -24,6 +24,7 @@ FAMILY = Family(
         SimOption("missing", "joints", "Fault: a joint that never answers (repeatable)."),
         SimOption("pace", "flag", "Serial buses take the wire time of every byte at the baud "
                   "rate the host set, as a real bus does.", False),
+        SimOption("stall", "joints", "Fault: a joint that cannot move (repeatable)."),
         SimOption("wrong_baud", "joints",
                   "Fault: a servo set to another baud rate than its bus (repeatable)."),
     ),

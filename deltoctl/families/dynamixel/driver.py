@@ -32,6 +32,7 @@ RAD_PER_RAW = 0.001533980787886  # 2π/4096
 CENTER = 2047
 RAD_S_PER_RAW = 0.023980823922402  # 0.229 rpm
 DRIVE_MODE = BY_NAME["Drive Mode"]
+MOVING = BY_NAME["Moving"]
 PVL = struct.Struct("<hii")  # Present Load, Velocity, Position (126, 10 bytes)
 LOAD_SCALE = 0.0014
 # 3 tries of 100 ms; a lost port reopened once a second
@@ -404,7 +405,8 @@ class DynamixelDriver(Driver):
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:
         """A time profile to each goal (the servos run their own position loop); returns once
-        all joints are within tolerance, the timeout passes or the System halts the move."""
+        every servo says it stopped (Moving, 122, is 0) within tolerance of its goal, the
+        timeout passes or the System halts the move."""
         import time
 
         from deltoctl.core.motion import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
@@ -425,6 +427,7 @@ class DynamixelDriver(Driver):
             hook(time.time_ns(), values, setpoints)
         start = time.monotonic()
         errors: dict[str, float] = {}
+        arrived: list[str] = []
         while time.monotonic() - start < seconds + timeout and not self.halted.is_set():
             values = self.read()
             if hook is not None:
@@ -434,12 +437,21 @@ class DynamixelDriver(Driver):
             worst = max(errors.values(), default=0.0)
             if progress:
                 progress(max(0.0, 1.0 - worst / (distance or 1.0)))
-            if worst <= tolerance:
+            still = self._stopped(list(targets))
+            arrived = [j for j, e in errors.items() if e <= tolerance and j in still]
+            if len(arrived) == len(targets):
                 self.moving.clear()
                 return MoveResult(True, time.monotonic() - start, errors, [])
             time.sleep(0.02)
         return MoveResult(False, time.monotonic() - start, errors,
-                          [j for j, e in errors.items() if e > tolerance])
+                          [j for j in targets if j not in arrived])
+
+    def _stopped(self, joints: list[str]) -> set[str]:
+        """The joints whose servo says its profile is done (Moving, 122, reads 0); a servo
+        that does not answer is not known to have stopped."""
+        ids = {i: c.name for i, c in self.joints.items() if c.name in joints and i in self.present}
+        replies = self._sync_read(MOVING.address, 1, list(ids)) if ids else []
+        return {ids[i] for i, error, data in replies if i in ids and data and data[0] == 0}
 
     def follow(self, setpoints: dict[str, tuple[float, float, float]]) -> None:
         """A recorded goal (position) and its profile's speed (velocity) each, sent when they
