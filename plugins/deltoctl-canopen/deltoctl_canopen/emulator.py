@@ -1,11 +1,12 @@
 """Emulated CiA 402 drives: real CANopen slaves on a local hub.
 
-Each node is canopen's ``LocalNode`` — its SDO server, NMT slave (boot-up, heartbeat from
-0x1017), EMCY producer and PDO maps — over the object dictionary of the node's EDS, with a
-``Drive402`` behind the objects a drive computes (statusword, positions, velocities, error
-code). RPDOs are applied when they come (types 254/255) or at the next SYNC (0-240); TPDOs go
-out on SYNC (types 1-240) or when their data change (254/255), in OPERATIONAL only; node
-guarding requests are answered. A node can be missing, report another product code, stall
+Each node talks through the node side of deltoctl's CANopen conversation
+(``session.Device``: its SDO server, NMT state, boot-up, heartbeat from 0x1017 and guarding
+replies) over the object dictionary of the node's EDS, kept by canopen's ``LocalNode`` with
+its EMCY producer and PDO maps, and a ``Drive402`` behind the objects a drive computes
+(statusword, positions, velocities, error code). RPDOs are applied when they come (types
+254/255) or at the next SYNC (0-240); TPDOs go out on SYNC (types 1-240) or when their data
+change (254/255), in OPERATIONAL only. A node can be missing, report another product code, stall
 (its following error faults it: EMCY 0x8611) or fall silent after a while (no heartbeat,
 no reply).
 
@@ -22,8 +23,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from deltoctl_canopen import quiet  # noqa: F401  (the libraries' log records)
+from deltoctl_canopen import (
+    quiet,  # noqa: F401  (the libraries' log records)
+    session,
+)
+from deltoctl_canopen.codec import Frame
 from deltoctl_canopen.drive import Drive402
+from deltoctl_canopen.session import Abort
 
 if TYPE_CHECKING:
     from deltoctl.core.serving import ServeContext
@@ -57,13 +63,18 @@ class EmulatedDrive:
         self._sync_rpdo: list[tuple[Any, bytes]] = []
         self._sent: dict[int, bytes] = {}
         self._pdo_dirty = True
-        self._toggle = 0
+        self.session = session.Device(node_id, self._read_object, self._write_object)
+        self._beat_ms = 0  # 0x1017, the heartbeat's period
+        self._beat_at = 0.0
         self.node.add_read_callback(self._on_read)
         self.node.add_write_callback(self._on_write)
         network.add_node(self.node)
-        network.subscribe(0x000, self._after_nmt)
+        # the conversation is the session's: canopen's own SDO server and NMT slave stay off
+        network.unsubscribe(0x600 + node_id, self.node.sdo.on_request)
+        network.unsubscribe(0x000, self.node.nmt.on_command)
+        for can_id in (0x000, 0x600 + node_id, 0x700 + node_id):
+            network.subscribe(can_id, self._on_frame)
         network.subscribe(0x080, self._on_sync)
-        network.subscribe(0x700 + node_id, self._on_guard)
         if faults.product_code is not None:
             self.node.data_store.setdefault(0x1018, {})[2] = \
                 faults.product_code.to_bytes(4, "little")
@@ -84,8 +95,17 @@ class EmulatedDrive:
 
     def boot(self) -> None:
         """Power on: boot-up message, then PRE-OPERATIONAL (heartbeat as 0x1017 says)."""
-        self.node.nmt.send_command(0x82)
-        self.node.nmt.state = "PRE-OPERATIONAL"
+        self._send(self.session.boot())
+        self._heartbeat_from_od()
+
+    def _send(self, frame: Frame) -> None:
+        with contextlib.suppress(Exception):  # a hub gone: the bus is closing
+            self.network.send_message(frame.can_id, frame.data)
+
+    def _heartbeat_from_od(self) -> None:
+        with contextlib.suppress(Exception):
+            self._beat_ms = int.from_bytes(self.node.get_data(0x1017, 0), "little")
+        self._beat_at = time.monotonic()
 
     # -- the object dictionary ---------------------------------------------------------------
     def _on_read(self, index: int, subindex: int, od: Any) -> Any:
@@ -97,12 +117,35 @@ class EmulatedDrive:
     def _live(index: int) -> bool:
         return index >= 0x6000 or index in (0x1001,)
 
-    def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+    def _read_object(self, index: int, sub: int) -> bytes:
         from canopen.sdo import SdoAbortedError
 
+        try:
+            return bytes(self.node.get_data(index, sub, check_readable=True))
+        except SdoAbortedError as exc:
+            raise Abort(exc.code) from None
+
+    def _write_object(self, index: int, sub: int, data: bytes) -> None:
+        """An SDO download: the object there and writable, its length its type's, then the
+        drive's own checks (``_on_write``), then stored."""
+        obj = self.node.object_dictionary[index]  # KeyError: no such object
+        if hasattr(obj, "subindices"):
+            if sub not in obj:
+                raise Abort(0x06090011)
+            obj = obj[sub]
+        if not obj.writable:
+            raise Abort(0x06010002)
+        if obj.data_type in _NUMBERS and 8 * len(data) != len(obj):
+            raise Abort(session.ABORT_LENGTH)
+        self._on_write(index, sub, obj, data)
+        self.node.data_store.setdefault(index, {})[sub] = bytes(data)
+        if index == 0x1017:
+            self._beat_ms = int.from_bytes(data, "little")
+
+    def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
         if index == 0x1010:
             if int.from_bytes(data[:4], "little") != SAVE_SIGNATURE:
-                raise SdoAbortedError(0x08000020)
+                raise Abort(0x08000020)
             self.saved += 1
             return
         if 0x1400 <= index <= 0x1BFF:
@@ -112,41 +155,50 @@ class EmulatedDrive:
             value = od.decode_raw(data)
             low, high = od.min, od.max
             if (low is not None and value < low) or (high is not None and value > high):
-                raise SdoAbortedError(0x06090030)
+                raise Abort(0x06090030)
             with self.lock:
                 self.drive.write(index, subindex, int(value), time.monotonic())
             if index == 0x6040:
                 self.send_event_pdos()
 
     def _emcy(self, code: int) -> None:
+        if self.silent:
+            return
         with contextlib.suppress(Exception):
             self.node.emcy.send(code, 0x01)
 
-    # -- NMT, node guarding -------------------------------------------------------------------
-    def _after_nmt(self, can_id: int, data: bytes, timestamp: float) -> None:
-        if len(data) < 2 or data[1] not in (0, self.node.id) or self.silent:
+    # -- SDO, NMT, node guarding ---------------------------------------------------------------
+    def _on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
+        """An SDO request, an NMT command or a guarding request, through the session. canopen
+        hands its subscribers no remote flag: on the node's 0x700 + ID, only a guarding
+        request (a remote frame) comes without data."""
+        if self.silent:
             return
-        if data[0] == 0x81:  # reset node: the application's values too
+        remote = can_id == 0x700 + self.node.id and not data
+        try:
+            events = self.session.receive(Frame(can_id, bytes(data), remote=remote))
+        except Exception:  # a frame no node understands: ignored, as a node does
+            return
+        for event in events:
+            if isinstance(event, session.Send):
+                self._send(event.frame)
+            elif isinstance(event, session.NmtCommand):
+                self._after_nmt(event.command)
+
+    def _after_nmt(self, command: int) -> None:
+        if command == 0x81:  # reset node: the application's values too
             self.node.data_store.clear()
             if self.faults.product_code is not None:
                 self.node.data_store[0x1018] = {2: self.faults.product_code.to_bytes(4,
                                                                                   "little")}
             with self.lock:
                 self.drive = self._new_drive()
-        if data[0] in (0x81, 0x82):
+        if command in session.RESETS:
             self._pdo_dirty = True
-            self.node.nmt.state = "PRE-OPERATIONAL"
-        if data[0] == 0x01:
+            self._heartbeat_from_od()
+        if command == 0x01:
             self._sent.clear()
             self.send_event_pdos()
-
-    def _on_guard(self, can_id: int, data: bytes, timestamp: float) -> None:
-        if data or self.silent:  # a heartbeat has a byte; a guarding request none
-            return
-        state = {"STOPPED": 4, "OPERATIONAL": 5, "PRE-OPERATIONAL": 127}.get(
-            self.node.nmt.state, 0)
-        self.network.send_message(0x700 + self.node.id, bytes([state | self._toggle]))
-        self._toggle ^= 0x80
 
     # -- PDOs -----------------------------------------------------------------------------------
     def _maps(self) -> tuple[list[Any], list[Any]]:
@@ -168,7 +220,7 @@ class EmulatedDrive:
                 [p for p in node.rpdo.map.values() if p.enabled and p.cob_id and p.map])
 
     def _operational(self) -> bool:
-        return self.node.nmt.state == "OPERATIONAL" and not self.silent
+        return self.session.operational and not self.silent
 
     def _on_rpdo(self, can_id: int, data: bytes, timestamp: float) -> None:
         if not self._operational():
@@ -185,7 +237,7 @@ class EmulatedDrive:
 
         pdo.data = bytearray(data.ljust(len(pdo.data), b"\0"))
         for var in pdo.map:
-            with contextlib.suppress(SdoAbortedError, KeyError):
+            with contextlib.suppress(SdoAbortedError, Abort, KeyError):
                 self.node.set_data(var.index, var.subindex, var.get_data())
 
     def _on_sync(self, can_id: int, data: bytes, timestamp: float) -> None:
@@ -223,9 +275,12 @@ class EmulatedDrive:
         after = self.faults.silent_after
         if after is not None and not self.silent and now - self.started >= after:
             self.silent = True  # a dead node: no heartbeat, no reply, no PDO
-            self.node.nmt.stop_heartbeat()
-            self.node.remove_network()
             return
+        if self.silent:
+            return
+        if self._beat_ms and now >= self._beat_at:
+            self._beat_at = max(self._beat_at + self._beat_ms / 1000, now)
+            self._send(self.session.heartbeat())
         with self.lock:
             self.drive.update(now)
         self.send_event_pdos()
@@ -271,8 +326,6 @@ class EmulatedBus:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=1)
-        for drive in self.drives.values():
-            drive.node.nmt.stop_heartbeat()
         with contextlib.suppress(Exception):
             self.network.disconnect()
         self.hub.close()
