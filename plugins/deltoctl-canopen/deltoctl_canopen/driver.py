@@ -1,5 +1,11 @@
 """A CANopen bus of CiA 402 drives, one joint a node: deltoctl's master on canopen's client.
 
+canopen's SDO client carries every SDO read and write (expedited, segmented and block
+transfers, its tries and timeouts set from ``POLICY``), and its PDO maps the TPDOs and RPDOs;
+the rest of the conversation is deltoctl's own master side (``session.Host``): NMT commands,
+SYNC, the heartbeats and boot-ups heard, and detect's scan, whose SDO requests to every node
+ID are matched to their replies there.
+
 configure: the bus opened by its ``can://`` URL, each node's EDS read, an SDO read of 0x1000 and
 0x1018 per node (the roll call), then the start-up of ros2_canopen: the node's ``sdo:`` writes,
 its PDO mappings from the bus file (or those the drive has), its heartbeat, NMT start. Each
@@ -23,6 +29,7 @@ from typing import Any
 
 from deltoctl import trace
 from deltoctl.core.driver import Block, Driver, HomeProgress, MoveResult, Progress
+from deltoctl.core.exchange import ExchangePolicy
 from deltoctl.core.loop import CommLoop
 from deltoctl.errors import (
     DeltoctlError,
@@ -31,6 +38,7 @@ from deltoctl.errors import (
     InvalidInput,
     LinkLost,
     NoAnswer,
+    ProtocolError,
     Refused,
     Unreachable,
 )
@@ -38,11 +46,14 @@ from deltoctl.errors import (
 from deltoctl_canopen import (
     codec,
     quiet,  # noqa: F401  (the libraries' log records)
+    session,
 )
 from deltoctl_canopen.busconfig import NodeConfig
 from deltoctl_canopen.transport import parse_can_url
 
-SDO_TIMEOUT = 0.15  # s per try; canopen retries once
+# an SDO request: two tries of 0.15 s, 0.1 s apart (canopen's client runs them)
+POLICY = ExchangePolicy(tries=2, timeout=0.15, pause=0.1)
+SCAN_WINDOW = 0.3  # s detect listens for the nodes' replies and heartbeats
 STATE_TIMEOUT = 0.5  # s for each 402 transition
 TPDO_WAIT = 0.005  # s a cycle waits for the TPDOs its SYNC asked for
 POLL_PERIOD = 0.1  # s between two SDO reads of a value no TPDO carries
@@ -87,6 +98,7 @@ class CanopenDriver(Driver):
         self._lock = threading.Lock()
         self.loop = _BusLoop(f"{self.hw.name}_sync", self)
         self._polls: list[tuple[Axis, int]] = []
+        self.session = session.Host()
         self._poll_at = 0.0
 
     def comm_loops(self) -> list[CommLoop]:
@@ -127,7 +139,8 @@ class CanopenDriver(Driver):
             assert config.dcf is not None
             od = eds.load(config.dcf, config.node_id)
             node = canopen.RemoteNode(config.node_id, od)
-            node.sdo.RESPONSE_TIMEOUT = SDO_TIMEOUT
+            node.sdo.RESPONSE_TIMEOUT, node.sdo.MAX_RETRIES, node.sdo.RETRY_DELAY = (
+                POLICY.timeout, POLICY.tries - 1, POLICY.pause)
             self.network.add_node(node)
             axis = Axis(joint, config, node)
             self.network.subscribe(0x700 + axis.id, self._heartbeat(axis))
@@ -136,10 +149,21 @@ class CanopenDriver(Driver):
 
     def _heartbeat(self, axis: Axis) -> Any:
         def on_heartbeat(can_id: int, data: bytes, timestamp: float) -> None:
-            if data:
-                axis.heartbeat_at = time.monotonic()
-                axis.nmt_state = data[0] & 0x7F
+            try:
+                events = self.session.receive(codec.Frame(can_id, bytes(data)))
+            except ProtocolError:  # not a heartbeat: a guarding request, a bad frame
+                return
+            for event in events:
+                if isinstance(event, session.Heartbeat):
+                    axis.heartbeat_at = time.monotonic()
+                    axis.nmt_state = event.state
         return on_heartbeat
+
+    def _send(self, frame: codec.Frame) -> None:
+        self.network.send_message(frame.can_id, frame.data, frame.remote)
+
+    def _nmt(self, axis: Axis, command: int) -> None:
+        self._send(session.nmt_frame(command, axis.id))
 
     def _on_emcy(self, axis: Axis) -> Any:
         def on_emcy(error: Any) -> None:
@@ -240,7 +264,7 @@ class CanopenDriver(Driver):
         """ros2_canopen's start-up of a node: pre-operational, its sdo: list, its PDOs,
         its heartbeat, then operational."""
         config = axis.config
-        axis.node.nmt.send_command(0x80)
+        self._nmt(axis, 0x80)
         for write in config.sdo:
             self.sdo_write(axis, write.index, write.subindex, write.value)
         self._pdos(axis)
@@ -248,7 +272,7 @@ class CanopenDriver(Driver):
         with contextlib.suppress(DeviceError):
             self.sdo_write(axis, 0x1017, 0, producer)
         axis.heartbeat_ms = producer  # type: ignore[attr-defined]
-        axis.node.nmt.send_command(0x01)
+        self._nmt(axis, 0x01)
         axis.nmt_state = 5
         axis.heartbeat_at = time.monotonic()
 
@@ -309,7 +333,7 @@ class CanopenDriver(Driver):
         self._arrived = 0
         self._sync_seen.clear()
         try:
-            self.network.send_message(0x080, b"")
+            self._send(session.sync_frame())
         except Exception as exc:  # python-can's errors: the bus went away
             self._lose(f"{exc}")
 
@@ -688,20 +712,32 @@ class CanopenDriver(Driver):
                            + (f", {len(bad)} problem(s)" if bad else ", as the profile says")}
 
     def _scan(self) -> set[int]:
+        """The node IDs that answer an SDO read of 0x1000 (a value or an abort: a node is
+        there), or whose heartbeat or boot-up is heard, within SCAN_WINDOW."""
         heard: set[int] = set()
+        scan, lock = session.Host(), threading.Lock()
+        requests = [scan.upload(node_id, 0x1000) for node_id in range(1, 128)]
 
         def listen(can_id: int, data: bytes, timestamp: float) -> None:
-            if can_id & 0x780 in (0x580, 0x700) and can_id & 0x7F:
-                heard.add(can_id & 0x7F)
+            with lock:
+                try:
+                    events = scan.receive(codec.Frame(can_id, bytes(data)))
+                except DeviceFault:  # it refused the read: it is there
+                    heard.add(can_id & 0x7F)
+                    return
+                except ProtocolError:  # another master's reply, a node's second one
+                    return
+            heard.update(e.node for e in events
+                         if isinstance(e, (session.SdoDone, session.SdoPending,
+                                           session.Heartbeat)))
 
         for base in (0x580, 0x700):
             for node_id in range(1, 128):
                 self.network.subscribe(base + node_id, listen)
         try:
-            for node_id in range(1, 128):  # SDO upload request of 0x1000:00
-                self.network.send_message(0x600 + node_id, bytes([0x40, 0x00, 0x10, 0, 0, 0, 0,
-                                                                  0]))
-            time.sleep(0.3)
+            for request in requests:
+                self._send(request)
+            time.sleep(SCAN_WINDOW)
         finally:
             for base in (0x580, 0x700):
                 for node_id in range(1, 128):
@@ -793,14 +829,14 @@ class CanopenDriver(Driver):
             plan[axis] = sorted(writes, key=lambda w: _restore_order(w[0]))
         read_back: dict[str, dict[str, Any]] = {}
         for axis, writes in plan.items():
-            axis.node.nmt.send_command(0x80)
+            self._nmt(axis, 0x80)
             try:
                 for var, value in writes:
                     self.sdo_write(axis, var.index, var.subindex, value)
                 if "save" in allow and 0x1010 in axis.node.object_dictionary:
                     self.sdo_write(axis, 0x1010, 1, 0x65766173)
             finally:
-                axis.node.nmt.send_command(0x01)
+                self._nmt(axis, 0x01)
             read_back[axis.joint] = {objects.item_name(v): _plain(self.sdo_read(
                 axis, v.index, v.subindex)) for v, _ in writes if v.readable}
         return read_back

@@ -56,9 +56,9 @@ class EmulatedDrive:
         self.network, self.faults = network, faults
         self.lock = threading.RLock()
         self.node = LocalNode(node_id, od)
+        self.silent = False
         self.drive = self._new_drive()
         self.started = time.monotonic()
-        self.silent = False
         self.saved = 0  # how many times 0x1010 was written
         self._sync_rpdo: list[tuple[Any, bytes]] = []
         self._sent: dict[int, bytes] = {}
