@@ -189,3 +189,69 @@ def test_any_request_gets_a_reply(data):
     device = Device(2, od.read, od.write)
     for event in device.receive(Frame(0x602, data)):
         assert isinstance(event, session.Send) and len(event.frame.data) == 8
+
+
+# -- the master side against the emulated drives, over the local hub -------------------------
+
+def over_hub(bus, host, frame, deadline=5.0):
+    """Send a frame; feed every reply to the host until its transfer ends: its last event."""
+    import time
+
+    import can
+
+    bus.send(can.Message(arbitration_id=frame.can_id, data=frame.data, is_extended_id=False))
+    end = time.monotonic() + deadline
+    while time.monotonic() < end:
+        msg = bus.recv(0.1)
+        if msg is None or msg.arbitration_id & 0x780 != 0x580:
+            continue
+        for event in host.receive(Frame(msg.arbitration_id, bytes(msg.data))):
+            if isinstance(event, session.Send):
+                bus.send(can.Message(arbitration_id=event.frame.can_id, data=event.frame.data,
+                                     is_extended_id=False))
+            elif isinstance(event, session.SdoDone):
+                return event
+    raise AssertionError("no reply")
+
+
+@pytest.fixture
+def hub_bus(drives):
+    from deltoctl_canopen.hub import HubBus
+
+    bus = HubBus(channel=drives.hub.channel)
+    yield bus
+    bus.shutdown()
+
+
+def test_the_emulated_drive_serves_the_session(hub_bus):
+    host = Host()
+    name = over_hub(hub_bus, host, host.upload(2, 0x1008))
+    assert name.data == b"deltoctl generic CiA 402 drive"  # segmented, 5 segments
+    assert over_hub(hub_bus, host, host.download(3, 0x6081, 0, (1234).to_bytes(4, "little")))
+    value = over_hub(hub_bus, host, host.upload(3, 0x6081))
+    assert int.from_bytes(value.data, "little") == 1234
+    with pytest.raises(DeviceFault) as caught:
+        over_hub(hub_bus, host, host.download(2, 0x1000, 0, bytes(4)))
+    assert caught.value.code == 0x06010002  # write of a read-only object
+    with pytest.raises(DeviceFault) as caught:
+        over_hub(hub_bus, host, host.download(2, 0x6081, 0, b"\x01"))
+    assert caught.value.code == 0x06070010  # the length is not the type's
+    with pytest.raises(DeviceFault) as caught:
+        over_hub(hub_bus, host, host.upload(2, 0x5FFF))
+    assert caught.value.code == 0x06020000
+
+
+def test_the_emulated_drive_boots_up_after_a_reset(hub_bus):
+    import time
+
+    import can
+
+    host = Host()
+    hub_bus.send(can.Message(arbitration_id=0, data=session.nmt_frame(0x82, 3).data,
+                             is_extended_id=False))
+    end, seen = time.monotonic() + 5, []
+    while time.monotonic() < end and not any(e.boot_up for e in seen):
+        msg = hub_bus.recv(0.1)
+        if msg is not None and msg.arbitration_id == 0x703:
+            seen += host.receive(Frame(msg.arbitration_id, bytes(msg.data)))
+    assert any(e.boot_up for e in seen)
