@@ -72,9 +72,8 @@ class EmulatedDrive:
         # the conversation is the session's: canopen's own SDO server and NMT slave stay off
         network.unsubscribe(0x600 + node_id, self.node.sdo.on_request)
         network.unsubscribe(0x000, self.node.nmt.on_command)
-        for can_id in (0x000, 0x600 + node_id, 0x700 + node_id):
+        for can_id in (0x000, 0x080, 0x600 + node_id, 0x700 + node_id):
             network.subscribe(can_id, self._on_frame)
-        network.subscribe(0x080, self._on_sync)
         if faults.product_code is not None:
             self.node.data_store.setdefault(0x1018, {})[2] = \
                 faults.product_code.to_bytes(4, "little")
@@ -169,9 +168,9 @@ class EmulatedDrive:
 
     # -- SDO, NMT, node guarding ---------------------------------------------------------------
     def _on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
-        """An SDO request, an NMT command or a guarding request, through the session. canopen
-        hands its subscribers no remote flag: on the node's 0x700 + ID, only a guarding
-        request (a remote frame) comes without data."""
+        """An SDO request, an NMT command, a SYNC or a guarding request, through the
+        session. canopen hands its subscribers no remote flag: on the node's 0x700 + ID, only
+        a guarding request (a remote frame) comes without data."""
         if self.silent:
             return
         remote = can_id == 0x700 + self.node.id and not data
@@ -184,6 +183,8 @@ class EmulatedDrive:
                 self._send(event.frame)
             elif isinstance(event, session.NmtCommand):
                 self._after_nmt(event.command)
+            elif isinstance(event, session.Sync):
+                self._on_sync()
 
     def _after_nmt(self, command: int) -> None:
         if command == 0x81:  # reset node: the application's values too
@@ -240,7 +241,7 @@ class EmulatedDrive:
             with contextlib.suppress(SdoAbortedError, Abort, KeyError):
                 self.node.set_data(var.index, var.subindex, var.get_data())
 
-    def _on_sync(self, can_id: int, data: bytes, timestamp: float) -> None:
+    def _on_sync(self) -> None:
         if not self._operational():
             return
         pending, self._sync_rpdo = self._sync_rpdo, []
