@@ -72,7 +72,7 @@ class EmulatedDrive:
         # the conversation is the session's: canopen's own SDO server and NMT slave stay off
         network.unsubscribe(0x600 + node_id, self.node.sdo.on_request)
         network.unsubscribe(0x000, self.node.nmt.on_command)
-        for can_id in (0x000, 0x080, 0x600 + node_id, 0x700 + node_id):
+        for can_id in (0x000, 0x080, 0x600 + node_id):
             network.subscribe(can_id, self._on_frame)
         if faults.product_code is not None:
             self.node.data_store.setdefault(0x1018, {})[2] = \
@@ -167,13 +167,13 @@ class EmulatedDrive:
             self.node.emcy.send(code, 0x01)
 
     # -- SDO, NMT, node guarding ---------------------------------------------------------------
-    def _on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
-        """An SDO request, an NMT command, a SYNC or a guarding request, through the
-        session. canopen hands its subscribers no remote flag: on the node's 0x700 + ID, only
-        a guarding request (a remote frame) comes without data."""
+    def _on_frame(self, can_id: int, data: bytes, timestamp: float = 0.0,
+                  remote: bool = False) -> None:
+        """An SDO request, an NMT command, a SYNC or a guarding request (a remote frame,
+        which canopen hands no subscriber: the bus's ``_on_remote`` brings it), through the
+        session."""
         if self.silent:
             return
-        remote = can_id == 0x700 + self.node.id and not data
         try:
             events = self.session.receive(Frame(can_id, bytes(data), remote=remote))
         except Exception:  # a frame no node understands: ignored, as a node does
@@ -310,7 +310,14 @@ class EmulatedBus:
     def url(self) -> str:
         return f"can://localhub/{self.hub.channel}"
 
+    def _on_remote(self, msg: Any) -> None:
+        """A remote frame, as python-can's notifier hands it: a node guarding request."""
+        drive = self.drives.get(msg.arbitration_id - 0x700)
+        if msg.is_remote_frame and not msg.is_extended_id and drive is not None:
+            drive._on_frame(msg.arbitration_id, b"", remote=True)
+
     def start(self) -> EmulatedBus:
+        self.network.notifier.add_listener(self._on_remote)
         for drive in self.drives.values():
             drive.boot()
         self._thread = threading.Thread(target=self._run, name="canopen-drives", daemon=True)

@@ -255,3 +255,30 @@ def test_the_emulated_drive_boots_up_after_a_reset(hub_bus):
         if msg is not None and msg.arbitration_id == 0x703:
             seen += host.receive(Frame(msg.arbitration_id, bytes(msg.data)))
     assert any(e.boot_up for e in seen)
+
+
+def test_the_emulated_drive_answers_node_guarding(hub_bus):
+    import time
+
+    import can
+
+    replies = []
+    for _ in range(2):
+        hub_bus.send(can.Message(arbitration_id=0x702, is_remote_frame=True, dlc=0,
+                                 is_extended_id=False))
+        end = time.monotonic() + 5
+        while time.monotonic() < end:
+            msg = hub_bus.recv(0.1)
+            if msg is not None and msg.arbitration_id == 0x702 and msg.data[0] & 0x80 == \
+                    len(replies) * 0x80:
+                replies.append(msg.data[0])
+                break
+    assert replies == [0x7F, 0xFF]  # pre-operational, the toggle bit alternating
+
+
+def test_a_master_abort_ends_the_nodes_transfer_unanswered():
+    host, device, _ = pair()
+    device.receive(host.upload(2, 0x1008))
+    assert device.receive(host.cancel(2)) == []
+    reply = device.receive(Frame(0x602, bytes.fromhex("6000000000000000")))[0].frame
+    assert reply.data[0] == 0x80  # no transfer open: a segment request is refused
