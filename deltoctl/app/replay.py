@@ -417,11 +417,13 @@ class ReplayResult:
 
 class Deviated(Refused):
     """A replayed joint outside its limits or too far from its recording (exit 5): every
-    block was stopped; ``result`` is the replay so far."""
+    block was stopped; ``result`` is the replay so far (``report``: its comparison, once
+    made)."""
 
     def __init__(self, message: str, result: ReplayResult) -> None:
         super().__init__(message)
         self.result = result
+        self.report: dict[str, Any] | None = None
 
 
 class Track:

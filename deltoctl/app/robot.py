@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 from deltoctl.errors import DeviceError, InvalidInput
 
 if TYPE_CHECKING:
+    from deltoctl.app.replay import ReplayPlan
     from deltoctl.core.system import Member, System
     from deltoctl.profile.model import Profile
 
@@ -466,23 +467,35 @@ class Robot:
 
 
     def replay(self, recording: str | Path, max_deviation: float = 0.2,
-               tolerance: float | None = None) -> dict[str, Any]:
+               tolerance: float | None = None, plan: ReplayPlan | None = None,
+               on_simulator: bool | None = None, on_device: bool | None = None,
+               progress: Callable[[float], None] | None = None,
+               notice: Callable[[str], None] | None = None) -> dict[str, Any]:
         """Play a recording's commands (``jog --record``) back on this robot under its own
         profile's limits (a looser recorded profile is refused; differences are warnings):
         first to the recorded start pose, then at the recorded timing. A joint outside its
         limits or further than ``max_deviation`` from the recording stops every block it
-        commands (``Deviated``, exit 5). Returns the per-joint comparison."""
+        commands (``Deviated``, exit 5; its ``report`` is the replay until then). Returns the
+        per-joint comparison. ``plan``: the recording planned already (its notes are the
+        caller's); ``on_simulator``, ``on_device``: where it runs (by default, simulated when
+        every block is)."""
         from deltoctl.app.replay import plan_replay, replay_report, run_replay
 
         path = Path(recording)
-        plan = plan_replay(path, self.profile, True, [m.name for m in self.system])
-        self.system.notes.extend(plan.notes)
+        if plan is None:
+            plan = plan_replay(path, self.profile, True, [m.name for m in self.system])
+            self.system.notes.extend(plan.notes)
         simulated = all(m.simulated for m in self.system.members)
-        result, stopped = run_replay(self.system, plan.recorded, max_deviation, simulated)
+        on_simulator = simulated if on_simulator is None else on_simulator
+        result, stopped = run_replay(self.system, plan.recorded, max_deviation, on_simulator,
+                                     progress, notice)
+        report = replay_report(path, self.system, plan.recorded, result, tolerance,
+                               not simulated if on_device is None else on_device,
+                               max_deviation, stopped)
         if stopped is not None:
+            stopped.report = report
             raise stopped
-        return replay_report(path, self.system, plan.recorded, result, tolerance,
-                             not simulated, max_deviation)
+        return report
 
 
 def check_loop(rate: float, duration: float | None) -> None:

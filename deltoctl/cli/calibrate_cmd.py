@@ -65,7 +65,7 @@ def calibrate_ft(
                                          timeout, samples, drift)
     _show_ft(opts, result, verify)
     fail_ft(result)
-    finish(robot.system)
+    finish(robot)
 
 
 def _drift_limits(items: list[str]) -> dict[str, float]:
@@ -137,7 +137,7 @@ def calibrate_imu(
                 info(f"calibration: {b['calibration_file']} (name it in {b['sensor']}'s "
                      "calibration param)")
     fail_imu(result)
-    finish(robot.system)
+    finish(robot)
 
 
 def register(root: typer.Typer) -> None:

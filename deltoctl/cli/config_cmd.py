@@ -55,7 +55,7 @@ def snapshot(
         table(None, ["block", "family", "target", "parts", "items"],
               [[name, b["family"], b["target"] or "in-process", len(b["parts"]),
                 sum(len(items) for items in b["parts"].values())] for name, b in live.items()])
-    finish(robot.system)
+    finish(robot)
 
 
 def _profile(opts: Options, snap: Snapshot) -> Any:

@@ -71,10 +71,10 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
         raise
 
 
-def finish(system: Any, extra: list[str] | None = None) -> None:
+def finish(robot: Any, extra: list[str] | None = None) -> None:
     """Exit 3 when the verb finished but with warnings (a block left out, a model mismatch
-    allowed, reconnects)."""
-    warnings = system.warnings() + (extra or [])
+    allowed, reconnects): ``robot.warnings()`` and ``extra``."""
+    warnings = robot.warnings() + (extra or [])
     for w in warnings:
         warn(w)
     if warnings:
@@ -109,7 +109,7 @@ def connect(
         from deltoctl.render.identity import connect_lines
 
         show(connect_lines(result, [m.simulated for m in robot.blocks]))
-    finish(robot.system)
+    finish(robot)
 
 
 def identify(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
@@ -124,7 +124,7 @@ def identify(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) ->
         from deltoctl.render.identity import identify_tables
 
         show(identify_tables(result))
-    finish(robot.system)
+    finish(robot)
 
 
 def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
@@ -139,7 +139,7 @@ def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> N
         from deltoctl.render.identity import detect_parts
 
         show(detect_parts(result))
-    finish(robot.system)
+    finish(robot)
 
 
 def gpio_get(ctx: typer.Context) -> None:
@@ -154,7 +154,7 @@ def gpio_get(ctx: typer.Context) -> None:
         emit_json(gpio)
     else:
         table(None, ["interface", "value"], [[n, f"{v:g}"] for n, v in gpio.items()])
-    finish(robot.system)
+    finish(robot)
 
 
 _ON = {"on": 1.0, "true": 1.0, "off": 0.0, "false": 0.0}
@@ -196,7 +196,7 @@ def gpio_set(
         emit_json(after)
     else:
         say(f"{full} = {number:g}")
-    finish(robot.system)
+    finish(robot)
 
 
 RateOpt = Annotated[float, typer.Option("--rate", "-r", help="Samples per second.")]

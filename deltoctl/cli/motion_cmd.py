@@ -69,7 +69,7 @@ def home(
         _said("home", report)
     if plan.targets:
         fail_unsettled(report)
-    finish(robot.system)
+    finish(robot)
 
 
 class _Bars:
@@ -160,7 +160,7 @@ def jog(
     if opts.json:
         emit_json(report)
     fail_unsettled(report)
-    finish(robot.system)
+    finish(robot)
 
 
 def _jog(opts: Options, system: Any, targets: dict[str, float], speed: float | None,

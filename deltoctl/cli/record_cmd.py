@@ -127,7 +127,7 @@ def record(
     _show(opts, result, output)
     links.finish()
     # exit 3 on warnings (a servo that never answered, a link lost, a loop an adapter slowed)
-    finish(robot.system, loop_warnings([m.url for m in robot.system.members], rate,
+    finish(robot, loop_warnings([m.url for m in robot.system.members], rate,
                                        result["loop"]["real_rate"]))
 
 

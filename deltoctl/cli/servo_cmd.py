@@ -69,7 +69,7 @@ def register_get(
     else:
         table(f"{joint} (ID {result['id']})", ["address", "item", "value", "access"],
               [[i["address"], i["item"], i["value"], i["access"]] for i in result["items"]])
-    finish(robot.system)
+    finish(robot)
 
 
 def register_set(
@@ -87,7 +87,7 @@ def register_set(
         confirm(ctx, f"write {item} = {value} to {servo_named(robot.system, joint)}")
         after = robot.write_register(joint, item, value)
     _report(opts, {"joint": joint, "item": item, "value": after}, f"{joint}: {item} = {after}")
-    finish(robot.system)
+    finish(robot)
 
 
 def torque(
@@ -109,7 +109,7 @@ def torque(
     with open_robot(opts, profile=profile) as robot:
         done = robot.torque(joints, state == "on")
     _report(opts, {"torque": state, "joints": done}, f"torque {state}: {len(done)} joint(s)")
-    finish(robot.system)
+    finish(robot)
 
 
 def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
@@ -127,7 +127,7 @@ def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
     missing = sorted(set(joints) - set(done))
     if missing:
         raise DeviceError(f"no reboot acknowledgement from {', '.join(missing)}")
-    finish(robot.system)
+    finish(robot)
 
 
 def _report(opts: Any, data: dict, text: str) -> None:
