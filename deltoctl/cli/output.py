@@ -23,9 +23,6 @@ def stdout_is_terminal() -> bool:
 
 
 WARNINGS = "deltoctl.warnings"  # root ctx.meta key: the warnings said so far
-# verbs that report each block of the robot: ``blocks`` beside the envelope's keys, their
-# other data in ``result``
-BLOCK_VERBS = ("connect", "identify", "detect", "home", "jog", "calibrate ft", "calibrate imu")
 # verbs that read no profile (a file, the fleet, this computer): their envelope's is null
 NO_PROFILE = ("info", "plot", "help", "completion", "bench", "fleet", "ports")
 
@@ -43,29 +40,9 @@ def emit_json(data: Any, err: bool = False, profile: str | None = None) -> None:
 
 
 def write_json(data: Any, err: bool = False) -> None:
-    import json
+    from deltoctl.render.envelope import dumps
 
-    if err:
-        typer.echo(json.dumps(data, separators=(",", ":"), default=_jsonable), err=True)
-    else:
-        typer.echo(json.dumps(data, indent=2, default=_jsonable))
-
-
-def envelope(verb: str, data: Any, warnings: list[str], exit_code: int,
-             profile: str | None) -> dict[str, Any]:
-    """Every verb's JSON in one shape, these keys and no others: ``verb``, ``profile``, the
-    data — ``blocks`` for the robot's blocks, ``result`` for the rest (a verb that reports
-    each block has both when it says more than its blocks: home's ``settled``) —,
-    ``warnings`` and ``exit_code``."""
-    named = data.get("profile") if isinstance(data, dict) else None
-    profile = named if isinstance(named, str) else profile
-    if verb in BLOCK_VERBS and isinstance(data, dict) and isinstance(data.get("blocks"), list):
-        rest = {k: v for k, v in data.items() if k not in ("profile", "blocks")}
-        body = {"blocks": data["blocks"], **({"result": rest} if rest else {})}
-    else:
-        body = {"result": data}
-    return {"verb": verb, "profile": profile, **body, "warnings": list(warnings),
-            "exit_code": exit_code}
+    typer.echo(dumps(data, compact=err), err=err)
 
 
 def flush_document(ctx: Any, exit_code: int) -> None:
@@ -74,6 +51,8 @@ def flush_document(ctx: Any, exit_code: int) -> None:
     pending = meta.pop(DOCUMENT, None)
     if pending is None:
         return
+    from deltoctl.render.envelope import envelope
+
     verb, data, err, profile = pending
     if profile is None and verb.split(" ")[0] not in NO_PROFILE:
         profile = getattr(ctx.find_root().obj, "profile", None)
@@ -96,18 +75,10 @@ def _verb() -> str:
 
 
 def emit_json_line(data: Any) -> None:
-    import json
+    from deltoctl.render.envelope import dumps
 
-    sys.stdout.write(json.dumps(data, separators=(",", ":"), default=_jsonable) + "\n")
+    sys.stdout.write(dumps(data, compact=True) + "\n")
     sys.stdout.flush()
-
-
-def _jsonable(value: Any) -> Any:
-    if hasattr(value, "__fspath__"):
-        return str(value)
-    if isinstance(value, (set, tuple)):
-        return list(value)
-    raise TypeError(f"cannot write {type(value).__name__} as JSON")
 
 
 def emit_error(message: str, hint: str | None, exit_code: int, as_json: bool) -> None:
