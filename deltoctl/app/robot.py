@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 from deltoctl.errors import DeviceError, InvalidInput
 
 if TYPE_CHECKING:
+    from deltoctl.app.config import Snapshot
     from deltoctl.app.replay import ReplayPlan
     from deltoctl.core.system import Member, System
     from deltoctl.profile.model import Profile
@@ -390,32 +391,45 @@ class Robot:
     def config_snapshot(self) -> dict[str, Any]:
         """Every block's configuration, as a snapshot document (``config.dump_yaml`` writes
         it)."""
+        return self.config_read()[0]
+
+    def config_read(self) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+        """The snapshot document, and each block's live configuration it was made of (what
+        ``config.write_snapshot`` names the file by)."""
         from deltoctl.app import config
 
-        return config.snapshot(self.system)[0]
+        return config.snapshot(self.system)
 
-    def config_diff(self, snapshot: str | Path) -> list[dict[str, Any]]:
-        """The items where the devices differ from a snapshot file; notes are warnings."""
+    def config_diff(self, snapshot: str | Path | Snapshot) -> list[dict[str, Any]]:
+        """The items where the devices differ from a snapshot (or its file); notes are
+        warnings."""
         from deltoctl.app import config
 
-        rows, notes = config.compare_live(self.system, config.load_snapshot(Path(snapshot)))
+        rows, notes = config.compare_live(self.system, _snapshot(snapshot))
         self.system.notes.extend(notes)
         return rows
 
-    def config_restore(self, snapshot: str | Path,
-                       allow: Sequence[str] = ()) -> list[dict[str, Any]]:
-        """Write back what differs from a snapshot file (safety settings only when ``allow``
-        names them), each item verified by reading it back; returns each item's fate."""
+    def config_restore(self, snapshot: str | Path | Snapshot, allow: Sequence[str] = (),
+                       confirm: Callable[[str], None] | None = None) -> list[dict[str, Any]]:
+        """Write back what differs from a snapshot (or its file) — safety settings only when
+        ``allow`` names them —, each item verified by reading it back; returns each item's
+        fate. Refused (its ``rows`` and ``notes``: the plan) before anything is written or
+        ``confirm`` is told what will be written (it raises to stop)."""
         from deltoctl.app import config
 
         permitted = frozenset(config.permission(a) for a in allow)
-        rows, notes = config.plan_restore(self.system, config.load_snapshot(Path(snapshot)),
-                                          permitted)
-        self.system.notes.extend(notes)
+        rows, notes = config.plan_restore(self.system, _snapshot(snapshot), permitted)
         refused = [r for r in rows if r["status"] == "refused"]
         if refused:
-            raise config.refusal(refused, permitted)
-        config.write_changes(self.system, rows, permitted)
+            exc = config.refusal(refused, permitted)
+            exc.rows, exc.notes = rows, notes
+            raise exc
+        self.system.notes.extend(notes)
+        writes = [r for r in rows if r["status"] == "write"]
+        if writes and confirm is not None:
+            confirm(config.description(writes))
+        if writes:
+            config.write_changes(self.system, rows, permitted)
         return rows
 
     # -- data ----------------------------------------------------------------------------------
@@ -496,6 +510,12 @@ class Robot:
             stopped.report = report
             raise stopped
         return report
+
+
+def _snapshot(snapshot: str | Path | Snapshot) -> Snapshot:
+    from deltoctl.app.config import load_snapshot
+
+    return load_snapshot(Path(snapshot)) if isinstance(snapshot, (str, Path)) else snapshot
 
 
 def check_loop(rate: float, duration: float | None) -> None:
