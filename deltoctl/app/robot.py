@@ -19,6 +19,7 @@ from deltoctl.errors import DeviceError, InvalidInput
 
 if TYPE_CHECKING:
     from deltoctl.app.config import Snapshot
+    from deltoctl.app.motion import HomePlan
     from deltoctl.app.replay import ReplayPlan
     from deltoctl.core.system import Member, System
     from deltoctl.profile.model import Profile
@@ -315,20 +316,37 @@ class Robot:
         return move(self.system, positions, speed, progress)
 
     def home(self, joints: Sequence[str] = (), force: bool = False,
-             velocity: float | str | None = None) -> dict[str, Any]:
-        """Home the robot's joints (or ``joints``): homing routines into their hard stops,
-        the others to the profile's home pose (at ``velocity``: ``20deg/s``, a bare number
-        in rad/s or m/s)."""
+             velocity: float | str | None = None, plan: HomePlan | None = None,
+             progress: Callable[[float], None] | None = None,
+             show: Callable[[str, str, float], None] | None = None) -> dict[str, Any]:
+        """Home the robot's joints (or ``joints``): homing routines into their hard stops
+        (``show`` follows each joint), the others to the profile's home pose (``progress``)
+        at ``velocity`` (``20deg/s``, a bare number in rad/s or m/s). ``plan``: the homing
+        planned already (``motion.plan_home``), e.g. to confirm it first."""
         from deltoctl.app.motion import home, joint_speed, plan_home
 
-        hardware = [m.name for m in self.system]
-        plan = plan_home(self.profile, hardware, joints)
+        if plan is None:
+            plan = plan_home(self.profile, [m.name for m in self.system], joints)
         speed = joint_speed(self.profile, list(plan.targets), velocity, "velocity")
-        return home(self.system, plan, force, speed)
+        return home(self.system, plan, force, speed, progress, show)
+
+    def plan_jog(self, steps: Sequence[tuple[str, float | str | None]],
+                 to: float | str | None = None,
+                 velocity: float | str | None = None) -> tuple[dict[str, float], list[str]]:
+        """Each joint's target — its step (a number in rad or m, or ``5deg``, in the joint's
+        unit) from where it is now, or ``to`` — checked against the envelope at
+        ``velocity``, and each move in words (for a confirmation); nothing moves. The joints
+        are those of ``motion.jog_pairs``."""
+        from deltoctl.app.motion import jog_targets, joint_speed
+
+        targets, moves = jog_targets(self.system, steps, to)
+        self.system.check_move(targets, joint_speed(self.profile, list(targets), velocity,
+                                                    "velocity"))
+        return targets, moves
 
     def jog_targets(self, deltas: Mapping[str, float | str]) -> dict[str, float]:
         """Each joint's target ``delta`` (a number in rad or m, or a quantity such as
-        ``5deg``, in the joint's unit) from where it is now."""
+        ``5deg``, in the joint's unit) from where it is now (not checked yet)."""
         from deltoctl.app.motion import jog_targets, moving_joints
 
         moving_joints(self.profile, list(deltas))
@@ -338,6 +356,22 @@ class Robot:
             progress: Callable[[float], None] | None = None) -> dict[str, Any]:
         """Move joints by ``deltas`` from where they are (``max_jog_step`` bounds each)."""
         return self.move(self.jog_targets(deltas), velocity, progress)
+
+    def new_recording(self, output: Path,
+                      force: bool = False) -> contextlib.AbstractContextManager[Path]:
+        """The file a recording of moves goes to (``{serial}`` filled), created now and
+        removed again when what follows fails before writing to it."""
+        from deltoctl.app.recording import new_output
+
+        return new_output(output, self.system, force)
+
+    def recorded(self, output: Path, moves: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+        """Run ``moves`` (moves of this robot, returning their report) while their cycles'
+        states and commands go to ``output`` (for ``replay``); the report gains
+        ``recording``."""
+        from deltoctl.app.recording import recorded_moves
+
+        return recorded_moves(self.system, output, moves)
 
     # -- calibration and servos ----------------------------------------------------------------
 
