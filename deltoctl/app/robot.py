@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     from deltoctl.app.config import Snapshot
     from deltoctl.app.motion import HomePlan
     from deltoctl.app.replay import ReplayPlan
+    from deltoctl.app.sinks import LinkWatch
     from deltoctl.core.system import Member, System
     from deltoctl.profile.model import Profile
 
@@ -204,6 +205,14 @@ class Robot:
         """One cycle's state of every block (a copy)."""
         return dict(self.system.read())
 
+    def block_of(self, name: str) -> str:
+        """The block a joint, sensor, GPIO or interface (``gpio/output_1``) belongs to."""
+        return self.system.member(name).name
+
+    def make_safe(self) -> None:
+        """Every block in its safe state (duty 0, torque off, stop), whatever was sent."""
+        self.system.make_safe()
+
     def link_stats(self) -> dict[str, dict[str, int]]:
         """Each block's communication statistics so far: packets, errors, reconnects."""
         return {m.name: dict(m.driver.stats) for m in self.system}
@@ -376,18 +385,43 @@ class Robot:
     # -- calibration and servos ----------------------------------------------------------------
 
     def calibrate_ft(self, samples: int = 50, force_tolerance: float = 0.3,
-                     torque_tolerance: float = 0.03,
-                     output_dir: Path | None = None) -> dict[str, Any]:
-        """Tare every F/T sensor and judge the residual (see ``deltoctl.app.calibrate``)."""
-        from deltoctl.app.calibrate import tare_ft
+                     torque_tolerance: float = 0.03, output_dir: Path | None = None,
+                     confirm: Callable[[str], None] | None = None,
+                     verify: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """Tare every F/T sensor and judge the residual (see ``deltoctl.app.calibrate``);
+        ``confirm`` is told what the tare will do first (it raises to stop); ``verify``: the
+        checks after it, in ``checks`` (the options of ``calibrate.verify_ft``: mass, sensor,
+        watch, ask, timeout, drift_limit)."""
+        from deltoctl.app.calibrate import tare_description, tare_ft, verify_ft
 
-        return tare_ft(self.system, samples, force_tolerance, torque_tolerance, output_dir)
+        if confirm is not None:
+            confirm(tare_description(self.system))
+        result = tare_ft(self.system, samples, force_tolerance, torque_tolerance, output_dir)
+        if verify is not None:
+            result["checks"] = verify_ft(self.system, result, samples=samples, **verify)
+        return result
+
+    def calibrate_imu(self, samples: int = 100, ask: Callable[[str], None] | None = None,
+                      timeout: float = 120.0, output_dir: Path | None = None,
+                      confirm: Callable[[str], None] | None = None) -> dict[str, Any]:
+        """Self-test and gravity check of every IMU; with ``ask`` (told which face to put
+        down), the six-position tumble too, saved in ``output_dir``. ``confirm`` is told
+        what will happen first (it raises to stop)."""
+        from deltoctl.app.imu_calibration import calibrate_imu, self_test_description
+
+        if confirm is not None:
+            confirm(self_test_description(self.system, ask is not None))
+        return calibrate_imu(self.system, samples, ask, timeout, output_dir)
 
     def _registers(self, joint: str) -> Any:
         m = self.system.member(joint)
         if not m.can("registers"):
             raise InvalidInput(f"{joint} is in {m.name}, which has no registers")
         return m.driver
+
+    def servo_named(self, joint: str) -> str:
+        """``head_y (ID 52)``: a joint and the address of its servo on the bus."""
+        return servo_named(self.system, joint)
 
     def registers(self, joint: str, items: Sequence[str] = ()) -> dict[str, Any]:
         """A servo's control table items (every one without ``items``)."""
@@ -502,17 +536,44 @@ class Robot:
             yield Frame(time.time_ns(), {n: values.get(n) for n in names})
 
 
+    def cycles(self, rate: float, duration: float | None,
+               sinks: Sequence[Any]) -> tuple[dict[str, Any], LinkWatch]:
+        """Run the cycle loop at ``rate`` Hz until ``duration`` passes (or Ctrl-C), each
+        cycle's values to ``sinks``; returns the loop's statistics and the lost-link watch,
+        whose ``finish()`` says how the links ended (``Unreachable`` when one is still down,
+        a warning when one came back)."""
+        from deltoctl.app.sinks import LinkWatch
+        from deltoctl.core.runner import run_cycles
+
+        check_loop(rate, duration)
+        links = LinkWatch(self.system)
+        stats = run_cycles(self.system, rate, duration, [*sinks[:1], links, *sinks[1:]])
+        return stats.summary(), links
+
+    def loop_warnings(self, rate: float, loop: Mapping[str, Any]) -> list[str]:
+        """Why a loop ran below ``rate`` when a serial adapter's latency timer explains it."""
+        from deltoctl.app.latency import loop_warnings
+
+        return loop_warnings([m.url for m in self.system.members], rate, loop["real_rate"])
+
     def record(self, output: str | Path, rate: float = 100.0, duration: float | None = None,
                gpio_type: str = "group-values") -> dict[str, Any]:
         """Record every block's state interfaces to MCAP until ``duration`` passes (or
         Ctrl-C); the file is valid either way. A link still down at the end is
         ``Unreachable``; one that came back is a warning."""
-        from deltoctl.app.recording import record
-
-        result, links = record(self.system, Path(output), rate, duration, gpio_type)
+        result, links = self.record_to(Path(output), rate, duration, gpio_type)
         links.finish()
         return result
 
+    def record_to(self, output: Path, rate: float = 100.0, duration: float | None = None,
+                  gpio_type: str = "group-values", sinks: Sequence[Any] = (),
+                  show: Callable[[float, int, float | None], None] | None = None,
+                  force: bool = False) -> tuple[dict[str, Any], LinkWatch]:
+        """``record``, with more ``sinks`` and a ``show`` of its progress, an existing file
+        overwritten with ``force``; the lost-link watch's ``finish()`` is the caller's."""
+        from deltoctl.app.recording import record
+
+        return record(self.system, output, rate, duration, gpio_type, sinks, show, force)
 
     def replay(self, recording: str | Path, max_deviation: float = 0.2,
                tolerance: float | None = None, plan: ReplayPlan | None = None,

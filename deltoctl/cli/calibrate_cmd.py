@@ -49,20 +49,18 @@ def calibrate_ft(
     calibration-<model>-<address>-<time>.json. --verify reports each check (id, value,
     limit, verdict); --watch S the drift of each axis over S seconds; --mass KG a known
     mass's weight."""
-    from deltoctl.app import calibrate
-    from deltoctl.app.calibrate import check_tare, check_verify, fail_ft, verify_ft
+    from deltoctl.app.calibrate import check_tare, check_verify, fail_ft
 
     opts = options(ctx)
     drift = _drift_limits(drift_limit or [])
     check_tare(samples, force_tolerance, torque_tolerance, output_dir)
     check_verify(mass, watch, timeout, drift)
     verify = verify or mass is not None or watch is not None
+    checks = {"mass": mass, "sensor": sensor, "watch": watch, "ask": _ask, "timeout": timeout,
+              "drift_limit": drift} if verify else None
     with open_robot(opts, allow_model_mismatch) as robot:
-        confirm(ctx, calibrate.tare_description(robot.system))
-        result = robot.calibrate_ft(samples, force_tolerance, torque_tolerance, output_dir)
-        if verify:
-            result["checks"] = verify_ft(robot.system, result, mass, sensor, watch, _ask,
-                                         timeout, samples, drift)
+        result = robot.calibrate_ft(samples, force_tolerance, torque_tolerance, output_dir,
+                                    lambda what: confirm(ctx, what), checks)
     _show_ft(opts, result, verify)
     fail_ft(result)
     finish(robot)
@@ -117,15 +115,14 @@ def calibrate_imu(
     axis's bias and scale from six positions, saved as
     calibration-<chip>-<address>-<time>.json — name it in the sensor's `calibration` param
     and stream and record apply it. Exit 1 when a check fails."""
-    from deltoctl.app.imu_calibration import calibrate_imu as run
-    from deltoctl.app.imu_calibration import check_options, fail_imu, self_test_description
+    from deltoctl.app.imu_calibration import check_options, fail_imu
     from deltoctl.render.checks import check_rows
 
     opts = options(ctx)
     check_options(samples, timeout, output_dir)
     with open_robot(opts, allow_model_mismatch) as robot:
-        confirm(ctx, self_test_description(robot.system, tumble))
-        result = run(robot.system, samples, _ask if tumble else None, timeout, output_dir)
+        result = robot.calibrate_imu(samples, _ask if tumble else None, timeout, output_dir,
+                                     lambda what: confirm(ctx, what))
     blocks = result["blocks"]
     if opts.json:
         emit_json(result)

@@ -1,13 +1,12 @@
 """The lifecycle verbs on every block of a robot: connect, identify, detect, gpio, stream."""
 
 import contextlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from typing import Annotated, Any
 
 import typer
 
 from deltoctl.app.robot import check_loop
-from deltoctl.app.sinks import LinkWatch
 from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.output import (
@@ -17,7 +16,6 @@ from deltoctl.cli.output import (
     say,
     show,
     stdout_is_terminal,
-    table,
     warn,
 )
 from deltoctl.errors import WARNINGS, InvalidInput, NotHomed
@@ -64,7 +62,7 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
                 yield robot
             finally:
                 if SET_SAFE:
-                    robot.system.make_safe()
+                    robot.make_safe()
     except NotHomed as exc:
         if opts.sim and found is None:
             exc.hint = running.fresh_hint(prof.name)
@@ -93,6 +91,22 @@ def register(app: typer.Typer) -> None:
     app.add_typer(gpio_app, name="gpio")
 
 
+def on_robot(ctx: typer.Context, call: Callable[[Any], Any],
+             people: Callable[[Any, Any], Sequence[Any]], allow_model_mismatch: bool = False,
+             profile: Any = None, probe: bool = False) -> Any:
+    """A verb's one call on the robot (``call(robot)``); its result as JSON, or for people
+    (``people(result, robot)``: lines and tables); its warnings (exit 3)."""
+    opts = options(ctx)
+    with open_robot(opts, allow_model_mismatch, profile, probe) as robot:
+        result = call(robot)
+    if opts.json:
+        emit_json(result)
+    else:
+        show(people(result, robot))
+    finish(robot)
+    return result
+
+
 def connect(
     ctx: typer.Context,
     count: Annotated[int, typer.Option("--count", "-n", min=1, max=100000,
@@ -100,61 +114,39 @@ def connect(
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Reach every block, time round trips, and run the lifecycle to active and back."""
-    opts = options(ctx)
-    with open_robot(opts, allow_model_mismatch) as robot:
-        result = robot.connect(count)  # each block's lifecycle goes on to its end
-    if opts.json:
-        emit_json(result)
-    else:
-        from deltoctl.render.identity import connect_lines
+    from deltoctl.render.identity import connect_lines
 
-        show(connect_lines(result, [m.simulated for m in robot.blocks]))
-    finish(robot)
+    # each block's lifecycle goes on to its end
+    on_robot(ctx, lambda robot: robot.connect(count), lambda result, robot: connect_lines(
+        result, [m.simulated for m in robot.blocks]), allow_model_mismatch)
 
 
 def identify(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
     """What each block's device says it is (model, firmware, servos, joints), against the
     profile."""
-    opts = options(ctx)
-    with open_robot(opts, allow_model_mismatch) as robot:
-        result = robot.identify()
-    if opts.json:
-        emit_json(result)
-    else:
-        from deltoctl.render.identity import identify_tables
+    from deltoctl.render.identity import identify_tables
 
-        show(identify_tables(result))
-    finish(robot)
+    on_robot(ctx, lambda robot: robot.identify(), lambda result, _: identify_tables(result),
+             allow_model_mismatch)
 
 
 def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
     """What is on each block's device or bus (sensors, GPIO, servos, I2C devices), against
     the profile."""
-    opts = options(ctx)
-    with open_robot(opts, allow_model_mismatch, probe=True) as robot:
-        result = robot.detect()
-    if opts.json:
-        emit_json(result)
-    else:
-        from deltoctl.render.identity import detect_parts
+    from deltoctl.render.identity import detect_parts
 
-        show(detect_parts(result))
-    finish(robot)
+    on_robot(ctx, lambda robot: robot.detect(), lambda result, _: detect_parts(result),
+             allow_model_mismatch, probe=True)
 
 
 def gpio_get(ctx: typer.Context) -> None:
     """Read every GPIO state interface of every block."""
-    opts = options(ctx)
-    profile = opts.load_profile()
+    profile = options(ctx).load_profile()
     if not any(hw.gpios for hw in profile.hardware):
         raise InvalidInput(f"{profile.name} has no GPIO")
-    with open_robot(opts, profile=profile) as robot:
-        gpio = robot.gpio()
-    if opts.json:
-        emit_json(gpio)
-    else:
-        table(None, ["interface", "value"], [[n, f"{v:g}"] for n, v in gpio.items()])
-    finish(robot)
+    on_robot(ctx, lambda robot: robot.gpio(), lambda gpio, _: [(
+        None, ["interface", "value"], [[n, f"{v:g}"] for n, v in gpio.items()])],
+        profile=profile)
 
 
 _ON = {"on": 1.0, "true": 1.0, "off": 0.0, "false": 0.0}
@@ -190,7 +182,7 @@ def gpio_set(
         raise InvalidInput(f"value must be finite, got {value!r}")
     with open_robot(opts) as robot:
         full = robot.gpio_output(name)
-        confirm(ctx, f"set {full} of {robot.system.member(full).name} to {value}")
+        confirm(ctx, f"set {full} of {robot.block_of(full)} to {value}")
         after = robot.set_gpio(name, number)
     if opts.json:
         emit_json(after)
@@ -240,26 +232,20 @@ def stream(
     rows that do not fit are counted, -i picks fewer), NDJSON with --json or when piped; with
     --foxglove, to Foxglove as well (every interface, whatever -i picks). Exit 4 when a link
     is down at the end, 3 when one was lost and came back."""
-    from deltoctl.app.latency import loop_warnings
+    from deltoctl.app.live import foxglove_live, start_foxglove
     from deltoctl.app.sinks import LinesSink
-    from deltoctl.cli.record_cmd import foxglove_live, start_foxglove
-    from deltoctl.core.runner import run_cycles
     from deltoctl.render.stream import LiveSink
 
     opts = options(ctx)
     check_loop(rate, duration)
-    with foxglove_live(foxglove, foxglove_host, foxglove_port, foxglove_origin) as live, \
-            open_robot(opts, allow_model_mismatch) as robot:
-        system = robot.system
+    with foxglove_live(foxglove, foxglove_host, foxglove_port, foxglove_origin, warn,
+                       info) as live, open_robot(opts, allow_model_mismatch) as robot:
         names = robot.interfaces(interfaces or [])
         sink: Any = (LinesSink(names, emit_json_line) if opts.json or not stdout_is_terminal()
                      else LiveSink(names, rate, robot.joint_types()))
-        links = LinkWatch(system)
-        stats = run_cycles(system, rate, duration, [sink, links, *start_foxglove(live, system)])
+        loop, links = robot.cycles(rate, duration, [sink, *start_foxglove(live, robot, info)])
     info(f"{sink.samples} samples of {len(names)} interfaces")
     if opts.json:  # stdout holds the frames: the stream's document goes to stderr
-        emit_json({"samples": sink.samples, "interfaces": len(names),
-                   "loop": stats.summary()}, err=True)
+        emit_json({"samples": sink.samples, "interfaces": len(names), "loop": loop}, err=True)
     links.finish()
-    finish(system, loop_warnings([m.url for m in system.members], rate,
-                                 stats.summary()["real_rate"]))
+    finish(robot, robot.loop_warnings(rate, loop))

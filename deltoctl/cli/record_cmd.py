@@ -1,7 +1,6 @@
 """``deltoctl record OUT.mcap``: interface values to MCAP (ROS 2 encoding)."""
 
-import contextlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -25,13 +24,6 @@ if TYPE_CHECKING:
     from rich.progress import Progress
 
 
-def _status(output: Path, cycles: int, link: float | None) -> str:
-    """The status line people watch (the time so far is the bar's, against --duration)."""
-    size = output.stat().st_size if output.exists() else 0
-    state = "" if link is None else " · link up" if link else " · [red]link lost[/]"
-    return f"recording {output.name}: {cycles} cycles, {size / 1e6:.1f} MB{state}"
-
-
 ForceOpt = Annotated[bool, typer.Option(
     "--force", help="Overwrite the file when it exists (without: exit 2).")]
 OutputArg = Annotated[Path, typer.Argument(
@@ -43,43 +35,6 @@ GpioTypeOpt = Annotated[str, typer.Option(
     help="/gpio's type: group-values (control_msgs/DynamicInterfaceGroupValues, control_msgs "
          "4.7+ on Humble, 5.3+ on Jazzy) or joint-state (control_msgs/DynamicJointState, "
          "every control_msgs).")]
-
-
-@contextlib.contextmanager
-def foxglove_live(enabled: bool, host: str, port: int,
-                  origins: list[str] | None = None) -> Iterator[Any]:
-    """With --foxglove, the Foxglove sink, its address and port checked before the devices
-    are opened (the server starts with ``start_foxglove``, and stops on the way out); else
-    None."""
-    if not enabled:
-        yield None
-        return
-    from deltoctl.record.foxglove_live import FoxgloveLive
-
-    with FoxgloveLive(host, port, origins=tuple(origins or ())) as live:
-        if not live.local:
-            warn(f"--foxglove-host {host}: the robot's data is served beyond this machine, to "
-                 f"anyone who reaches port {port or 'chosen'} there")
-        yield live
-    if live.error:
-        warn(f"the live view stopped: {live.error}")
-    if live.dropped:
-        info(f"Foxglove: {live.dropped} cycles not sent (the live view fell behind)")
-    if live.gate.refused:
-        info(f"Foxglove: {live.gate.refused} connection(s) refused for their origin "
-             "(a web page that is not Foxglove; --foxglove-origin lets one in)")
-
-
-def start_foxglove(live: Any, system: Any, gpio_type: str = "group-values") -> list[Any]:
-    """With --foxglove (``live``), the server started with the topics of the blocks ``system``
-    drives, where it is said on stderr, and the live view as the loop's sink; else no sink."""
-    if live is None:
-        return []
-    from deltoctl.app.recording import driven_profile
-
-    live.begin(driven_profile(system), tuple(system.extra_states()), gpio_type)
-    info(f"Foxglove: connect to {live.url} (Open connection → Foxglove WebSocket)")
-    return [live]
 
 
 def record(
@@ -98,9 +53,8 @@ def record(
     """Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
     valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back, 1 when
     the file could not be written to the end (disk full, file too large, removed)."""
-    from deltoctl.app.latency import loop_warnings
+    from deltoctl.app.live import foxglove_live, start_foxglove
     from deltoctl.app.recording import check_record, planned_output
-    from deltoctl.app.recording import record as record_robot
     from deltoctl.core.runner import interrupted_by_signals
 
     opts = options(ctx)
@@ -113,11 +67,11 @@ def record(
     # SIGTERM and SIGHUP before the loop interrupt like Ctrl-C, so the file is finished too
     try:
         with interrupted_by_signals(), \
-                foxglove_live(foxglove, foxglove_host, foxglove_port, foxglove_origin) as live, \
-                open_robot(opts, allow_model_mismatch) as robot:
-            sinks = start_foxglove(live, robot.system, gpio_type)
-            result, links = record_robot(robot.system, output, rate, duration, gpio_type,
-                                         sinks, show, force)
+                foxglove_live(foxglove, foxglove_host, foxglove_port, foxglove_origin, warn,
+                              info) as live, open_robot(opts, allow_model_mismatch) as robot:
+            sinks = start_foxglove(live, robot, info, gpio_type)
+            result, links = robot.record_to(output, rate, duration, gpio_type, sinks, show,
+                                            force)
             output = Path(result["output"])
     finally:
         if bar is not None:
@@ -127,19 +81,22 @@ def record(
     _show(opts, result, output)
     links.finish()
     # exit 3 on warnings (a servo that never answered, a link lost, a loop an adapter slowed)
-    finish(robot, loop_warnings([m.url for m in robot.system.members], rate,
-                                       result["loop"]["real_rate"]))
+    finish(robot, robot.loop_warnings(rate, result["loop"]))
 
 
 def _shown(bar: "Progress | None", output: Path,
            duration: float | None) -> Callable[[float, int, float | None], None] | None:
     """What updates the status line on ``bar`` (None without one)."""
+    from deltoctl.render.recording import recording_status
+
     if bar is None:
         return None
     task = bar.add_task(f"recording {output.name}", total=duration)
 
     def show(seconds: float, cycles: int, link: float | None) -> None:
-        bar.update(task, completed=seconds, description=_status(output, cycles, link))
+        size = output.stat().st_size if output.exists() else 0
+        bar.update(task, completed=seconds,
+                   description=recording_status(output.name, cycles, size, link))
 
     return show
 

@@ -7,7 +7,7 @@ import typer
 
 from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import options
-from deltoctl.cli.device_cmd import finish, open_robot
+from deltoctl.cli.device_cmd import finish, on_robot, open_robot
 from deltoctl.cli.motion_cmd import complete_joint
 from deltoctl.cli.output import emit_json, say, table
 from deltoctl.errors import DeviceError, InvalidInput
@@ -80,14 +80,11 @@ def register_set(
     value: Annotated[int, typer.Argument(help="The raw value.")],
 ) -> None:
     """Write one control table item and read it back (asks first: a write can move)."""
-    from deltoctl.app.robot import servo_named
+    def write(robot: Any) -> dict[str, Any]:
+        confirm(ctx, f"write {item} = {value} to {robot.servo_named(joint)}")
+        return {"joint": joint, "item": item, "value": robot.write_register(joint, item, value)}
 
-    opts = options(ctx)
-    with open_robot(opts) as robot:
-        confirm(ctx, f"write {item} = {value} to {servo_named(robot.system, joint)}")
-        after = robot.write_register(joint, item, value)
-    _report(opts, {"joint": joint, "item": item, "value": after}, f"{joint}: {item} = {after}")
-    finish(robot)
+    on_robot(ctx, write, lambda done, _: [f"{joint}: {item} = {done['value']}"])
 
 
 def torque(
@@ -106,10 +103,8 @@ def torque(
     confirm(ctx, f"switch torque {state} for {joints_named(target, joints)}: " + (
         "they hold their position" if state == "on"
         else "they go limp, and an arm under gravity falls"))
-    with open_robot(opts, profile=profile) as robot:
-        done = robot.torque(joints, state == "on")
-    _report(opts, {"torque": state, "joints": done}, f"torque {state}: {len(done)} joint(s)")
-    finish(robot)
+    on_robot(ctx, lambda robot: {"torque": state, "joints": robot.torque(joints, state == "on")},
+             lambda done, _: [f"torque {state}: {len(done['joints'])} joint(s)"], profile=profile)
 
 
 def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:

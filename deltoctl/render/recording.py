@@ -9,6 +9,12 @@ from deltoctl.render.identity import Table
 from deltoctl.units import utc_time
 
 
+def recording_status(name: str, cycles: int, size: int, link: float | None) -> str:
+    """The status line people watch while recording (the time so far is the bar's)."""
+    state = "" if link is None else " · link up" if link else " · [red]link lost[/]"
+    return f"recording {name}: {cycles} cycles, {size / 1e6:.1f} MB{state}"
+
+
 def _size(n: float) -> str:
     for unit in ("B", "kB", "MB", "GB"):
         if n < 1000 or unit == "GB":
