@@ -61,22 +61,52 @@ def open_robot(profile: str | Path | Profile,
                sim: bool | Mapping[str, Any] = False, hardware: Sequence[str] = (),
                allow_model_mismatch: bool = False, probe: bool = False,
                notice: Callable[[str], None] | None = None,
-               served_by: str | None = None) -> Iterator[Robot]:
+               served_by: str | None = None, reuse: bool = False,
+               warn: Callable[[str], None] | None = None) -> Iterator[Robot]:
     """The robot of ``profile`` (a catalog name, a file, or a loaded Profile), configured and
     active, its blocks left safe and released on the way out.
 
     ``targets``: where the blocks are (``{"bus": "tcp://…"}``, ``["bus=url"]``, or one URL);
     ``sim``: start each block's simulated device first and drive it through its real
     transport (a mapping: with those faults of ``deltoctl sim serve``, e.g.
-    ``{"missing": ("head_y",)}``); ``hardware``: only these blocks; ``probe``: a bus where
-    nothing answers is still opened (detect); ``notice``: told first when a block runs on its
-    simulator because its profile asks for mock hardware; ``served_by``: the targets are
-    simulators another process serves (``deltoctl agent --sim``), said so on every block."""
-    from deltoctl.core.system import System, mock_blocks, select_blocks
+    ``{"missing": ("head_y",)}``); ``reuse``: with ``sim``, drive the ``deltoctl sim serve``
+    of this profile and faults that runs for this user instead, when one serves every block
+    (told to ``notice``; ``warn`` hears of a server's file that cannot be trusted);
+    ``hardware``: only these blocks; ``probe``: a bus where nothing answers is still opened
+    (detect); ``notice``: told first when a block runs on its simulator because its profile
+    asks for mock hardware; ``served_by``: the targets are simulators another process serves
+    (``deltoctl agent --sim``), said so on every block."""
+    from deltoctl.errors import NotHomed
+    from deltoctl.sim import running
 
     prof = load(profile)
+    found = (running.find(prof, sim if isinstance(sim, Mapping) else {}, hardware,
+                          warn or _ignore) if sim and reuse else None)
+    if found is not None:
+        (notice or _ignore)(f"using {found.name} of {found.profile}; --sim-fresh starts one of "
+                            "its own")
+        targets, sim, served_by = [*_targets(targets), *found.targets], False, found.name
+    try:
+        with _opened(prof, _targets(targets), sim, hardware, allow_model_mismatch, probe,
+                     notice, served_by) as robot:
+            yield robot
+    except NotHomed as exc:
+        if sim and found is None:
+            exc.hint = running.fresh_hint(prof.name)
+        raise
+
+
+def _ignore(message: str) -> None:
+    pass
+
+
+@contextlib.contextmanager
+def _opened(prof: Profile, urls: list[str], sim: bool | Mapping[str, Any],
+            hardware: Sequence[str], allow_model_mismatch: bool, probe: bool,
+            notice: Callable[[str], None] | None, served_by: str | None) -> Iterator[Robot]:
+    from deltoctl.core.system import System, mock_blocks, select_blocks
+
     with contextlib.ExitStack() as stack:
-        urls = _targets(targets)
         simulated = (dict.fromkeys(hardware or [hw.name for hw in prof.hardware], "--sim")
                      if sim else mock_blocks(prof, hardware))
         if simulated:

@@ -82,16 +82,12 @@ def _ask(text: str) -> None:
 
 
 def _show_ft(opts: Options, result: dict[str, Any], verify: bool) -> None:
-    from deltoctl.render.checks import check_rows, residual_rows
+    from deltoctl.render.checks import ft_table
 
     if opts.json:
         emit_json(result)
         return
-    if verify:
-        table(None, ["check", "value", "unit", "limit", "verdict"], check_rows(result["checks"]))
-    else:
-        table(None, ["block", "sensor", "residual force N", "residual torque N·m", "pass"],
-              residual_rows(result["blocks"]))
+    table(*ft_table(result, verify))
     for r in result["blocks"]:
         info(f"report: {r['report_file']}")
 
@@ -116,7 +112,7 @@ def calibrate_imu(
     calibration-<chip>-<address>-<time>.json — name it in the sensor's `calibration` param
     and stream and record apply it. Exit 1 when a check fails."""
     from deltoctl.app.imu_calibration import check_options, fail_imu
-    from deltoctl.render.checks import check_rows
+    from deltoctl.render.checks import imu_table
 
     opts = options(ctx)
     check_options(samples, timeout, output_dir)
@@ -127,8 +123,7 @@ def calibrate_imu(
     if opts.json:
         emit_json(result)
     else:
-        table(None, ["sensor", "check", "value", "unit", "limit", "verdict"],
-              [row for b in blocks for row in check_rows(b["checks"], b["sensor"])])
+        table(*imu_table(result))
         for b in blocks:
             if "calibration_file" in b:
                 info(f"calibration: {b['calibration_file']} (name it in {b['sensor']}'s "

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import typer
@@ -74,3 +75,14 @@ def parse_pairs(items: list[str], sep: str, what: str, example: str) -> dict[str
             raise InvalidInput(f"{what} {item!r} is not of the form {example}")
         pairs[key] = value
     return pairs
+
+
+def completer(name: str) -> Callable[[typer.Context, str], list[str]]:
+    """The completion ``name`` of deltoctl.cli.profile_cmd (names in the profile on the
+    command line), imported only when a command line is completed."""
+    def complete(ctx: typer.Context, incomplete: str) -> list[str]:
+        from deltoctl.cli import profile_cmd
+
+        return list(getattr(profile_cmd, name)(ctx, incomplete))
+
+    return complete

@@ -8,7 +8,7 @@ import typer
 
 from deltoctl.app.robot import check_loop
 from deltoctl.cli.confirm import confirm
-from deltoctl.cli.context import Options, options
+from deltoctl.cli.context import Options, completer, options
 from deltoctl.cli.output import (
     emit_json,
     emit_json_line,
@@ -18,7 +18,7 @@ from deltoctl.cli.output import (
     stdout_is_terminal,
     warn,
 )
-from deltoctl.errors import WARNINGS, InvalidInput, NotHomed
+from deltoctl.errors import WARNINGS, InvalidInput
 
 AllowMismatch = Annotated[bool, typer.Option(
     "--allow-model-mismatch",
@@ -41,32 +41,21 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
     simulators started first. Pass ``profile`` when the verb loaded it already; ``probe`` for
     a verb that looks at a bus where nothing may answer."""
     from deltoctl.app.robot import open_robot as open_app_robot
-    from deltoctl.sim import running
 
-    prof = profile or opts.load_profile()
     sim: Any = opts.sim
     if opts.sim and opts.sim_options:
         from deltoctl.sim.serve import options_given
 
         sim = options_given(opts.sim_options, "--sim-option")
-    found = (running.find(prof, sim if isinstance(sim, dict) else {}, opts.hardware, warn)
-             if opts.sim and not opts.sim_fresh else None)
-    if found is not None:
-        info(f"using {found.name} of {found.profile}; --sim-fresh starts one of its own")
-    try:
-        with open_app_robot(prof, [*opts.target, *found.targets] if found else opts.target,
-                            sim=False if found else sim, hardware=opts.hardware,
-                            allow_model_mismatch=allow_model_mismatch, probe=probe, notice=info,
-                            served_by=found.name if found else SERVED_SIMULATED) as robot:
-            try:
-                yield robot
-            finally:
-                if SET_SAFE:
-                    robot.make_safe()
-    except NotHomed as exc:
-        if opts.sim and found is None:
-            exc.hint = running.fresh_hint(prof.name)
-        raise
+    with open_app_robot(profile or opts.load_profile(), opts.target, sim=sim,
+                        hardware=opts.hardware, allow_model_mismatch=allow_model_mismatch,
+                        probe=probe, notice=info, served_by=SERVED_SIMULATED,
+                        reuse=not opts.sim_fresh, warn=warn) as robot:
+        try:
+            yield robot
+        finally:
+            if SET_SAFE:
+                robot.make_safe()
 
 
 def finish(robot: Any, extra: list[str] | None = None) -> None:
@@ -152,20 +141,10 @@ def gpio_get(ctx: typer.Context) -> None:
 _ON = {"on": 1.0, "true": 1.0, "off": 0.0, "false": 0.0}
 
 
-def _complete_gpio(ctx: typer.Context, incomplete: str) -> list[str]:
-    """The profile's GPIO command interfaces."""
-    from deltoctl.cli.profile_cmd import _completion_profile
-
-    prof = _completion_profile(ctx)
-    names = [] if prof is None else [n for hw in prof.hardware for c in hw.gpios
-                                     for n in c.interface_names("command")]
-    return [n for n in names if n.startswith(incomplete)]
-
-
 def gpio_set(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(
-        autocompletion=_complete_gpio,
+        autocompletion=completer("complete_gpio"),
         help="A GPIO command interface, e.g. gpio/output_2 (Delto: motor on, grasp, release), "
              "flange_vacuum/vacuum; output_2 alone when the profile has one GPIO 'gpio'.")],
     value: Annotated[str, typer.Argument(help="on, off or a number.")],

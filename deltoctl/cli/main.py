@@ -15,7 +15,7 @@ from typer._click import exceptions as click_exceptions
 from typer.core import TyperGroup
 
 from deltoctl import __version__, verbs
-from deltoctl.cli.context import Options, parse_pairs
+from deltoctl.cli.context import Options, completer, parse_pairs
 from deltoctl.cmdline import GLOBAL_OPTIONS, hoist_global_options
 from deltoctl.errors import DeltoctlError, InvalidInput
 
@@ -183,12 +183,6 @@ def complete_profile(incomplete: str) -> list[str]:
     return [n for n in catalog_names() if n.startswith(incomplete)]
 
 
-def _complete_hardware(ctx: typer.Context, incomplete: str) -> list[str]:
-    from deltoctl.cli.profile_cmd import complete_blocks
-
-    return complete_blocks(ctx, incomplete)
-
-
 # the global options (root's), each declared once here
 ProfileOpt = Annotated[str | None, typer.Option(
     "--profile", "-p", envvar="DELTOCTL_PROFILE", autocompletion=complete_profile,
@@ -224,7 +218,7 @@ LogFileOpt = Annotated[str | None, typer.Option(
 XacroArgOpt = Annotated[list[str] | None, typer.Option(
     "--arg", metavar="NAME:=VALUE", help="A xacro argument (repeatable).")]
 HardwareOpt = Annotated[list[str] | None, typer.Option(
-    "--hardware", metavar="NAME", autocompletion=_complete_hardware,
+    "--hardware", metavar="NAME", autocompletion=completer("complete_blocks"),
     help="Only this <ros2_control> block of the profile (repeatable; default: all).")]
 XacroOpt = Annotated[bool, typer.Option(
     "--xacro", help="Run xacro on a profile file that is not named .xacro.")]

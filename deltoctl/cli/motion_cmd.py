@@ -9,7 +9,7 @@ from typing import Annotated, Any
 import typer
 
 from deltoctl.cli.confirm import confirm
-from deltoctl.cli.context import Options, options
+from deltoctl.cli.context import Options, completer, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import advancing, emit_json, info, progress, say
 
@@ -24,10 +24,7 @@ def register(app: typer.Typer) -> None:
     app.command("jog", context_settings={"ignore_unknown_options": True})(jog)
 
 
-def complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
-    from deltoctl.cli.profile_cmd import complete_part
-
-    return complete_part(ctx, incomplete)
+complete_joint = completer("complete_part")
 
 
 def _said(label: str, report: dict[str, Any]) -> None:

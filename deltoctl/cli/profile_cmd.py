@@ -67,6 +67,17 @@ def _completer(names: "Callable[[Profile], Iterable[str]]") -> Any:
 complete_part = _completer(lambda prof: [c.name for _, c in prof.components()])
 complete_blocks = _completer(lambda prof: [hw.name for hw in prof.hardware])
 complete_joints = _completer(lambda prof: [j.name for j in prof.joints()])
+complete_gpio = _completer(lambda prof: [n for hw in prof.hardware for c in hw.gpios
+                                         for n in c.interface_names("command")])
+
+
+def _target_names(prof: "Profile") -> list[str]:
+    from deltoctl.app.robot import target_names
+
+    return target_names(prof)
+
+
+complete_target = _completer(_target_names)  # joints, their groups and all
 
 
 def complete_register_items(ctx: typer.Context, incomplete: str) -> list[str]:

@@ -6,34 +6,19 @@ from typing import Annotated, Any
 import typer
 
 from deltoctl.cli.confirm import confirm
-from deltoctl.cli.context import options
+from deltoctl.cli.context import completer, options
 from deltoctl.cli.device_cmd import finish, on_robot, open_robot
 from deltoctl.cli.motion_cmd import complete_joint
 from deltoctl.cli.output import emit_json, say, table
 from deltoctl.errors import DeviceError, InvalidInput
 
 
-def _complete_target(ctx: typer.Context, incomplete: str) -> list[str]:
-    """The profile's joint groups (their ``group`` param, and arms/legs), all, and joints."""
-    from deltoctl.app.robot import target_names
-    from deltoctl.cli.profile_cmd import _completion_profile
-
-    prof = _completion_profile(ctx)
-    return [n for n in target_names(prof) if n.startswith(incomplete)] if prof else []
-
-
 def _complete_state(incomplete: str) -> list[str]:
     return [s for s in ("on", "off") if s.startswith(incomplete)]
 
 
-def _complete_item(ctx: typer.Context, incomplete: str) -> list[str]:
-    from deltoctl.cli.profile_cmd import complete_register_items
-
-    return complete_register_items(ctx, incomplete)
-
-
 TargetArg = Annotated[str, typer.Argument(
-    autocompletion=_complete_target,
+    autocompletion=completer("complete_target"),
     help="A joint, a group (head, left_arm, right_arm, arms, left_leg, right_leg, legs) "
          "or all.")]
 
@@ -56,7 +41,7 @@ def register_get(
     ctx: typer.Context,
     joint: JointArg,
     items: Annotated[list[str] | None, typer.Argument(
-        autocompletion=_complete_item,
+        autocompletion=completer("complete_register_items"),
         help="Items to read (default: the whole table, in one read).")] = None,
 ) -> None:
     """Read control table items of one servo."""
@@ -75,7 +60,7 @@ def register_get(
 def register_set(
     ctx: typer.Context,
     joint: JointArg,
-    item: Annotated[str, typer.Argument(autocompletion=_complete_item,
+    item: Annotated[str, typer.Argument(autocompletion=completer("complete_register_items"),
                                         help="The item, e.g. return_delay_time.")],
     value: Annotated[int, typer.Argument(help="The raw value.")],
 ) -> None:
