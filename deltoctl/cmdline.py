@@ -80,3 +80,17 @@ def hoist_global_options(args: list[str]) -> list[str]:
                 tail.append(rest)
         i += 1
     return head + hoisted + tail
+
+
+def first_argument(args: list[str], takes_value: set[str]) -> int | None:
+    """Where the first argument stands among a command's ``args`` (after ``--``, or the
+    first word that is neither an option nor the value of one in ``takes_value``)."""
+    i = 0
+    while i < len(args):
+        arg = args[i]
+        if arg == "--":
+            return i + 1 if i + 1 < len(args) else None
+        if not arg.startswith("-") or arg == "-":
+            return i
+        i += 2 if arg in takes_value else 1
+    return None

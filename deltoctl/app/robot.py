@@ -605,7 +605,7 @@ class Robot:
 
         return record(self.system, output, rate, duration, gpio_type, sinks, show, force)
 
-    def replay(self, recording: str | Path, max_deviation: float = 0.2,
+    def replay(self, recording: str | Path, max_deviation: float = 0.2,  # MAX_DEVIATION
                tolerance: float | None = None, plan: ReplayPlan | None = None,
                on_simulator: bool | None = None, on_device: bool | None = None,
                progress: Callable[[float], None] | None = None,
@@ -641,6 +641,20 @@ def _snapshot(snapshot: str | Path | Snapshot) -> Snapshot:
     from deltoctl.app.config import load_snapshot
 
     return load_snapshot(Path(snapshot)) if isinstance(snapshot, (str, Path)) else snapshot
+
+
+SWITCH = {"on": 1.0, "true": 1.0, "off": 0.0, "false": 0.0}
+
+
+def gpio_value(text: str) -> float:
+    """A GPIO value as typed: on, off (true, false) or a finite number."""
+    try:
+        number = SWITCH[text.lower()] if text.lower() in SWITCH else float(text)
+    except ValueError:
+        raise InvalidInput(f"value must be on, off or a number, got {text!r}") from None
+    if not math.isfinite(number):
+        raise InvalidInput(f"value must be finite, got {text!r}")
+    return number
 
 
 def check_loop(rate: float, duration: float | None) -> None:

@@ -112,22 +112,19 @@ def calibrate_imu(
     calibration-<chip>-<address>-<time>.json — name it in the sensor's `calibration` param
     and stream and record apply it. Exit 1 when a check fails."""
     from deltoctl.app.imu_calibration import check_options, fail_imu
-    from deltoctl.render.checks import imu_table
+    from deltoctl.render.checks import calibration_files, imu_table
 
     opts = options(ctx)
     check_options(samples, timeout, output_dir)
     with open_robot(opts, allow_model_mismatch) as robot:
         result = robot.calibrate_imu(samples, _ask if tumble else None, timeout, output_dir,
                                      lambda what: confirm(ctx, what))
-    blocks = result["blocks"]
     if opts.json:
         emit_json(result)
     else:
         table(*imu_table(result))
-        for b in blocks:
-            if "calibration_file" in b:
-                info(f"calibration: {b['calibration_file']} (name it in {b['sensor']}'s "
-                     "calibration param)")
+        for line in calibration_files(result):
+            info(line)
     fail_imu(result)
     finish(robot)
 

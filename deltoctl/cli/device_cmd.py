@@ -13,7 +13,6 @@ from deltoctl.cli.output import (
     emit_json,
     emit_json_line,
     info,
-    say,
     show,
     stdout_is_terminal,
     warn,
@@ -138,9 +137,6 @@ def gpio_get(ctx: typer.Context) -> None:
         profile=profile)
 
 
-_ON = {"on": 1.0, "true": 1.0, "off": 0.0, "false": 0.0}
-
-
 def gpio_set(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(
@@ -150,24 +146,16 @@ def gpio_set(
     value: Annotated[str, typer.Argument(help="on, off or a number.")],
 ) -> None:
     """Set one GPIO output and read it back (a Delto's three outputs travel together)."""
-    import math
+    from deltoctl.app.robot import gpio_value
 
-    opts = options(ctx)
-    try:
-        number = _ON[value.lower()] if value.lower() in _ON else float(value)
-    except ValueError:
-        raise InvalidInput(f"value must be on, off or a number, got {value!r}") from None
-    if not math.isfinite(number):
-        raise InvalidInput(f"value must be finite, got {value!r}")
-    with open_robot(opts) as robot:
+    number = gpio_value(value)
+
+    def set_output(robot: Any) -> dict[str, float]:
         full = robot.gpio_output(name)
         confirm(ctx, f"set {full} of {robot.block_of(full)} to {value}")
-        after = robot.set_gpio(name, number)
-    if opts.json:
-        emit_json(after)
-    else:
-        say(f"{full} = {number:g}")
-    finish(robot)
+        return robot.set_gpio(name, number)
+
+    on_robot(ctx, set_output, lambda _, robot: [f"{robot.gpio_output(name)} = {number:g}"])
 
 
 RateOpt = Annotated[float, typer.Option("--rate", "-r", help="Samples per second.")]

@@ -59,19 +59,20 @@ def flush_document(ctx: Any, exit_code: int) -> None:
     write_json(envelope(verb, data, meta.get(WARNINGS, []), exit_code, profile), err)
 
 
-def _root() -> Any:
+def _context() -> Any:
+    """The context of the command running, or None outside one."""
     from typer._click.globals import get_current_context
 
-    ctx = get_current_context(silent=True)
-    return None if ctx is None else ctx.find_root()
+    return get_current_context(silent=True)
+
+
+def _root() -> Any:
+    return None if _context() is None else _context().find_root()
 
 
 def _verb() -> str:
     """The command path of the verb running (``gpio get``)."""
-    from typer._click.globals import get_current_context
-
-    ctx = get_current_context(silent=True)
-    return "" if ctx is None else ctx.command_path.partition(" ")[2]
+    return "" if _context() is None else _context().command_path.partition(" ")[2]
 
 
 def emit_json_line(data: Any) -> None:
@@ -81,13 +82,15 @@ def emit_json_line(data: Any) -> None:
     sys.stdout.flush()
 
 
-def emit_error(message: str, hint: str | None, exit_code: int, as_json: bool) -> None:
+def emit_error(message: str, hint: str | None, exit_code: int, as_json: bool,
+               **more: str) -> None:
     """An error on stderr: one line (and its hint) for people; with --json one object,
-    ``{"error": {"message", "hint", "exit_code"}}``, so stdout holds data only."""
+    ``{"error": {"message", "hint", "exit_code"}}`` (and ``more``: the robot a remote verb
+    ran on), so stdout holds data only."""
     if as_json:
         import json
 
-        error = {"message": message, "hint": hint, "exit_code": exit_code}
+        error = {"message": message, "hint": hint, "exit_code": exit_code, **more}
         typer.echo(json.dumps({"error": error}), err=True)
         return
     typer.echo(f"deltoctl: error: {message}", err=True)
@@ -117,10 +120,7 @@ def warn(message: str) -> None:
 
 
 def _quiet() -> bool:
-    from typer._click.globals import get_current_context
-
-    ctx = get_current_context(silent=True)
-    return ctx is not None and bool(getattr(ctx.find_root().obj, "quiet", False))
+    return _root() is not None and bool(getattr(_root().obj, "quiet", False))
 
 
 def progress(opts: Any, transient: bool = True, elapsed: bool = False) -> Progress | None:
@@ -129,23 +129,17 @@ def progress(opts: Any, transient: bool = True, elapsed: bool = False) -> Progre
     instead of the time left."""
     if opts.json or opts.quiet or not sys.stderr.isatty():
         return None
-    from rich.console import Console
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+    from deltoctl.render.progress import started_bar
 
-    columns = ((TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn()) if elapsed
-               else Progress.get_default_columns())
-    bar = Progress(*columns, console=Console(stderr=True), transient=transient)
-    bar.start()
-    return bar
+    return started_bar(transient, elapsed)
 
 
 def advancing(bar: Progress | None, label: str) -> Callable[[float], None] | None:
     """A task named ``label`` on ``bar`` and what moves it to a fraction done; None without
     a bar."""
-    if bar is None:
-        return None
-    task = bar.add_task(label, total=1.0)
-    return lambda fraction: bar.update(task, completed=fraction)
+    from deltoctl.render.progress import advancing as task
+
+    return None if bar is None else task(bar, label)
 
 
 def show(parts: Sequence[str | tuple]) -> None:

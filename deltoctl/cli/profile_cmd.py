@@ -131,6 +131,7 @@ def validate_cmd(
     """Check profiles against ros2_control's rules and deltoctl's own (exit 2 if any fails,
     3 if any has warnings)."""
     from deltoctl.profile.summary import validation
+    from deltoctl.render.profile import validation_lines
 
     opts = options(ctx)
     specs = list(profiles or []) or ([opts.profile] if opts.profile else [])
@@ -140,17 +141,8 @@ def validate_cmd(
     for spec in specs:
         result, code = validation(spec, opts.load_profile, strict)
         checked.append((result, code))
-        if opts.json:
-            continue
-        if not result["ok"]:
-            info(f"invalid: {result['error']}")
-            continue
-        say(f"ok: {spec} ({result['joints']} joints, {result['sensors']} sensors, "
-            f"{result['gpios']} gpios)")
-        for note in result["warnings"]:
-            info(f"warning: {note}")
-        for note in result.get("notes", []):
-            info(f"note: {note}")
+        for to_stdout, line in [] if opts.json else validation_lines(spec, result):
+            (say if to_stdout else info)(line)
     if opts.json:
         emit_json([result for result, _ in checked])
     failed = [code for result, code in checked if not result["ok"]]

@@ -11,19 +11,15 @@ larger difference exit 3.
 """
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import Annotated, Any
 
 import typer
 
+from deltoctl.app.replay import MAX_DEVIATION
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import advancing, emit_json, info, progress, show, warn
 from deltoctl.errors import WARNINGS
-
-if TYPE_CHECKING:
-    from deltoctl.app.robot import Robot
-
-MAX_DEVIATION = 0.2  # rad or m: a replayed joint further than this from its recording stops
 
 
 def register(app: typer.Typer) -> None:
@@ -68,8 +64,7 @@ def replay(
     (exit 5)."""
     import copy
 
-    from deltoctl.app.motion import joints_quantity
-    from deltoctl.app.replay import Deviated, plan_replay, where_to_replay
+    from deltoctl.app.replay import Deviated, plan_replay, replay_limits, where_to_replay
     from deltoctl.cli.confirm import confirm
     from deltoctl.units import nonnegative
 
@@ -78,9 +73,7 @@ def replay(
     nonnegative(max_deviation, "--max-deviation")
     named = opts.load_profile() if opts.profile else None
     plan = plan_replay(recording, named, device, opts.hardware)
-    limit = joints_quantity(plan.profile, plan.recorded.joints, tolerance, "--tolerance")
-    deviation = joints_quantity(plan.profile, plan.recorded.joints, max_deviation,
-                                "--max-deviation")
+    limit, deviation = replay_limits(plan, tolerance, max_deviation)
     run_opts = copy.copy(opts)  # only the blocks it commands, on the simulators unless --device
     run_opts.hardware, run_opts.sim = where_to_replay(plan, device, opts.hardware, opts.target,
                                                       opts.sim)
@@ -90,8 +83,8 @@ def replay(
     bar = progress(opts)
     try:
         with open_robot(run_opts, allow_model_mismatch, plan.profile) as robot:
-            report = robot.replay(recording, MAX_DEVIATION if deviation is None else deviation,
-                                  limit, plan, run_opts.sim, device and not opts.sim,
+            report = robot.replay(recording, deviation, limit, plan, run_opts.sim,
+                                  device and not opts.sim,
                                   advancing(bar, f"replay {recording.name}"), info)
     except Deviated as stopped:
         if opts.json and stopped.report is not None:
@@ -100,20 +93,21 @@ def replay(
     finally:
         if bar is not None:
             bar.stop()
-    _show(opts, report, robot, tolerance)
+    _show(opts, report, robot.joint_types(), tolerance)
     finish(robot)
     if report["exceeded"] or plan.notes:  # the notes: shown before the replay
         raise typer.Exit(WARNINGS)
 
 
-def _show(opts: Options, report: dict[str, Any], robot: "Robot", tolerance: str | None) -> None:
+def _show(opts: Options, report: dict[str, Any], joint_types: dict[str, str],
+          tolerance: str | None) -> None:
     """The report, and the joints beyond --tolerance as a warning."""
     from deltoctl.render.replay import replay_parts
 
     if opts.json:
         emit_json(report)
     else:
-        show(replay_parts(report, robot.joint_types(), tolerance))
+        show(replay_parts(report, joint_types, tolerance))
     if report["exceeded"]:
         warn(f"{', '.join(report['exceeded'])}: replayed more than {tolerance} from the "
              "recording")

@@ -103,15 +103,11 @@ def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
                  "an arm under gravity falls")
     with open_robot(opts, profile=profile) as robot:
         done = robot.reboot(joints)
-    _report(opts, {"rebooted": done}, f"rebooted {len(done)} of {len(joints)} joint(s)")
+    if opts.json:
+        emit_json({"rebooted": done})
+    else:
+        say(f"rebooted {len(done)} of {len(joints)} joint(s)")
     missing = sorted(set(joints) - set(done))
     if missing:
         raise DeviceError(f"no reboot acknowledgement from {', '.join(missing)}")
     finish(robot)
-
-
-def _report(opts: Any, data: dict, text: str) -> None:
-    if opts.json:
-        emit_json(data)
-    else:
-        say(text)

@@ -39,3 +39,9 @@ def imu_table(result: dict[str, Any]) -> tuple[None, list[str], list[list[Any]]]
     """An IMU calibration's table: each sensor's checks."""
     return (None, ["sensor", "check", "value", "unit", "limit", "verdict"],
             [row for b in result["blocks"] for row in check_rows(b["checks"], b["sensor"])])
+
+
+def calibration_files(result: dict[str, Any]) -> list[str]:
+    """Where an IMU calibration saved each sensor's tumble, and what to do with it."""
+    return [f"calibration: {b['calibration_file']} (name it in {b['sensor']}'s calibration "
+            "param)" for b in result["blocks"] if "calibration_file" in b]
