@@ -4,6 +4,8 @@ fleet agent judges a remote command line with the same rules."""
 
 from __future__ import annotations
 
+from typing import Any
+
 # option spellings → whether they take a value: the root command's options (cli/main.py), which
 # the fleet reads without loading the CLI; a test holds the two equal
 GLOBAL_OPTIONS: dict[str, bool] = {
@@ -94,3 +96,20 @@ def first_argument(args: list[str], takes_value: set[str]) -> int | None:
             return i
         i += 2 if arg in takes_value else 1
     return None
+
+
+def given_options(ctx: Any) -> list[str]:
+    """The spellings of the options a context's command line (or environment) gave: not
+    their defaults, nor a flag given as off."""
+    from typer._click.core import ParameterSource
+
+    given: list[str] = []
+    for param in ctx.command.params:
+        if param.param_type_name != "option":
+            continue
+        source = ctx.get_parameter_source(param.name) if param.name else None
+        if source in (None, ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP):
+            continue
+        if ctx.params.get(param.name) is not False:
+            given += getattr(param, "opts", [])
+    return given

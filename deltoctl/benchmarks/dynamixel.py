@@ -216,18 +216,11 @@ def _mixed_driver(pty: str, baud: int, fast: bool = False) -> Any:
 def _read_ways(driver: Any) -> dict[str, Any]:
     """One read of every servo's present current/load, velocity and position, three ways:
     one Sync Read (every X model keeps them at 126), one Bulk Read, a Sync Read per model."""
-    from deltoctl.families.dynamixel import codec
-
     ids = list(range(1, len(MIXED) + 1))
-    bulk = codec.bulk_read([(i, 126, 10) for i in ids])
+    bulk = [(i, 126, 10) for i in ids]
     groups = [[i for i in ids if MIXED[i - 1] == n] for n in sorted(set(MIXED))]
-
-    def bulk_read() -> int:
-        driver._send(bulk)
-        return len(codec.split_statuses(driver._collect(len(ids) * 21)))
-
     return {"sync_read": lambda: len(driver._sync_read(126, 10, ids)),
-            "bulk_read": bulk_read,
+            "bulk_read": lambda: len(driver.bulk_read(bulk)),
             "sync_read_per_model": lambda: sum(len(driver._sync_read(126, 10, g))
                                                for g in groups)}
 
@@ -236,7 +229,7 @@ def _paced_ms(read: Any, duration: float, rate: float = 1000.0,
               expect: int = len(MIXED)) -> tuple[float, float, float, int]:
     """Reads at ``rate`` Hz for ``duration`` s: (mean, median and 99th percentile ms, the
     reads that missed a servo: ``read`` returns how many answered, ``expect`` of them)."""
-    from deltoctl.families.dynamixel.emulator import wait_until
+    from deltoctl.servo.pty_server import wait_until
 
     period, times, short = 1.0 / rate, [], 0
     start = next_at = time.perf_counter()

@@ -1,13 +1,20 @@
-"""The global options every verb shares, and the profile they select."""
+"""The global options every verb shares, the profile they select, and the keys of the root
+context's meta the verbs read."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import typer
 
 from deltoctl.errors import InvalidInput
+
+EXIT_LINE = ("Exit codes: 0 ok · 1 failed · 2 usage or invalid input · 3 warnings · "
+             "4 unreachable · 5 refused for safety · 130 interrupted")
+
+TEACH = "deltoctl.teach"  # ctx.meta key: this run shows help or completes, so verbs are taught
+ARGV = "deltoctl.argv"  # ctx.meta key: the command line, global options first
+DOCUMENT = "deltoctl.document"  # ctx.meta key: the verb's JSON document, written as it exits
 
 if TYPE_CHECKING:
     from deltoctl.profile.model import Profile
@@ -75,14 +82,3 @@ def parse_pairs(items: list[str], sep: str, what: str, example: str) -> dict[str
             raise InvalidInput(f"{what} {item!r} is not of the form {example}")
         pairs[key] = value
     return pairs
-
-
-def completer(name: str) -> Callable[[typer.Context, str], list[str]]:
-    """The completion ``name`` of deltoctl.cli.profile_cmd (names in the profile on the
-    command line), imported only when a command line is completed."""
-    def complete(ctx: typer.Context, incomplete: str) -> list[str]:
-        from deltoctl.cli import profile_cmd
-
-        return list(getattr(profile_cmd, name)(ctx, incomplete))
-
-    return complete

@@ -6,17 +6,11 @@ from typing import Annotated, Any
 
 import typer
 
-from deltoctl.app.robot import check_loop
+from deltoctl.cli.completions import complete_gpio
 from deltoctl.cli.confirm import confirm
-from deltoctl.cli.context import Options, completer, options
-from deltoctl.cli.output import (
-    emit_json,
-    emit_json_line,
-    info,
-    show,
-    stdout_is_terminal,
-    warn,
-)
+from deltoctl.cli.context import Options, options
+from deltoctl.cli.output import emit_json, emit_json_line, info, show, stdout_is_terminal, warn
+from deltoctl.core.runner import check_loop
 from deltoctl.errors import WARNINGS, InvalidInput
 
 AllowMismatch = Annotated[bool, typer.Option(
@@ -41,15 +35,16 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
     a verb that looks at a bus where nothing may answer."""
     from deltoctl.app.robot import open_robot as open_app_robot
 
+    prof = profile or opts.load_profile()
     sim: Any = opts.sim
     if opts.sim and opts.sim_options:
         from deltoctl.sim.serve import options_given
 
-        sim = options_given(opts.sim_options, "--sim-option")
-    with open_app_robot(profile or opts.load_profile(), opts.target, sim=sim,
-                        hardware=opts.hardware, allow_model_mismatch=allow_model_mismatch,
-                        probe=probe, notice=info, served_by=SERVED_SIMULATED,
-                        reuse=not opts.sim_fresh, warn=warn) as robot:
+        sim = options_given(opts.sim_options, "--sim-option", prof, opts.hardware)
+    with open_app_robot(prof, opts.target, sim=sim, hardware=opts.hardware,
+                        allow_model_mismatch=allow_model_mismatch, probe=probe, notice=info,
+                        served_by=SERVED_SIMULATED, reuse=not opts.sim_fresh,
+                        warn=warn) as robot:
         try:
             yield robot
         finally:
@@ -57,12 +52,16 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
                 robot.make_safe()
 
 
-def finish(robot: Any, extra: list[str] | None = None) -> None:
-    """Exit 3 when the verb finished but with warnings (a block left out, a model mismatch
-    allowed, reconnects): ``robot.warnings()`` and ``extra``."""
+def finish(robot: Any, extra: list[str] | None = None,
+           failures: list[dict[str, Any]] | None = None) -> None:
+    """Exit 1 naming each check of ``failures`` that failed; exit 3 when the verb finished but
+    with warnings (a block left out, a model mismatch allowed, reconnects; ``extra``)."""
+    from deltoctl.app.checks import fail_on
+
     warnings = robot.warnings() + (extra or [])
     for w in warnings:
         warn(w)
+    fail_on(failures or [])
     if warnings:
         raise typer.Exit(WARNINGS)
 
@@ -81,9 +80,10 @@ def register(app: typer.Typer) -> None:
 
 def on_robot(ctx: typer.Context, call: Callable[[Any], Any],
              people: Callable[[Any, Any], Sequence[Any]], allow_model_mismatch: bool = False,
-             profile: Any = None, probe: bool = False) -> Any:
+             profile: Any = None, probe: bool = False, judged: bool = False) -> Any:
     """A verb's one call on the robot (``call(robot)``); its result as JSON, or for people
-    (``people(result, robot)``: lines and tables); its warnings (exit 3)."""
+    (``people(result, robot)``: lines and tables); its warnings (exit 3), and with ``judged``
+    its failed ``checks`` (exit 1)."""
     opts = options(ctx)
     with open_robot(opts, allow_model_mismatch, profile, probe) as robot:
         result = call(robot)
@@ -91,7 +91,7 @@ def on_robot(ctx: typer.Context, call: Callable[[Any], Any],
         emit_json(result)
     else:
         show(people(result, robot))
-    finish(robot)
+    finish(robot, failures=result["checks"] if judged else None)
     return result
 
 
@@ -124,7 +124,7 @@ def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> N
     from deltoctl.render.identity import detect_parts
 
     on_robot(ctx, lambda robot: robot.detect(), lambda result, _: detect_parts(result),
-             allow_model_mismatch, probe=True)
+             allow_model_mismatch, probe=True, judged=True)
 
 
 def gpio_get(ctx: typer.Context) -> None:
@@ -140,7 +140,7 @@ def gpio_get(ctx: typer.Context) -> None:
 def gpio_set(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(
-        autocompletion=completer("complete_gpio"),
+        autocompletion=complete_gpio,
         help="A GPIO command interface, e.g. gpio/output_2 (Delto: motor on, grasp, release), "
              "flange_vacuum/vacuum; output_2 alone when the profile has one GPIO 'gpio'.")],
     value: Annotated[str, typer.Argument(help="on, off or a number.")],

@@ -8,8 +8,9 @@ from typing import Annotated, Any
 
 import typer
 
+from deltoctl.cli.completions import complete_part as complete_joint
 from deltoctl.cli.confirm import confirm
-from deltoctl.cli.context import Options, completer, options
+from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import advancing, emit_json, info, progress, say
 
@@ -22,9 +23,6 @@ def register(app: typer.Typer) -> None:
     app.command("home")(home)
     # negative deltas (`jog J -5deg`) are arguments, not unknown options
     app.command("jog", context_settings={"ignore_unknown_options": True})(jog)
-
-
-complete_joint = completer("complete_part")
 
 
 def _said(label: str, report: dict[str, Any]) -> None:
@@ -66,7 +64,7 @@ def home(
     elif plan.targets:
         _said("home", report)
     if plan.targets:
-        fail_unsettled(report)
+        fail_unsettled(report, profile)
     finish(robot)
 
 
@@ -156,7 +154,7 @@ def jog(
         report = _jog(opts, robot, targets, speed, record)
     if opts.json:
         emit_json(report)
-    fail_unsettled(report)
+    fail_unsettled(report, profile)
     finish(robot)
 
 

@@ -8,8 +8,8 @@ import typer
 
 from deltoctl.cli.context import options
 from deltoctl.cli.device_cmd import AllowMismatch, open_robot
-from deltoctl.cli.output import emit_json, info, say, table, warn
-from deltoctl.errors import WARNINGS, DeviceError
+from deltoctl.cli.output import emit_json, info, progress, say, table, warn
+from deltoctl.errors import WARNINGS
 
 
 def register(root: typer.Typer) -> None:
@@ -38,8 +38,10 @@ def report(
     report's hash. With --yes, motion checks where the profile allows motion: returns home
     and each joint to its soft limits and back. Limits come from the profile's `report:`
     section. Exit 0 when every check passes, 1 when one fails (named), 3 with warnings."""
+    from deltoctl.app.checks import fail_on
     from deltoctl.app.report import Plan, check_plan, report_paths, run_report, write_report
-    from deltoctl.render.checks import check_rows
+    from deltoctl.render.checks import check_rows, verdict_text
+    from deltoctl.render.progress import stages
     from deltoctl.render.report_html import report_html
 
     opts = options(ctx)
@@ -47,17 +49,23 @@ def report(
     html, twin, mcap = report_paths(output, profile.name)
     plan = Plan(golden, record, mcap if record is not None else None, operator, opts.yes)
     check_plan(plan)
-    with open_robot(opts, allow_model_mismatch, profile) as robot:
-        doc = run_report(robot, plan)
+    bar = progress(opts, elapsed=True)
+    try:
+        said = stages(bar, "report", None if opts.json else info)
+        said("connect", 0.0)
+        with open_robot(opts, allow_model_mismatch, profile) as robot:
+            doc = run_report(robot, plan, said)
+    finally:
+        if bar is not None:
+            bar.stop()
     write_report(doc, html, report_html)
     if opts.json:
         emit_json(doc)
     else:
         table(None, ["check", "value", "unit", "limit", "verdict"], check_rows(doc["checks"]))
-        say(f"verdict: {doc['verdict']}")
+        say(f"verdict: {verdict_text(doc)}")
     info(f"report: {html} and {twin.name}")
-    if doc["failed"]:
-        raise DeviceError(f"acceptance failed: {', '.join(doc['failed'])}")
+    fail_on(doc["checks"], "acceptance failed: ")
     if doc["verdict"] == "warn":
         for w in doc["warnings"]:
             warn(w)

@@ -5,8 +5,9 @@ from typing import Annotated, Any
 
 import typer
 
+from deltoctl.cli.completions import complete_register_items, complete_target
 from deltoctl.cli.confirm import confirm
-from deltoctl.cli.context import completer, options
+from deltoctl.cli.context import options
 from deltoctl.cli.device_cmd import finish, on_robot, open_robot
 from deltoctl.cli.motion_cmd import complete_joint
 from deltoctl.cli.output import emit_json, say, table
@@ -18,7 +19,7 @@ def _complete_state(incomplete: str) -> list[str]:
 
 
 TargetArg = Annotated[str, typer.Argument(
-    autocompletion=completer("complete_target"),
+    autocompletion=complete_target,
     help="A joint, a group (head, left_arm, right_arm, arms, left_leg, right_leg, legs) "
          "or all.")]
 
@@ -41,7 +42,7 @@ def register_get(
     ctx: typer.Context,
     joint: JointArg,
     items: Annotated[list[str] | None, typer.Argument(
-        autocompletion=completer("complete_register_items"),
+        autocompletion=complete_register_items,
         help="Items to read (default: the whole table, in one read).")] = None,
 ) -> None:
     """Read control table items of one servo."""
@@ -60,7 +61,7 @@ def register_get(
 def register_set(
     ctx: typer.Context,
     joint: JointArg,
-    item: Annotated[str, typer.Argument(autocompletion=completer("complete_register_items"),
+    item: Annotated[str, typer.Argument(autocompletion=complete_register_items,
                                         help="The item, e.g. return_delay_time.")],
     value: Annotated[int, typer.Argument(help="The raw value.")],
 ) -> None:

@@ -5,8 +5,8 @@ from typing import TYPE_CHECKING, Annotated, Any, cast
 
 import typer
 
-from deltoctl.cli.context import completer, options
-from deltoctl.cli.main import complete_profile
+from deltoctl.cli.completions import complete_joints, complete_profile
+from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_error, say, warn
 from deltoctl.errors import USAGE, InvalidInput
 
@@ -67,7 +67,7 @@ def _parameter(option: "SimOption") -> inspect.Parameter:
         "metavar": option.metavar or ("JOINT" if option.kind == "joints" else None),
         "show_default": False}
     if option.kind == "joints":
-        info["autocompletion"] = completer("complete_joints")  # of PROFILE or --profile
+        info["autocompletion"] = complete_joints  # of PROFILE or --profile
     kind: Any = {"flag": bool, "joints": list[str] | None}.get(option.kind, str | None)
     default: Any = False if option.kind == "flag" else None
     return inspect.Parameter(option.name, inspect.Parameter.KEYWORD_ONLY, default=default,

@@ -42,3 +42,18 @@ def recording_task(bar: Progress, output: Path,
                    description=recording_status(output.name, cycles, size, link))
 
     return show
+
+
+def stages(bar: Progress | None, name: str,
+           line: Callable[[str], None] | None) -> Callable[[str, float], None]:
+    """What shows a sequence's stages as they run: a task named ``name`` on ``bar`` when
+    there is one, else a line each told to ``line`` (none with ``line`` None)."""
+    task = bar.add_task(name, total=1.0) if bar is not None else None
+
+    def said(label: str, fraction: float) -> None:
+        if bar is not None and task is not None:
+            bar.update(task, completed=fraction, description=f"{name}: {label}")
+        elif line is not None and label != "done":
+            line(f"{name}: {label}")
+
+    return said

@@ -1,25 +1,65 @@
-"""Dynamixel Protocol 2.0, sans-I/O: instruction packets out, status packets in.
-
-Packet: ``FF FF FD 00 | ID | LEN_L LEN_H | INST | params | CRC_L CRC_H``; a status packet has
-INST 0x55 and an ERR byte before its params. LEN counts INST, params and the CRC. Between INST
-and the CRC every ``FF FF FD`` is stuffed to ``FF FF FD FD``; the CRC (CRC-16/BUYPASS: poly
-0x8005, init 0, no reflection) covers the stuffed packet. Reference: bioscara-mh5-dynamixel.md §3.
+"""Dynamixel Protocol 2.0: its instructions, their requests, and the names of its frames and
+errors, on the kit's Protocol 2.0 frame (deltoctl.servo.frames.dxl2, whose names this module
+also offers: packets, statuses, the CRC, the reader). Reference: bioscara-mh5-dynamixel.md §3.
 """
 
 from __future__ import annotations
 
 import struct
-from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from collections.abc import Iterable
 
-from deltoctl.errors import ProtocolError
+from deltoctl.servo.frames.dxl2 import (
+    _TABLE,
+    BROADCAST_ID,
+    FRAMES,
+    HEADER,
+    MAX_ID,
+    STATUS,
+    STATUS_ERRORS,
+    PacketReader,
+    Status,
+    SyncReplies,
+    crc16,
+    decode_fast_sync,
+    decode_status,
+    fast_sync_status,
+    packet,
+    split_fast_sync,
+    split_statuses,
+    status,
+    status_at,
+    stuff,
+    unstuff,
+)
+from deltoctl.servo.session import DEVICE, HOST, Instructions, Session
 
-HEADER = b"\xff\xff\xfd\x00"
-BROADCAST_ID = 0xFE
-MAX_ID = 0xFC
+__all__ = [
+    "BROADCAST_ID",
+    "DEVICE",
+    "HEADER",
+    "HOST",
+    "MAX_ID",
+    "STATUS",
+    "STATUS_ERRORS",
+    "_TABLE",
+    "PacketReader",
+    "Status",
+    "SyncReplies",
+    "crc16",
+    "decode_fast_sync",
+    "decode_status",
+    "fast_sync_status",
+    "packet",
+    "split_fast_sync",
+    "split_statuses",
+    "status",
+    "status_at",
+    "stuff",
+    "unstuff",
+]
 
 PING, READ, WRITE, REG_WRITE, ACTION = 0x01, 0x02, 0x03, 0x04, 0x05
-FACTORY_RESET, REBOOT, CLEAR, STATUS = 0x06, 0x08, 0x10, 0x55
+FACTORY_RESET, REBOOT, CLEAR = 0x06, 0x08, 0x10
 SYNC_READ, SYNC_WRITE, FAST_SYNC_READ = 0x82, 0x83, 0x8A
 BULK_READ, BULK_WRITE, FAST_BULK_READ = 0x92, 0x93, 0x9A
 INSTRUCTIONS = {PING: "PING", READ: "READ", WRITE: "WRITE", REG_WRITE: "REG_WRITE",
@@ -29,9 +69,11 @@ INSTRUCTIONS = {PING: "PING", READ: "READ", WRITE: "WRITE", REG_WRITE: "REG_WRIT
                 BULK_READ: "BULK_READ", BULK_WRITE: "BULK_WRITE",
                 FAST_BULK_READ: "FAST_BULK_READ"}
 
-STATUS_ERRORS = {1: "result fail", 2: "instruction error", 3: "CRC error",
-                 4: "data range error", 5: "data length error", 6: "data limit error",
-                 7: "access error"}
+# who answers what: at Status Return Level 0 a PING only, at 1 a READ too, at 2 everything;
+# a PING's status holds the model number and the firmware version
+INSTRUCTION_SET = Instructions(
+    ping=PING, read=READ, answered_at=(frozenset({PING}), frozenset({PING, READ}), None),
+    ping_length=3, sync_read=SYNC_READ, fast_sync_read=FAST_SYNC_READ, bulk_read=BULK_READ)
 HARDWARE_ERRORS = {0: "input voltage", 2: "overheating", 3: "motor encoder",
                    4: "electrical shock", 5: "overload"}
 
@@ -51,91 +93,43 @@ def frame_name(data: bytes) -> str | None:
     return (names[0] if len(names) == 1 else f"{len(names)} × {names[0]}") if names else None
 
 
-def _crc_table() -> list[int]:
-    table = []
-    for byte in range(256):
-        crc = byte << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x8005) if crc & 0x8000 else crc << 1
-        table.append(crc & 0xFFFF)
-    return table
-
-
-_TABLE = _crc_table()
-_TABLE16: list[int] | None = None  # two bytes a step; built on first use (about 10 ms)
-
-
-def _table16() -> list[int]:
-    # the register is 16 bits wide, so after two bytes it is the table entry of
-    # (register ^ the two bytes): T16[w] = T8-step of the high byte, then of the low byte.
-    # Built whole, then published: buses configured in parallel threads never see it half-made.
-    global _TABLE16
-    t = _TABLE
-    _TABLE16 = [((t[hi] << 8) & 0xFFFF) ^ t[(t[hi] >> 8) ^ lo]
-                for hi in range(256) for lo in range(256)]
-    return _TABLE16
-
-
-_WORDS: dict[int, Callable[..., tuple[int, ...]]] = {}  # n → unpack_from of n words (n ≤ 64)
-
-
-def crc16(data: bytes, crc: int = 0, start: int = 0, end: int | None = None) -> int:
-    """CRC-16 (polynomial 0x8005, not reflected) of the Dynamixel protocol, of
-    ``data[start:end]`` (read in place: a reply is checked where it lies in the buffer)."""
-    table = _TABLE16 or _table16()
-    if end is None:
-        end = len(data)
-    n = (end - start) >> 1
-    words = _WORDS.get(n)
-    if words is None:
-        words = struct.Struct(f">{n}H").unpack_from
-        if n <= 64:  # a packet of the sync loops; longer ones are rare
-            _WORDS[n] = words
-    for word in words(data, start):
-        crc = table[crc ^ word]
-    if (end - start) & 1:
-        crc = ((crc << 8) ^ _TABLE[(crc >> 8) ^ data[end - 1]]) & 0xFFFF
-    return crc
-
-
-def stuff(body: bytes) -> bytes:
-    return body.replace(b"\xff\xff\xfd", b"\xff\xff\xfd\xfd")
-
-
-def unstuff(body: bytes) -> bytes:
-    return body.replace(b"\xff\xff\xfd\xfd", b"\xff\xff\xfd")
-
-
-def packet(device_id: int, instruction: int, params: bytes = b"") -> bytes:
-    """An instruction (or, with STATUS, a status) packet with stuffing and CRC."""
-    if not 0 <= device_id <= BROADCAST_ID or device_id in (0xFD,):
-        raise ValueError(f"ID {device_id} is not 0..252 or 254 (broadcast)")
-    body = stuff(bytes([instruction]) + params)
-    head = HEADER + bytes([device_id]) + struct.pack("<H", len(body) + 2)
-    crc = crc16(head + body)
-    return head + body + struct.pack("<H", crc)
-
+# -- instructions ---------------------------------------------------------------------------------
 
 def _u16(value: int) -> bytes:
     return struct.pack("<H", value)
 
 
-# -- instructions ---------------------------------------------------------------------------------
+def read_params(address: int, length: int) -> bytes:
+    return _u16(address) + _u16(length)
+
+
+def write_params(address: int, data: bytes) -> bytes:
+    return _u16(address) + data
+
+
+def sync_read_params(address: int, length: int, ids: Iterable[int]) -> bytes:
+    return _u16(address) + _u16(length) + bytes(ids)
+
+
+def bulk_read_params(requests: Iterable[tuple[int, int, int]]) -> bytes:
+    """(ID, address, length) per servo."""
+    return b"".join(bytes([i]) + _u16(a) + _u16(n) for i, a, n in requests)
+
 
 def ping(device_id: int = BROADCAST_ID) -> bytes:
     return packet(device_id, PING)
 
 
 def read(device_id: int, address: int, length: int) -> bytes:
-    return packet(device_id, READ, _u16(address) + _u16(length))
+    return packet(device_id, READ, read_params(address, length))
 
 
 def write(device_id: int, address: int, data: bytes) -> bytes:
-    return packet(device_id, WRITE, _u16(address) + data)
+    return packet(device_id, WRITE, write_params(address, data))
 
 
 def reg_write(device_id: int, address: int, data: bytes) -> bytes:
-    return packet(device_id, REG_WRITE, _u16(address) + data)
+    return packet(device_id, REG_WRITE, write_params(address, data))
 
 
 def action(device_id: int = BROADCAST_ID) -> bytes:
@@ -159,7 +153,7 @@ def clear_multi_turn(device_id: int) -> bytes:
 
 def sync_read(address: int, length: int, ids: Iterable[int], fast: bool = False) -> bytes:
     return packet(BROADCAST_ID, FAST_SYNC_READ if fast else SYNC_READ,
-                  _u16(address) + _u16(length) + bytes(ids))
+                  sync_read_params(address, length, ids))
 
 
 def sync_write(address: int, length: int, data: dict[int, bytes]) -> bytes:
@@ -172,8 +166,8 @@ def sync_write(address: int, length: int, data: dict[int, bytes]) -> bytes:
 
 
 def bulk_read(requests: Iterable[tuple[int, int, int]], fast: bool = False) -> bytes:
-    params = b"".join(bytes([i]) + _u16(a) + _u16(n) for i, a, n in requests)
-    return packet(BROADCAST_ID, FAST_BULK_READ if fast else BULK_READ, params)
+    return packet(BROADCAST_ID, FAST_BULK_READ if fast else BULK_READ,
+                  bulk_read_params(requests))
 
 
 def bulk_write(writes: Iterable[tuple[int, int, bytes]]) -> bytes:
@@ -181,210 +175,11 @@ def bulk_write(writes: Iterable[tuple[int, int, bytes]]) -> bytes:
     return packet(BROADCAST_ID, BULK_WRITE, params)
 
 
-# -- status packets -------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class Status:
-    id: int
-    error: int
-    params: bytes
-
-    @property
-    def alert(self) -> bool:
-        """Bit 7: read Hardware Error Status (70) for the cause."""
-        return bool(self.error & 0x80)
-
-    def error_text(self) -> str | None:
-        code = self.error & 0x7F
-        if not code and not self.alert:
-            return None
-        words = [STATUS_ERRORS.get(code, f"error {code}")] if code else []
-        if self.alert:
-            words.append("hardware alert")
-        return ", ".join(words)
-
-
 def hardware_error_text(bits: int) -> list[str]:
     return [name for bit, name in HARDWARE_ERRORS.items() if bits >> bit & 1]
 
 
-_HEADS: dict[tuple[int, int], tuple[bytes, int]] = {}  # (ID, data length) → see _status_head
-
-
-def _status_head(device_id: int, length: int) -> tuple[bytes, int]:
-    """The first 8 bytes of a status packet from ``device_id`` with ``length`` bytes of data
-    (nothing stuffed), and their CRC: the same for every reply of a sync loop, so built once
-    (for the first few thousand kinds) and the CRC of each reply goes on from there."""
-    head = _HEADS.get((device_id, length))
-    if head is None:
-        size = length + 4  # INST, ERR, data, CRC
-        prefix = HEADER + bytes((device_id, size & 0xFF, size >> 8, STATUS))
-        head = (prefix, crc16(prefix))
-        if len(_HEADS) < 4096:
-            _HEADS[device_id, length] = head
-    return head
-
-
-def status(device_id: int, error: int = 0, params: bytes = b"") -> bytes:
-    """The emulator's side: a status packet (as ``packet`` with STATUS builds it; a bus
-    answers a sync read of N servos with N of them, so the common case goes faster)."""
-    body = bytes((error,)) + params
-    if not (0 <= device_id <= MAX_ID or device_id == BROADCAST_ID) or b"\xff\xff\xfd" in body:
-        return packet(device_id, STATUS, body)
-    head, crc = _status_head(device_id, len(params))
-    crc = crc16(body, crc)
-    return head + body + bytes((crc & 0xFF, crc >> 8))
-
-
-class PacketReader:
-    """Finds packets in a byte stream: ``feed(data)`` returns (id, instruction, body) tuples
-    whose CRC checks; a bad CRC raises ProtocolError (the bytes are dropped)."""
-
-    def __init__(self) -> None:
-        self._buf = bytearray()
-
-    def feed(self, data: bytes) -> list[tuple[int, int, bytes]]:
-        self._buf += data
-        out = []
-        while True:
-            start = self._buf.find(HEADER)
-            if start < 0:
-                del self._buf[: max(0, len(self._buf) - 3)]  # keep a possible partial header
-                return out
-            del self._buf[:start]
-            if len(self._buf) < 7:
-                return out
-            length = self._buf[5] | (self._buf[6] << 8)
-            total = 7 + length
-            if length < 3:
-                del self._buf[:4]
-                raise ProtocolError(f"packet length {length} is too short")
-            if len(self._buf) < total:
-                return out
-            raw = bytes(self._buf[:total])
-            del self._buf[:total]
-            crc = raw[-2] | (raw[-1] << 8)
-            if crc16(raw[:-2]) != crc:
-                raise ProtocolError(f"CRC mismatch from ID {raw[4]}: got {crc:#06x}, "
-                                    f"expected {crc16(raw[:-2]):#06x}")
-            body = unstuff(raw[7:-2])
-            out.append((raw[4], body[0], body[1:]))
-
-    def reset(self) -> None:
-        self._buf.clear()
-
-
-def decode_status(device_id: int, instruction: int, body: bytes) -> Status:
-    if instruction != STATUS:
-        raise ProtocolError(f"expected a status packet from ID {device_id}, got instruction "
-                            f"{instruction:#04x}")
-    if not body:
-        raise ProtocolError(f"status packet from ID {device_id} has no error byte")
-    return Status(device_id, body[0], bytes(body[1:]))
-
-
-def status_at(data: bytes, offset: int, length: int, device_id: int) -> tuple | bool | None:
-    """The common case of a sync read reply — the expected servo, in order, nothing stuffed
-    — read in place: ``(id, error, data)``; False for a bad CRC; None when the bytes do not
-    have that shape."""
-    end = offset + 11 + length
-    head, crc = _status_head(device_id, length)
-    if len(data) < end or not data.startswith(head, offset):
-        return None
-    if crc16(data, crc, offset + 8, end - 2) != data[end - 2] | data[end - 1] << 8:
-        return False
-    return device_id, data[offset + 8], data[offset + 9:end - 2]
-
-
-class SyncReplies:
-    """The replies to one sync read, checked as their bytes arrive: ``feed`` the bytes so far
-    while later replies are still on the wire, then ``result`` once all are in (or the time
-    is up). The common case goes by offsets; anything else by ``split_statuses``."""
-
-    def __init__(self, length: int, ids: list[int]) -> None:
-        self.length, self.ids, self.size = length, ids, 11 + length
-        self.found: list = []  # (id, error, data), or False for a bad CRC
-        self.in_shape = True
-
-    def feed(self, data: bytes) -> None:
-        found, ids, size, length = self.found, self.ids, self.size, self.length
-        k, whole = len(found), min(len(data) // size, len(ids))
-        while k < whole and self.in_shape:
-            reply = status_at(data, k * size, length, ids[k])
-            if reply is None:
-                self.in_shape = False
-            else:
-                found.append(reply)
-                k += 1
-
-    def result(self, data: bytes) -> list[tuple[int, int, bytes]]:
-        self.feed(data)
-        if self.in_shape and len(self.found) == len(self.ids):
-            return [r for r in self.found if r]
-        return split_statuses(data)
-
-
-def split_statuses(data: bytes) -> list[tuple[int, int, bytes]]:
-    """Status packets in whatever shape they came (some missing, stuffed, out of order):
-    ``(id, error, data)`` per valid one, packet by packet, so one bad CRC costs only its
-    own reply."""
-    reader, out, start = PacketReader(), [], 0
-    while True:
-        end = data.find(HEADER, start + 1)
-        try:
-            found = reader.feed(data[start:] if end < 0 else data[start:end])
-        except ProtocolError:
-            found = []
-        out += [(i, body[0], bytes(body[1:])) for i, inst, body in found
-                if inst == STATUS and body]
-        if end < 0:
-            return out
-        start = end
-
-
-def fast_sync_status(blocks: list[tuple[int, int, bytes]]) -> bytes:
-    """The emulator's side of a Fast Sync Read: one status packet from ID 0xFE holding
-    [ERR, ID, data, CRC] per servo, stuffed as every status packet is. Each inner block's
-    CRC is that of the unstuffed packet up to the block's end (unverified: dynamixel-sdk
-    checks only the packet's own, the last one, over the stuffed packet as always)."""
-    body = bytearray([STATUS])
-    ends = []
-    for error, device_id, data in blocks:
-        body += bytes([error, device_id]) + data + b"\0\0"
-        ends.append(len(body) - 2)
-    head = HEADER + bytes([BROADCAST_ID])
-    for end in ends[:-1]:
-        prefix = head + struct.pack("<H", len(body)) + bytes(body[:end])
-        body[end:end + 2] = struct.pack("<H", crc16(prefix))
-    stuffed = stuff(bytes(body[:-2]))
-    packet = head + struct.pack("<H", len(stuffed) + 2) + stuffed
-    return packet + struct.pack("<H", crc16(packet))
-
-
-def split_fast_sync(data: bytes, length: int, ids: list[int]) -> list[tuple[int, int, bytes]]:
-    """The reply to a Fast Sync Read as ``(id, error, data)`` per servo; nothing when the
-    packet does not check."""
-    try:
-        found = PacketReader().feed(data)
-        if not found:
-            return []
-        blocks = decode_fast_sync(decode_status(*found[0]), length, ids)
-    except ProtocolError:
-        return []
-    return [(i, error, block) for i, (error, block) in blocks.items()]
-
-
-def decode_fast_sync(status_: Status, length: int, ids: list[int]) -> dict[int, tuple[int, bytes]]:
-    """A Fast Sync Read reply: one status (ID 0xFE) with [ERR, ID, data, CRC] per servo."""
-    out: dict[int, tuple[int, bytes]] = {}
-    data = status_.error.to_bytes(1, "little") + status_.params
-    stride = length + 4
-    for k, expected in enumerate(ids):
-        block = data[k * stride:(k + 1) * stride]
-        if len(block) < length + 2:
-            break
-        if block[1] != expected:
-            raise ProtocolError(f"fast sync read: block {k} is from ID {block[1]}, "
-                                f"expected {expected}")
-        out[expected] = (block[0], bytes(block[2:2 + length]))
-    return out
+def session(role: str = HOST) -> Session:
+    """The conversation on a Protocol 2.0 bus, as the driver (``HOST``) or the emulated
+    servos (``DEVICE``) hold it."""
+    return Session(FRAMES, INSTRUCTION_SET, role)

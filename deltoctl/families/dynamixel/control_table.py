@@ -9,31 +9,17 @@ items (addresses below 64) are writable only while Torque Enable is 0.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+
+from deltoctl.servo import items
 
 
 @dataclass(frozen=True)
-class Item:
-    address: int
-    size: int
-    name: str
-    access: str = "RW"  # "R" or "RW"
-    default: int = 0
-    signed: bool = False
-    low: int | None = None  # the documented range (None: only the size's)
-    high: int | None = None
-    # a safety setting (a limit, what an error does, where zero is, how the servo moves):
-    # `config restore` writes it only when named with --allow
-    safety: bool = False
+class Item(items.Item):
+    """An X-series item (the kit's, little-endian, two's complement where signed)."""
 
     @property
     def eeprom(self) -> bool:
         return self.address < 64
-
-    @property
-    def key(self) -> str:
-        """The name --allow takes: max-position-limit."""
-        return self.name.lower().replace(" ", "-")
 
 
 XL430_W250 = 1060
@@ -99,7 +85,7 @@ BAUD_RATES = {0: 9600, 1: 57600, 2: 115200, 3: 1_000_000, 4: 2_000_000, 5: 3_000
 
 
 def item_at(address: int, table: tuple[Item, ...] = XL430) -> Item | None:
-    return next((i for i in table if i.address <= address < i.address + i.size), None)
+    return items.item_at(address, table)  # type: ignore[return-value]
 
 
 def item_named(name: str, table: tuple[Item, ...] = XL430, model: str = "") -> Item:
@@ -146,30 +132,3 @@ READINGS = frozenset({
 # servo (the profile addresses it by ID at the bus's rate); `register set` changes them
 BUS_ITEMS = frozenset({"ID", "Baud Rate", "Protocol Type", "Status Return Level"})
 OPERATING_MODES = {1: "velocity", 3: "position", 4: "extended position", 16: "PWM"}
-
-
-def config_rules() -> dict[str, tuple[int | None, int | None, str | None]]:
-    """For `config restore`: each item's documented range over every model (the driver
-    checks each servo's own model's before writing), and the --allow that a safety setting
-    needs to be written (None for the others)."""
-    from deltoctl.families.dynamixel.models import MODELS
-
-    rules: dict[str, tuple[int | None, int | None, str | None]] = {}
-    for model in MODELS:
-        for i in model.table:
-            low, high, _ = rules.get(i.name, (i.low, i.high, None))
-            rules[i.name] = (_widest(low, i.low, min), _widest(high, i.high, max),
-                             i.key if i.safety else None)
-    return rules
-
-
-def _widest(a: int | None, b: int | None, pick: Any) -> int | None:
-    return None if a is None or b is None else pick(a, b)
-
-
-def item_names() -> list[str]:
-    """Item names as the register verbs take them (return_delay_time), of every model."""
-    from deltoctl.families.dynamixel.models import MODELS
-
-    names = dict.fromkeys(i.name.lower().replace(" ", "_") for m in MODELS for i in m.table)
-    return list(names)

@@ -1,20 +1,20 @@
 """A Dynamixel Protocol 2.0 bus: ping and identify the profile's servos, register access with
 retries, and the MH5's sync loops — present load/velocity/position read (126, 10), voltage and
 temperature read (144, 3), profile/goal write (108, 12), torque write (64) — each at its own
-rate (the block's ``<loop>_rate`` params) with its own communication statistics."""
+rate (the block's ``<loop>_rate`` params) with its own communication statistics. The wire is
+the servo kit's: the host session matches the replies, the serial link tries and reopens by
+the exchange policy, the sync-read scheduler runs the loops."""
 
 from __future__ import annotations
 
-import contextlib
-import os
 import struct
-import time
+from dataclasses import replace
 from typing import Any
 
-from deltoctl import trace
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
+from deltoctl.core.exchange import ExchangePolicy
 from deltoctl.core.loop import CommLoop
-from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, ProtocolError, Refused
+from deltoctl.errors import DeviceError, DeviceFault, InvalidInput, NoAnswer, Refused
 from deltoctl.families.dynamixel import codec, parse_bus_url
 from deltoctl.families.dynamixel.control_table import (
     BAUD_RATES,
@@ -24,17 +24,21 @@ from deltoctl.families.dynamixel.control_table import (
 )
 from deltoctl.families.dynamixel.models import Model, by_number, expected_model, label
 from deltoctl.families.dynamixel.plugins import gpio_readings, servo_ids
+from deltoctl.servo.frames import Reply
+from deltoctl.servo.serial_io import SerialLink
+from deltoctl.servo.sync_loops import SyncLoops, SyncRead
 
 RAD_PER_RAW = 0.001533980787886  # 2π/4096
 CENTER = 2047
 RAD_S_PER_RAW = 0.023980823922402  # 0.229 rpm
 DRIVE_MODE = BY_NAME["Drive Mode"]
+MOVING = BY_NAME["Moving"]
 PVL = struct.Struct("<hii")  # Present Load, Velocity, Position (126, 10 bytes)
 LOAD_SCALE = 0.0014
-RETRIES = 3
-REGISTER_TRIES = 5  # as the MH5's register helpers
+# 3 tries of 100 ms; a lost port reopened once a second
+POLICY = ExchangePolicy(tries=3, timeout=0.1, reopen_period=1.0)
+REGISTER_POLICY = replace(POLICY, tries=5)  # as the MH5's register helpers
 SCAN_BAUDS = sorted(BAUD_RATES.values(), key=lambda b: (b < 57600, b))  # 9600 last: slowest
-REOPEN_PERIOD = 1.0  # s between attempts to reopen a lost port
 NAN = float("nan")
 LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}  # default Hz
 
@@ -42,7 +46,7 @@ LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}
 def refused_rates(url: str, bauds: list[int]) -> dict[int, str]:
     """The rates of ``bauds`` the bus's adapter cannot set (its driver's), each with why:
     a scan leaves them out rather than fail in the middle."""
-    from deltoctl.transport.adapters import adapter_of_target
+    from deltoctl.transport.serial_port import adapter_of_target
 
     adapter = adapter_of_target(url)
     why = {b: adapter.refuses(b) for b in bauds} if adapter is not None else {}
@@ -62,22 +66,17 @@ class DynamixelDriver(Driver):
         self.joints = servo_ids(block.profile, hw)
         # dynamixel_hardware_interface's servo gpios: their Present ... states, by servo
         self.gpio_states = gpio_readings(block.profile, hw)
-        self.port: Any = None
-        self.reader = codec.PacketReader()
+        self.session = codec.session()
+        self.link = SerialLink(self.url, POLICY, self.stats)
         self.present: dict[int, tuple[int, int]] = {}  # id → (model, firmware)
         self.expected = {i: expected_model(hw.params, j.params, j.name)
                          for i, j in self.joints.items()}
         self.allow_model_mismatch = block.allow_model_mismatch
         self.torque_enabled: set[int] = set()
         self.moving: set[int] = set()  # servos sent a goal they may not have reached
-        self._requests: dict[tuple, bytes] = {}  # sync read instructions, built once
         # Fast Sync Read (XL430 firmware 45 and later) for the reader loops, when the block
         # says fast_sync_read: true
         self.fast = str(hw.params.get("fast_sync_read", "false")).lower() in ("1", "true", "yes")
-        self._poll: Any = None
-        self._stale = False
-        self._inflight: tuple[int, list[int], Any] | None = None  # a sync read sent
-        self._retry_at = 0.0  # when a lost port is next reopened (0: not lost)
         self._followed: dict[str, tuple[float, float]] = {}  # replayed goals and speeds
         self._units: dict[int, float | None] | None = None  # Present Current's A per step
         self.loops = {}
@@ -88,121 +87,63 @@ class DynamixelDriver(Driver):
                 raise InvalidInput(f"{hw.name}: {name}_rate must be a number (Hz)") from None
             # writers send what a verb commands, when it commands it: never held back
             self.loops[name] = CommLoop(f"{hw.name}_{name}", rate if "reader" in name else 0.0)
+        self.sync = SyncLoops(self.link, self.session,
+                              codec.FAST_SYNC_READ if self.fast else codec.SYNC_READ, self._lost)
+        # the slow loop's exchange in full, then the fast loop's, overlapped with other buses'
+        self.sync.add(SyncRead(self.loops["tv_reader"], 144, 3, self._take_voltage_temperature))
+        self.sync.add(SyncRead(self.loops["pvl_reader"], 126, 10, self._take_pvl))
 
     def comm_loops(self) -> list[CommLoop]:
         return list(self.loops.values())
 
     # -- wire ------------------------------------------------------------------------------------
-    def _send(self, packet: bytes) -> None:
-        """Write an instruction; bytes left over from an exchange that went wrong are dropped
-        first."""
-        assert self.port is not None
-        if self._stale:
-            self.port.reset_input_buffer()
-            self._stale = False
-        if self._poll is None:  # no file descriptor (not POSIX): pyserial's own calls
-            self.port.write(packet)
-            return
-        view = memoryview(packet)
-        while view:
-            view = view[os.write(self.port.fd, view):]
-
-    def _collect(self, expected: int, timeout: float = 0.1,
-                 on_data: Any = None) -> bytes:
-        """The hot path of the sync loops: take reply bytes as they come until ``expected``
-        are in or the timeout passes; ``on_data(buffer)`` sees the bytes so far after each
-        read, so replies are checked while later ones are still on the wire."""
-        if self._poll is None:
-            data = self.port.read(expected)
-        else:
-            fd = self.port.fd
-            data = b""
-            deadline = time.perf_counter() + timeout
-            while len(data) < expected:
-                left = deadline - time.perf_counter()
-                if left <= 0 or not self._poll.poll(left * 1000):
-                    break
-                data += os.read(fd, 4096)
-                if on_data is not None:
-                    on_data(data)
-        self._stale = len(data) != expected
-        return data
-
-    def _exchange(self, packet: bytes, replies: int, timeout: float = 0.1) -> list[codec.Status]:
-        import time
-
-        assert self.port is not None
-        self.port.reset_input_buffer()
-        self.reader.reset()
-        self.port.write(packet)
-        got: list[codec.Status] = []
-        deadline = time.monotonic() + timeout
-        while len(got) < replies and time.monotonic() < deadline:
-            data = self.port.read(self.port.in_waiting or 1)
-            if data:
-                got += [codec.decode_status(*p) for p in self.reader.feed(data)]
-        return got
+    @property
+    def port(self) -> Any:
+        """The bus's serial port (None while it is lost)."""
+        return self.link.port
 
     def ping(self, device_id: int) -> tuple[int, int] | None:
-        for _ in range(RETRIES):
-            self.stats["packets"] += 1
-            try:
-                replies = self._exchange(codec.ping(device_id), 1)
-            except ProtocolError:
-                replies = []
-            if replies and replies[0].id == device_id and len(replies[0].params) >= 3:
-                model, firmware = struct.unpack_from("<HB", replies[0].params)
-                return model, firmware
-            self.stats["errors"] += 1
-        return None
+        """(model number, firmware) of a servo, or None when it does not answer."""
+        try:
+            _, _, data = self.link.request(self.session, device_id, codec.PING, b"",
+                                           f"ping servo {device_id} on {self.url}")
+        except NoAnswer:
+            return None
+        model, firmware = struct.unpack_from("<HB", data)
+        return model, firmware
 
     # -- registers -------------------------------------------------------------------------------
-    def _request(self, device_id: int, packet: bytes, what: str) -> codec.Status:
+    def _request(self, device_id: int, instruction: int, params: bytes, what: str) -> Reply:
         """One instruction and its status, tried up to 5 times while no valid reply comes;
-        a status with an error is the servo's answer, not retried."""
-        for _ in range(REGISTER_TRIES):
-            self.stats["packets"] += 1
-            try:
-                replies = self._exchange(packet, 1)
-            except ProtocolError:
-                replies = []
-            if replies and replies[0].id == device_id:
-                status = replies[0]
-                if status.error & 0x7F:
-                    raise DeviceError(f"servo {device_id} refused to {what}: "
-                                      f"{status.error_text()}")
-                return status
-            self.stats["errors"] += 1
-        raise DeviceError(f"no valid reply from servo {device_id} on {self.url} to {what} "
-                          f"({REGISTER_TRIES} tries)")
+        a status with an error is the servo's answer (DeviceFault), not tried again."""
+        reply = self.link.request(self.session, device_id, instruction, params,
+                                  f"{what} from servo {device_id} on {self.url}",
+                                  REGISTER_POLICY)
+        if reply[1] & 0x7F:
+            raise DeviceFault(f"servo {device_id} refused to {what}: "
+                              f"{codec.Status(*reply).error_text()}", code=reply[1])
+        return reply
 
     def read_table(self, device_id: int, address: int = 0, length: int = TABLE_SIZE) -> bytes:
-        status = self._request(device_id, codec.read(device_id, address, length),
-                               f"read {length} bytes at {address}")
-        if len(status.params) != length:
-            raise ProtocolError(f"servo {device_id} sent {len(status.params)} bytes, not "
-                                f"{length}")
-        return status.params
+        return self._request(device_id, codec.READ, codec.read_params(address, length),
+                             f"read {length} bytes at {address}")[2]
 
     def read_register(self, device_id: int, item: Item) -> int:
-        data = self.read_table(device_id, item.address, item.size)
-        return int.from_bytes(data, "little", signed=item.signed)
+        return item.decode(self.read_table(device_id, item.address, item.size))
 
     def write_register_item(self, device_id: int, item: Item, value: int) -> None:
         try:
-            data = value.to_bytes(item.size, "little", signed=item.signed)
+            data = item.encode(value)
         except OverflowError:
             raise InvalidInput(f"{value} does not fit {item.name} ({item.size} byte(s))") \
                 from None
         hint = " (EEPROM items need torque off)" if item.eeprom else ""
-        self._request(device_id, codec.write(device_id, item.address, data),
+        self._request(device_id, codec.WRITE, codec.write_params(item.address, data),
                       f"write {item.name}{hint}")
 
     # -- lifecycle -------------------------------------------------------------------------------
     def configure(self) -> None:
-        from deltoctl.transport.serial_port import open_serial
-
-        self._open(open_serial(self.url))
+        self.link.open()
         for device_id in self.joints:
             found = self.ping(device_id)
             if found is not None:
@@ -251,75 +192,30 @@ class DynamixelDriver(Driver):
         """One ping of the first servo: what ``connect`` times."""
         self.ping(next(iter(self.present)))
 
-    def _open(self, port: Any) -> None:
-        self.port = port
-        if hasattr(port, "fd") and not trace.PACKETS:  # traced: through the port's calls
-            import select
-
-            self._poll = select.poll()
-            self._poll.register(port.fd, select.POLLIN)
-
     def _lost(self, exc: Exception) -> None:
         """The port went away (an adapter unplugged): the bus reads as lost, and is reopened
         once a second; a recording goes on meanwhile."""
-        import time
-
         if self.connected:
             self.warnings.append(f"{self.hw.name}: {self.url} lost ({exc})")
         self.connected = False
-        self.stats["errors"] += 1
-        self._inflight = None
-        self._retry_at = time.monotonic() + REOPEN_PERIOD
-        with contextlib.suppress(Exception):
-            self.port.close()
-        self.port = None
-        self._poll = None
-
-    def _reopen(self) -> None:
-        import time
-
-        from deltoctl.transport.serial_port import open_serial
-
-        if time.monotonic() < self._retry_at:
-            return
-        self._retry_at = time.monotonic() + REOPEN_PERIOD
-        try:
-            self._open(open_serial(self.url))
-        except DeltoctlError:
-            return
-        self._stale, self.connected = True, True
-        self.stats["reconnects"] += 1
+        self.link.lost()
 
     def start_read(self) -> None:
         """The slow loop's exchange when due, then the fast loop's sync read sent; ``read``
         takes its replies (the other bus sends its own meanwhile)."""
-        if self.port is None and self._retry_at:
-            self._reopen()
-        if self._inflight is not None or self.port is None:
-            return
-        ids = list(self.present)
-        try:
-            if self.loops["tv_reader"].due():
-                self._read_voltage_temperature(ids)
-            if self.loops["pvl_reader"].due():
-                self._inflight = (10, ids, self.loops["pvl_reader"])
-                self._send(self._sync_request(126, 10, ids))
-        except OSError as exc:  # pyserial's errors are OSErrors too
-            self._lost(exc)
+        if self.port is None and self.link.reopen():
+            self.connected = True
+        self.sync.start(list(self.present))
 
     def read(self) -> dict[str, float]:
-        if self._inflight is None:
+        if not self.sync.pending:
             self.start_read()
-        if self._inflight is None:
-            return self.values
-        length, ids, loop = self._inflight
-        self._inflight = None
+        self.sync.finish()
+        return self.values
+
+    def _take_pvl(self, replies: list[Reply]) -> None:
+        """Present Load (or Current), Velocity and Position (126, 10 bytes)."""
         values = self.values
-        try:
-            replies = self._sync_replies(length, ids, loop)
-        except OSError as exc:
-            self._lost(exc)
-            return values
         for device_id, _, data in replies:
             joint = self.joints[device_id]
             load, velocity, position = PVL.unpack(data)
@@ -336,7 +232,6 @@ class DynamixelDriver(Driver):
                     "Present Position": (position - CENTER) * RAD_PER_RAW,
                     "Present Velocity": velocity * RAD_S_PER_RAW,
                     "Present Current" if unit else "Present Load": load * (unit or 0.1)})
-        return values
 
     def _servo_states(self, states: dict[str, str], readings: dict[str, float]) -> None:
         """A servo gpio's states, as the servo reports them: rad, rad/s, A, % of load, V, °C
@@ -355,39 +250,23 @@ class DynamixelDriver(Driver):
             units = self._units = {i: _amps_per_step(m) for i, (m, _) in self.present.items()}
         return units
 
-    def _sync_request(self, address: int, length: int, ids: list[int]) -> bytes:
-        key = (address, length, tuple(ids))
-        packet = self._requests.get(key)
-        if packet is None:
-            packet = self._requests[key] = codec.sync_read(address, length, ids, self.fast)
-        return packet
-
-    def _sync_read(self, address: int, length: int, ids: list[int],
-                   loop: CommLoop | None = None) -> list[tuple[int, int, bytes]]:
+    def _sync_read(self, address: int, length: int, ids: list[int]) -> list[Reply]:
         """One sync read (or Fast Sync Read): ``(id, error, data)`` per valid reply; a missing
         or corrupted reply counts as an error, never raises."""
-        self._send(self._sync_request(address, length, ids))
-        return self._sync_replies(length, ids, loop)
+        return self.sync.read(address, length, ids)
 
-    def _sync_replies(self, length: int, ids: list[int],
-                      loop: CommLoop | None) -> list[tuple[int, int, bytes]]:
+    def bulk_read(self, reads: list[tuple[int, int, int]]) -> list[Reply]:
+        """One Bulk Read of (ID, address, length) each: ``(id, error, data)`` per valid
+        reply."""
         self.stats["packets"] += 1
-        if self.fast:  # one status packet for all: 7 bytes less per servo on the wire
-            data = self._collect(8 + len(ids) * (length + 4))
-            replies = codec.split_fast_sync(data, length, ids)
-        else:
-            check = codec.SyncReplies(length, ids)
-            replies = check.result(self._collect(len(ids) * (11 + length),
-                                                 on_data=check.feed))
-        ok = len(replies) == len(ids)
-        self.stats["errors"] += not ok
-        if loop is not None:
-            loop.count(ok)
-        return [r for r in replies if r[0] in self.joints and len(r[2]) == length]
+        done = self.link.exchange(self.session, codec.BROADCAST_ID, codec.BULK_READ,
+                                  codec.bulk_read_params(reads))
+        self.stats["errors"] += not done.complete
+        return done.replies
 
-    def _read_voltage_temperature(self, ids: list[int]) -> None:
+    def _take_voltage_temperature(self, replies: list[Reply]) -> None:
         """The slow loop: Present Input Voltage (144, 0.1 V) and Temperature (146, °C)."""
-        for device_id, _, data in self._sync_read(144, 3, ids, self.loops["tv_reader"]):
+        for device_id, _, data in replies:
             name = self.joints[device_id].name
             voltage, temperature = struct.unpack("<Hb", data)
             self.values[f"{name}/voltage"] = voltage / 10.0
@@ -399,12 +278,8 @@ class DynamixelDriver(Driver):
 
     def _broadcast_ping(self, timeout: float) -> dict[int, int]:
         """ID → model number of every servo that answers a broadcast ping."""
-        try:
-            replies = self._exchange(codec.ping(), 253, timeout=timeout)
-        except ProtocolError:
-            replies = []
-        return {st.id: struct.unpack_from("<HB", st.params)[0] for st in replies
-                if len(st.params) >= 3}
+        done = self.link.exchange(self.session, codec.BROADCAST_ID, codec.PING, b"", timeout)
+        return {i: struct.unpack_from("<H", data)[0] for i, _, data in done.replies}
 
     def detect(self) -> dict:
         """Broadcast ping at the bus's rate; when a servo is missing, broadcast pings at
@@ -431,11 +306,10 @@ class DynamixelDriver(Driver):
         wrong = sorted(i for i in set(found) & set(expected)
                        if expected[i] is not None and found[i] != expected[i])
         name = {i: j.name for i, j in self.joints.items()}
-        checks = [{"what": f"{self.hw.name}: servos", "profile": sorted(expected),
-                   "device": sorted(found),
-                   "match": not (missing or unexpected or wrong)}]
-        checks += [{"what": f"{name.get(i, i)} (ID {i}) baud rate", "profile": self.port.baudrate,
-                    "device": baud, "match": False} for i, baud in sorted(elsewhere.items())]
+        checks = [self._servo_check(i, name.get(i), model, found.get(i), elsewhere.get(i))
+                  for i, model in sorted(expected.items())]
+        checks += [{"what": f"ID {i}", "profile": "no servo", "device": label(found[i]),
+                    "match": False} for i in unexpected]
         summary = (f"{self.hw.name}: {len(found)} servos answer ({len(missing)} missing, "
                    f"{len(unexpected)} unexpected)")
         if elsewhere:
@@ -448,6 +322,18 @@ class DynamixelDriver(Driver):
                 "unscanned": {str(b): why for b, why in unscanned.items()},
                 "checks": checks, "summary": summary}
 
+    def _servo_check(self, servo_id: int, joint: str | None, model: int | None,
+                     answer: int | None, baud: int | None) -> dict:
+        """A servo the profile declares, as the bus answers for it: its model, no answer, or
+        an answer at another baud rate only (``missing``: not at the bus's rate)."""
+        device = "no answer" if answer is None else label(answer)
+        if baud is not None:
+            device = f"found at {baud} baud, not {self.port.baudrate}"
+        return {"what": f"{joint or 'servo'} (ID {servo_id})", "part": joint,
+                "profile": "a servo" if model is None else label(model), "device": device,
+                "match": answer is not None and model in (None, answer),
+                "missing": answer is None}
+
     def send_goals(self, goals: dict[str, float], seconds: float) -> None:
         """Torque on, then a profile to each goal through the PV writer (108, 12):
         acceleration 0, profile velocity, goal position. Drive Mode is set to a time-based
@@ -459,7 +345,7 @@ class DynamixelDriver(Driver):
         ids = {by_name[name]: rad for name, rad in goals.items() if name in by_name}
         if not ids:
             return
-        self.port.write(codec.sync_write(10, 1, {
+        self.link.write(codec.sync_write(10, 1, {
             i: bytes([5 if self.joints[i].inverse else 4]) for i in ids}))
         modes = {i: self.read_register(i, DRIVE_MODE) for i in ids}
         reversed_wrong = [self.joints[i].name for i, mode in modes.items()
@@ -480,8 +366,8 @@ class DynamixelDriver(Driver):
             raw = round((rad - joint.offset) / RAD_PER_RAW + CENTER)
             data[i] = struct.pack("<IIi", 0, profile, raw)
         self.moving.update(ids)
-        self.port.write(codec.sync_write(108, 12, data))
-        self.port.flush()
+        self.link.write(codec.sync_write(108, 12, data))
+        self.link.flush()
         self.loops["pv_writer"].count(True)
         self.stats["packets"] += 2
 
@@ -490,12 +376,12 @@ class DynamixelDriver(Driver):
         ids = {i: j.name for i, j in self.joints.items() if j.name in joints and i in self.present}
         if ids:
             self._torque(list(ids), on)
-            self.port.flush()  # a sync write has no reply: be sure it left before returning
+            self.link.flush()  # a sync write has no reply: be sure it left before returning
         return list(ids.values())
 
     def _torque(self, ids: list[int], on: bool) -> None:
         """The torque writer (64, 1)."""
-        self.port.write(codec.sync_write(64, 1, {i: bytes([int(on)]) for i in ids}))
+        self.link.write(codec.sync_write(64, 1, {i: bytes([int(on)]) for i in ids}))
         self.loops["t_writer"].count(True)
         self.stats["packets"] += 1
         if on:
@@ -509,11 +395,8 @@ class DynamixelDriver(Driver):
         for i, joint in self.joints.items():
             if joint.name in joints and i in self.present:
                 self.stats["packets"] += 1
-                try:
-                    replies = self._exchange(codec.reboot(i), 1, timeout=0.5)
-                except ProtocolError:
-                    replies = []
-                if replies and replies[0].error == 0:
+                answer = self.link.exchange(self.session, i, codec.REBOOT, b"", timeout=0.5)
+                if answer.replies and answer.replies[0][1] == 0:
                     done.append(joint.name)
                 else:
                     self.stats["errors"] += 1
@@ -522,7 +405,8 @@ class DynamixelDriver(Driver):
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:
         """A time profile to each goal (the servos run their own position loop); returns once
-        all joints are within tolerance, the timeout passes or the System halts the move."""
+        every servo says it stopped (Moving, 122, is 0) within tolerance of its goal, the
+        timeout passes or the System halts the move."""
         import time
 
         from deltoctl.core.motion import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
@@ -543,6 +427,7 @@ class DynamixelDriver(Driver):
             hook(time.time_ns(), values, setpoints)
         start = time.monotonic()
         errors: dict[str, float] = {}
+        arrived: list[str] = []
         while time.monotonic() - start < seconds + timeout and not self.halted.is_set():
             values = self.read()
             if hook is not None:
@@ -552,12 +437,21 @@ class DynamixelDriver(Driver):
             worst = max(errors.values(), default=0.0)
             if progress:
                 progress(max(0.0, 1.0 - worst / (distance or 1.0)))
-            if worst <= tolerance:
+            still = self._stopped(list(targets))
+            arrived = [j for j, e in errors.items() if e <= tolerance and j in still]
+            if len(arrived) == len(targets):
                 self.moving.clear()
                 return MoveResult(True, time.monotonic() - start, errors, [])
             time.sleep(0.02)
         return MoveResult(False, time.monotonic() - start, errors,
-                          [j for j, e in errors.items() if e > tolerance])
+                          [j for j in targets if j not in arrived])
+
+    def _stopped(self, joints: list[str]) -> set[str]:
+        """The joints whose servo says its profile is done (Moving, 122, reads 0); a servo
+        that does not answer is not known to have stopped."""
+        ids = {i: c.name for i, c in self.joints.items() if c.name in joints and i in self.present}
+        replies = self._sync_read(MOVING.address, 1, list(ids)) if ids else []
+        return {ids[i] for i, error, data in replies if i in ids and data and data[0] == 0}
 
     def follow(self, setpoints: dict[str, tuple[float, float, float]]) -> None:
         """A recorded goal (position) and its profile's speed (velocity) each, sent when they
@@ -582,7 +476,7 @@ class DynamixelDriver(Driver):
         for device_id, comp in self.joints.items():
             if comp.name == joint:
                 if device_id not in self.present:
-                    raise DeviceError(f"{joint} (ID {device_id}) does not answer on {self.url}")
+                    raise NoAnswer(f"{joint} (ID {device_id}) does not answer on {self.url}")
                 return device_id
         raise InvalidInput(f"{joint!r} is not a servo joint of {self.hw.name}")
 
@@ -599,8 +493,7 @@ class DynamixelDriver(Driver):
         else:
             table = self.read_table(device_id, 0, model.table_size)
             chosen = list(model.table)
-            values = {i.name: int.from_bytes(table[i.address:i.address + i.size], "little",
-                                             signed=i.signed) for i in chosen}
+            values = {i.name: i.of_table(table) for i in chosen}
         return {"joint": joint, "id": device_id, "model": model.name, "items": [
             {"address": i.address, "item": i.name, "value": values[i.name],
              "access": ("EEPROM " if i.eeprom else "RAM ") + i.access} for i in chosen]}
@@ -643,8 +536,7 @@ class DynamixelDriver(Driver):
                 continue  # configure warned already
             model = self.model(device_id)
             table = self.read_table(device_id, 0, model.table_size)
-            values = {i.name: int.from_bytes(table[i.address:i.address + i.size], "little",
-                                             signed=i.signed) for i in model.table}
+            values = {i.name: i.of_table(table) for i in model.table}
             parts[joint.name] = {i.name: self._config_entry(i, values, model)
                                  for i in model.table}
         return parts
@@ -654,9 +546,8 @@ class DynamixelDriver(Driver):
         from deltoctl.families.dynamixel.control_table import BUS_ITEMS, READINGS
         from deltoctl.families.dynamixel.models import MODE_NAMES
 
-        value, bits = values[item.name], item.size * 8
-        low, high = ((-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if item.signed
-                     else (0, (1 << bits) - 1))
+        value = values[item.name]
+        low, high = item.span()
         entry: dict[str, Any] = {"value": value, "access": item.access,
                                  "area": "EEPROM" if item.eeprom else "RAM",
                                  "address": item.address, "min": low, "max": high}
@@ -706,8 +597,7 @@ class DynamixelDriver(Driver):
             self._write_servo(device_id, writes, device_id in locked)
             table = self.read_table(device_id, 0, self.model(device_id).table_size)
             read_back[self.joints[device_id].name] = {
-                item.name: int.from_bytes(table[item.address:item.address + item.size],
-                                          "little", signed=item.signed) for item, _ in writes}
+                item.name: item.of_table(table) for item, _ in writes}
         return read_back
 
     def _restorable(self, part: str, name: str, value: Any) -> Item:
@@ -722,7 +612,7 @@ class DynamixelDriver(Driver):
         try:  # checked before any write: a restore is refused whole, never half done
             if isinstance(value, bool):
                 raise TypeError
-            value.to_bytes(item.size, "little", signed=item.signed)
+            item.encode(value)
         except (AttributeError, OverflowError, TypeError):
             raise InvalidInput(f"{part}: {name} takes an integer of {item.size} byte(s), "
                                f"{'signed' if item.signed else 'unsigned'}, not {value!r}") \
@@ -755,19 +645,23 @@ class DynamixelDriver(Driver):
             return
         ids = sorted(self.moving)
         self.moving.clear()
-        for _ in range(RETRIES):  # the stop must get through a noisy bus
+        for _ in range(POLICY.tries):  # the stop must get through a noisy bus
             here = {i: data for i, _, data in self._sync_read(132, 4, ids)}
             if here:
-                self.port.write(codec.sync_write(116, 4, here))
-                self.port.flush()
+                self.link.write(codec.sync_write(116, 4, here))
+                self.link.flush()
             ids = [i for i in ids if i not in here]
             if not ids:
                 return
         self.warnings.append(f"{self.hw.name}: no present position from "
                              f"{', '.join(self.joints[i].name for i in ids)} to stop them at")
 
+    def make_safe(self) -> None:
+        """Every servo of the block stops where it is (goal = present position), whatever
+        this session moved; the torque stays on (an arm must not fall)."""
+        self.moving.update(self.joints)
+        self.stop()
+
     def cleanup(self) -> None:
-        if self.port is not None:
-            self.port.close()
-            self.port = None
+        self.link.close()
         self.connected = False

@@ -7,27 +7,22 @@ mode it lacks is a data range error; position mode keeps goals within the positi
 extended and current-based position do not; velocity mode turns at the goal velocity, within
 the velocity limit), moves to a goal with a time-based or velocity-based profile, reports its
 current in its own unit (or its load, without a current sensor), temperature and voltage, and
-honours Status Return Level, broadcast semantics, REG_WRITE and ACTION, reboot and factory
-reset, and answers only at its Baud Rate (the rate the host set on the pty). Faults: a missing
-servo, a corrupted CRC, no reply, a servo at another baud rate. Paced, the bus takes the wire
-time of every byte.
+honours REG_WRITE and ACTION, reboot and factory reset, and answers only at its Baud Rate (the
+rate the host set on the pty). Who answers what (Status Return Level, broadcast, sync, fast
+sync and bulk reads) is the device session's (deltoctl.servo.session), the pty and its pacing
+the kit's server (deltoctl.servo.pty_server). Faults: a missing servo, a corrupted CRC, no
+reply, a servo at another baud rate, a stalled servo (held where it is, Moving stays 1). Paced,
+the bus takes the wire time of every byte.
 """
 
 from __future__ import annotations
 
-import contextlib
-import os
 import struct
-import sys
-import termios
-import threading
 import time
-import tty
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from deltoctl.core.serving import ServeContext
-from deltoctl.errors import ProtocolError
 from deltoctl.families.dynamixel import codec
 from deltoctl.families.dynamixel.control_table import BAUD_RATES, item_at
 from deltoctl.families.dynamixel.models import (
@@ -39,15 +34,14 @@ from deltoctl.families.dynamixel.models import (
     by_number,
     expected_model,
 )
+from deltoctl.servo.pty_server import PtyServer, Replies
+from deltoctl.servo.session import Request
 
 if TYPE_CHECKING:
     from deltoctl.profile.model import Component, Hardware
 
-_SPEEDS = {getattr(termios, f"B{b}"): b for b in BAUD_RATES.values() if hasattr(termios, f"B{b}")}
 ACCESS_ERROR, DATA_LENGTH_ERROR, INSTRUCTION_ERROR, RESULT_FAIL = 7, 5, 2, 1
 DATA_RANGE_ERROR, DATA_LIMIT_ERROR = 4, 6
-PR_SET_TIMERSLACK = 29  # prctl(2)
-PRECISE_MARGIN = 0.0001  # s a paced bus spins before a byte time, its timer slack cut
 RAW_PER_REV = 4096
 RPM_PER_UNIT = 0.229
 MOVING_CURRENT_MA = 120.0  # what a servo draws while it moves (no load model)
@@ -71,17 +65,15 @@ class Servo:
         self.position = 2047.0
         self._move: tuple[float, float, float, float] | None = None  # start, goal, t0, duration
         self._turned_at = time.monotonic()  # velocity mode: when the position was last moved
+        self.stalled = False  # fault: held where it is, its goal never reached (Moving stays 1)
 
     # -- the table ---------------------------------------------------------------------------
     def get(self, name: str) -> int:
-        item = self.items[name]
-        raw = bytes(self.memory[item.address:item.address + item.size])
-        return int.from_bytes(raw, "little", signed=item.signed)
+        return self.items[name].of_table(self.memory)
 
     def set(self, name: str, value: int) -> None:
         item = self.items[name]
-        self.memory[item.address:item.address + item.size] = value.to_bytes(
-            item.size, "little", signed=item.signed)
+        self.memory[item.address:item.address + item.size] = item.encode(value)
 
     @property
     def id(self) -> int:
@@ -163,6 +155,7 @@ class Servo:
             rev_per_s = units * RPM_PER_UNIT / 60.0
             duration = distance / (rev_per_s * RAW_PER_REV)
         self._move = (self.position, goal, time.monotonic(), duration)
+        self.set("Moving", 1)  # from the goal's write until the profile ends, however short
 
     def update(self) -> None:
         now = time.monotonic()
@@ -177,14 +170,17 @@ class Servo:
             start, goal, t0, duration = self._move
             fraction = 1.0 if duration <= 0 else min(1.0, (time.monotonic() - t0) / duration)
             previous = self.position
-            self.position = start + (goal - start) * fraction
+            if self.stalled:  # held: the shaft stays, the error never closes
+                fraction, duration = min(fraction, 0.5), 0.0
+            else:
+                self.position = start + (goal - start) * fraction
             velocity = 0.0 if duration <= 0 else (goal - start) / duration  # raw/s
             self.set("Present Velocity", round(velocity * 60 / RAW_PER_REV / 0.229)
                      if fraction < 1.0 else 0)
             self.set("Moving", 1 if fraction < 1.0 else 0)
             if fraction >= 1.0:
                 self._move = None
-            self._effort(previous != self.position)
+            self._effort(self.stalled or previous != self.position)
         self.memory[self._at:self._at + 4] = round(self.position).to_bytes(4, "little",
                                                                           signed=True)
 
@@ -205,7 +201,8 @@ class BusFaults:
 
 
 class DynamixelBus:
-    """The servos on one bus: instruction packets in, the bytes of their replies out."""
+    """The servos on one bus: request bytes in (read by the bus's device session, which also
+    says who answers), the servos' statuses out."""
 
     def __init__(self, servos: list[Servo], baud: int | None = None) -> None:
         """With ``baud``, every servo's Baud Rate item is set to it and a servo answers only
@@ -214,6 +211,7 @@ class DynamixelBus:
         self.faults = BusFaults()
         self.baud = baud
         self.line_baud: int | None = None  # what the host speaks, told by the transport
+        self.session = codec.session(codec.DEVICE)
         if baud is not None:
             code = next((c for c, b in BAUD_RATES.items() if b == baud), None)
             if code is None:
@@ -229,39 +227,63 @@ class DynamixelBus:
             return None  # it hears only noise
         return servo
 
-    def _status(self, servo: Servo, error: int = 0, params: bytes = b"") -> bytes:
-        data = codec.status(servo.memory[7], error, params)
+    def _status(self, servo: Servo, error: int = 0, params: bytes = b"") -> tuple[float, bytes]:
+        """A servo's status, and its Return Delay Time (2 µs a step) before it."""
+        data = self.session.reply(servo.memory[7], error, params)
         if self.faults.corrupt_crc and servo.id in self.faults.corrupt_crc:
             data = data[:-1] + bytes([data[-1] ^ 0xFF])
-        return data
+        return servo.memory[9] * 2e-6, data
 
-    def _answers(self, servo: Servo, instruction: int) -> bool:
-        level = servo.memory[68]
-        return instruction == codec.PING or level == 2 or (level == 1 and instruction in (
-            codec.READ, codec.SYNC_READ, codec.BULK_READ))
+    def serve(self, data: bytes) -> list[tuple[int, Replies]]:
+        return [(r.size, self.handle(r.id, r.instruction, r.params))
+                for r in self.session.receive_requests(data)]
 
-    def handle(self, device_id: int, instruction: int, params: bytes) -> bytes:
+    def handle(self, device_id: int, instruction: int, params: bytes) -> Replies:
+        """One request: what the servos do, and their statuses (with their return delays)."""
         if self.faults.no_reply:
-            return b""
-        broadcast = device_id == codec.BROADCAST_ID
-        if instruction == codec.PING:
-            targets = sorted(self.servos) if broadcast else [device_id]
-            return b"".join(self._status(s, 0, struct.pack("<HB", s.get("Model Number"),
-                                                           s.get("Firmware Version")))
-                            for i in targets if (s := self._present(i)))
-        if instruction in (codec.SYNC_READ, codec.SYNC_WRITE, codec.BULK_READ,
-                           codec.BULK_WRITE, codec.FAST_SYNC_READ):
-            return self._group(instruction, params)
-        targets = list(self.servos) if broadcast else [device_id]
+            return []
+        request = Request(device_id, instruction, params, 0)
+        if instruction in (codec.PING, codec.SYNC_READ, codec.FAST_SYNC_READ, codec.BULK_READ):
+            return self._reads(request)
+        if instruction in (codec.SYNC_WRITE, codec.BULK_WRITE):
+            self._group_write(instruction, params)
+            return []
+        broadcast = request.id == codec.BROADCAST_ID
         replies = []
-        for i in targets:
+        for i in list(self.servos) if broadcast else [request.id]:
             servo = self._present(i)
             if servo is None:
                 continue
             error, data = self._single(servo, instruction, params)
-            if not broadcast and self._answers(servo, instruction):
+            if self.session.answers(request, servo.id, servo.memory[68]):
                 replies.append(self._status(servo, error, data))
-        return b"".join(replies)
+        return replies
+
+    def _reads(self, request: Request) -> Replies:
+        """A PING's and a Sync, Fast Sync or Bulk Read's: data from the servos the session
+        says are asked, in the order they answer."""
+        instruction, params = request.instruction, request.params
+        ids = self.session.addressed(request, self.servos)
+        if not ids:
+            return []
+        if instruction == codec.PING:
+            return [self._status(s, 0, struct.pack("<HB", s.get("Model Number"),
+                                                   s.get("Firmware Version")))
+                    for i in ids if (s := self._present(i))]
+        if instruction == codec.BULK_READ:
+            where = {params[k]: struct.unpack_from("<HH", params, k + 1)
+                     for k in range(0, len(params) - 4, 5)}
+        else:
+            where = dict.fromkeys(ids, struct.unpack_from("<HH", params))
+        if instruction == codec.FAST_SYNC_READ:  # every servo's data in one status packet
+            blocks = []
+            for i in ids:
+                servo = self._present(i)
+                if servo is not None:
+                    error, data = servo.read(*where[i])
+                    blocks.append((error, servo.id, data))
+            return [(0.0, codec.fast_sync_status(blocks))] if blocks else []
+        return [self._status(s, *s.read(*where[i])) for i in ids if (s := self._present(i))]
 
     def _single(self, servo: Servo, instruction: int, params: bytes) -> tuple[int, bytes]:
         if instruction == codec.READ and len(params) == 4:
@@ -290,182 +312,34 @@ class DynamixelBus:
             return (RESULT_FAIL if servo.memory[122] else 0), b""
         return INSTRUCTION_ERROR, b""
 
-    def _group(self, instruction: int, params: bytes) -> bytes:
-        replies = []
-        if instruction == codec.FAST_SYNC_READ:  # every servo's data in one status packet
-            address, length = struct.unpack_from("<HH", params)
-            blocks = []
-            for i in params[4:]:
-                servo = self._present(i)
-                if servo is not None:
-                    error, data = servo.read(address, length)
-                    blocks.append((error, servo.id, data))
-            return codec.fast_sync_status(blocks) if blocks else b""
-        if instruction in (codec.SYNC_READ, codec.SYNC_WRITE):
+    def _group_write(self, instruction: int, params: bytes) -> None:
+        """A Sync or Bulk Write: each servo named takes its data; none answers."""
+        if instruction == codec.SYNC_WRITE:
+            if len(params) < 4:
+                return
             address, length = struct.unpack_from("<HH", params)
             body = params[4:]
-            if instruction == codec.SYNC_READ:
-                for i in body:
-                    servo = self._present(i)
-                    if servo is not None:
-                        error, data = servo.read(address, length)
-                        replies.append(self._status(servo, error, data))
-            else:
-                for k in range(0, len(body), length + 1):
-                    servo = self._present(body[k])
-                    if servo is not None:
-                        servo.write(address, bytes(body[k + 1:k + 1 + length]))
-        elif instruction == codec.BULK_READ:
-            for k in range(0, len(params), 5):
-                device_id, address, length = struct.unpack_from("<BHH", params, k)
-                servo = self._present(device_id)
+            for k in range(0, len(body), length + 1):
+                servo = self._present(body[k])
                 if servo is not None:
-                    error, data = servo.read(address, length)
-                    replies.append(self._status(servo, error, data))
-        else:
-            k = 0
-            while k + 5 <= len(params):
-                device_id, address, length = struct.unpack_from("<BHH", params, k)
-                servo = self._present(device_id)
-                if servo is not None:
-                    servo.write(address, bytes(params[k + 5:k + 5 + length]))
-                k += 5 + length
-        return b"".join(replies)
-
-
-def wait_until(deadline: float, margin: float = 0.0002) -> None:
-    """Sleep to ``margin`` before the deadline, then spin: byte-time precision. The spin
-    yields the CPU at each turn, so a host on a small machine is not starved by its devices;
-    a thread whose sleeps overshoot less (``precise_timers``) can sleep closer."""
-    while True:
-        left = deadline - time.perf_counter()
-        if left <= 0:
+                    servo.write(address, bytes(body[k + 1:k + 1 + length]))
             return
-        if left > margin + 0.0001:
-            time.sleep(left - margin)
-        else:
-            os.sched_yield()
+        k = 0
+        while k + 5 <= len(params):
+            device_id, address, length = struct.unpack_from("<BHH", params, k)
+            servo = self._present(device_id)
+            if servo is not None:
+                servo.write(address, bytes(params[k + 5:k + 5 + length]))
+            k += 5 + length
 
 
-def precise_timers() -> bool:
-    """The calling thread's timer slack cut from Linux's default 50 µs to 1 ns, so that its
-    sleeps end at their time, within the wake-up latency, instead of up to 50 µs after it
-    (a sleep of ``wait_until`` then leaves its spin the margin it counts on, even on a busy
-    machine). Returns whether it took (False elsewhere than on Linux)."""
-    if not sys.platform.startswith("linux"):
-        return False
-    try:
-        import ctypes
-
-        return ctypes.CDLL(None, use_errno=True).prctl(PR_SET_TIMERSLACK, 1, 0, 0, 0) == 0
-    except (OSError, AttributeError):
-        return False
-
-
-def split_packets(data: bytes) -> list[bytes]:
-    out, k = [], 0
-    while k + 7 <= len(data):
-        end = k + 7 + (data[k + 5] | data[k + 6] << 8)
-        out.append(data[k:end])
-        k = end
-    return out
-
-
-class DynamixelPtyServer:
-    """Serves a bus on a pseudo-terminal; ``port`` is the path a serial client opens.
-
-    With ``pace``, the bus takes the time a real one would at the baud rate the host set: the
-    instruction's bytes arrive, each servo waits its Return Delay Time, and its status packet
-    leaves when its last byte would have crossed the wire (10 bits a byte). ``latency``: seconds
-    each reply is held before the host sees it, as a USB adapter's latency timer holds a short
-    packet (an FTDI's: 16 ms unless set)."""
+class DynamixelPtyServer(PtyServer):
+    """A Dynamixel bus on a pseudo-terminal (the kit's server): ``port`` is the path a serial
+    client opens; with ``pace``, the bus takes the wire time of every byte; ``latency`` holds
+    each reply as a USB adapter's latency timer does."""
 
     def __init__(self, bus: DynamixelBus, pace: bool = False, latency: float = 0.0) -> None:
-        self.bus = bus
-        self.pace = pace
-        self.latency = latency
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.master)
-        tty.setraw(self.slave)
-        self.port = os.ttyname(self.slave)
-        self._stop = threading.Event()
-        self._margin = 0.0002  # s spun before each byte time (the default timer slack's)
-        self._thread = threading.Thread(target=self._serve, name="dxl-sim", daemon=True)
-
-    def start(self) -> DynamixelPtyServer:
-        self._thread.start()
-        return self
-
-    def _serve(self) -> None:
-        import select
-
-        reader = codec.PacketReader()
-        if self.pace:
-            if precise_timers():  # this thread's: it sleeps to its byte times, spins less
-                self._margin = PRECISE_MARGIN
-            os.set_blocking(self.master, False)
-        while not self._stop.is_set():
-            data = self._spin_read() if self.pace else b""
-            if not data:
-                if not select.select([self.master], [], [], 0.1)[0]:
-                    continue
-                try:
-                    data = os.read(self.master, 4096)
-                except BlockingIOError:
-                    continue
-                except OSError:
-                    return
-            arrived = time.perf_counter()
-            if self.bus.baud is not None or self.pace:  # the rate the host set on the pty
-                self.bus.line_baud = _SPEEDS.get(termios.tcgetattr(self.master)[5])
-            try:
-                packets = reader.feed(data)
-            except ProtocolError:
-                continue  # a corrupted instruction is ignored, as a servo would
-            for device_id, instruction, params in packets:
-                reply = self.bus.handle(device_id, instruction, params)
-                if self.pace and self.bus.line_baud:
-                    self._paced(arrived, 10 + len(params), reply)
-                elif reply:
-                    if self.latency:
-                        time.sleep(self.latency)
-                    os.write(self.master, reply)
-
-    def _spin_read(self, spin: float = 0.002) -> bytes:
-        """Paced, the bus watches the line like a UART: no wake-up delay for the next
-        instruction within ``spin`` seconds of the last one."""
-        end = time.perf_counter() + spin
-        while time.perf_counter() < end:
-            try:
-                return os.read(self.master, 4096)
-            except BlockingIOError:
-                os.sched_yield()
-                continue
-            except OSError:
-                break
-        return b""
-
-    def _paced(self, arrived: float, sent: int, reply: bytes) -> None:
-        byte_time = 10.0 / (self.bus.line_baud or 1)
-        t = arrived + sent * byte_time  # the instruction's last byte is in
-        for packet in split_packets(reply):
-            servo = self.bus.servos.get(packet[4])
-            t += (servo.memory[9] * 2e-6 if servo else 0.0) + len(packet) * byte_time
-            wait_until(t, self._margin)
-            os.write(self.master, packet)
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=1)
-        for fd in (self.master, self.slave):
-            with contextlib.suppress(OSError):
-                os.close(fd)
-
-    def __enter__(self) -> DynamixelPtyServer:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+        super().__init__(bus, pace, name="dxl-sim", latency=latency)
 
 
 def _model_of(hw: Hardware, joint: Component) -> Model:
@@ -490,6 +364,9 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
         bus = DynamixelBus([Servo(i, model=_model_of(hw, j))
                             for i, j in servo_ids(ctx.profile, hw).items()], baud=baud)
         bus.faults.missing |= {ids[j.name] for j in ctx.named("missing", hw) if j.name in ids}
+        for joint in ctx.named("stall", hw):
+            if joint.name in ids:
+                bus.servos[ids[joint.name]].stalled = True
         for joint in ctx.named("wrong_baud", hw):
             if joint.name in ids:  # 57600 (or 115200 on a 57600 bus)
                 bus.servos[ids[joint.name]].memory[8] = 1 if baud != 57600 else 2

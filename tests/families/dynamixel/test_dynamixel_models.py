@@ -91,7 +91,7 @@ def test_every_model_reads_position_velocity_and_current_where_one_sync_read_doe
 # -- the emulator: each servo its model ------------------------------------------------------------
 
 def _write(bus: DynamixelBus, device_id: int, address: int, data: bytes) -> int:
-    reply = bus.handle(device_id, codec.WRITE, struct.pack("<H", address) + data)
+    [(_, reply)] = bus.handle(device_id, codec.WRITE, struct.pack("<H", address) + data)
     return codec.decode_status(*codec.PacketReader().feed(reply)[0]).error
 
 

@@ -14,14 +14,9 @@ import tty
 import pytest
 
 from deltoctl.families.dynamixel import codec
-from deltoctl.families.dynamixel.emulator import (
-    DynamixelBus,
-    DynamixelPtyServer,
-    Servo,
-    precise_timers,
-    wait_until,
-)
+from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
 from deltoctl.families.dynamixel.models import by_number
+from deltoctl.servo.pty_server import precise_timers, wait_until
 
 MIXED = [1020] * 5 + [1200] * 2  # five XM430-W350 and two XL330-M288
 linux = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="prctl(2) is Linux's")

@@ -169,3 +169,27 @@ def test_sdk_fast_sync_read_and_the_driver_agree(bus):
         (11, 2047), (12, 1000), (13, 2047)]
     assert values["j12/position"] == pytest.approx((1000 - 2047) * 0.001533980787886)
     assert driver.stats["errors"] == 0
+
+
+def test_a_refused_write_is_the_servo_s_fault_with_its_code_tried_once():
+    from deltoctl.errors import DeviceFault
+    from deltoctl.families.dynamixel.control_table import BY_NAME
+    from deltoctl.families.dynamixel.driver import DynamixelDriver
+    from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
+    from deltoctl.profile.model import Component, Hardware, Profile
+
+    servo = Servo(1)
+    servo.set("Torque Enable", 1)  # EEPROM is locked
+    hw = Hardware("bus", family="dynamixel", joints=[Component("joint", "j1", address=1)])
+    with DynamixelPtyServer(DynamixelBus([servo])) as server:
+        driver = DynamixelDriver(block_for(Profile("t", hardware=[hw]), hw,
+                                           f"serial://{server.port}?baud=1000000"))
+        driver.configure()
+        before = dict(driver.stats)
+        with pytest.raises(DeviceFault, match=r"refused to write Max Position Limit .*: "
+                                              r"access error") as refused:
+            driver.write_register_item(1, BY_NAME["Max Position Limit"], 3000)
+        driver.cleanup()
+    assert refused.value.code == 7
+    assert driver.stats["packets"] == before["packets"] + 1  # an answer: not tried again
+    assert driver.stats["errors"] == before["errors"]
