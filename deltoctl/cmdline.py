@@ -4,6 +4,8 @@ fleet agent judges a remote command line with the same rules."""
 
 from __future__ import annotations
 
+from typing import Any
+
 # option spellings → whether they take a value: the root command's options (cli/main.py), which
 # the fleet reads without loading the CLI; a test holds the two equal
 GLOBAL_OPTIONS: dict[str, bool] = {
@@ -80,3 +82,34 @@ def hoist_global_options(args: list[str]) -> list[str]:
                 tail.append(rest)
         i += 1
     return head + hoisted + tail
+
+
+def first_argument(args: list[str], takes_value: set[str]) -> int | None:
+    """Where the first argument stands among a command's ``args`` (after ``--``, or the
+    first word that is neither an option nor the value of one in ``takes_value``)."""
+    i = 0
+    while i < len(args):
+        arg = args[i]
+        if arg == "--":
+            return i + 1 if i + 1 < len(args) else None
+        if not arg.startswith("-") or arg == "-":
+            return i
+        i += 2 if arg in takes_value else 1
+    return None
+
+
+def given_options(ctx: Any) -> list[str]:
+    """The spellings of the options a context's command line (or environment) gave: not
+    their defaults, nor a flag given as off."""
+    from typer._click.core import ParameterSource
+
+    given: list[str] = []
+    for param in ctx.command.params:
+        if param.param_type_name != "option":
+            continue
+        source = ctx.get_parameter_source(param.name) if param.name else None
+        if source in (None, ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP):
+            continue
+        if ctx.params.get(param.name) is not False:
+            given += getattr(param, "opts", [])
+    return given

@@ -3,6 +3,8 @@ their exit code."""
 
 from __future__ import annotations
 
+from typing import Any
+
 OK = 0
 FAILED = 1
 USAGE = 2
@@ -97,3 +99,19 @@ class ProfileError(InvalidInput):
         self.source = source
         self.line = line
         self.reason = message
+
+
+PLOT_EXTRA = "pip install 'deltoctl[plot]'"
+
+
+def need_plot(module: str) -> Any:
+    """A module of the ``deltoctl[plot]`` extra (numpy, plotext, matplotlib), or one clear
+    message naming the extra."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise DeltoctlError(f"plot needs {module.split('.')[0]}, which is not installed",
+                            f"{PLOT_EXTRA} (plotext for the terminal, matplotlib for --out)") \
+            from None

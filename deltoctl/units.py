@@ -155,3 +155,12 @@ def utc_time(t_ns: int | None) -> str:
 
     stamp = datetime.fromtimestamp(t_ns / 1e9, timezone.utc)
     return stamp.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def shown_value(value: object) -> str:
+    """A configuration value as a person reads it."""
+    if value is None:
+        return "—"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 from deltoctl.errors import DeviceError, InvalidInput, ProfileError, Refused
+from deltoctl.units import shown_value
 
 if TYPE_CHECKING:
     from deltoctl.core.system import System
@@ -290,15 +291,6 @@ def same(a: Any, b: Any) -> bool:
     return type(a) is type(b) and a == b
 
 
-def show(value: Any) -> str:
-    """A value as a person reads it."""
-    if value is None:
-        return "—"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return str(value)
-
-
 def _compared(a: Value | None, b: Value | None, both_ways: bool) -> bool:
     """Whether an item held as ``a`` and ``b`` counts as a difference."""
     if (a and a.state) or (b and b.state):  # a reading or a command
@@ -438,7 +430,7 @@ def write_changes(system: System, rows: list[dict[str, Any]], allow: frozenset[s
             if same(after, row["snapshot"]):
                 row["status"] = "verified"
             else:
-                row["status"], row["note"] = "failed", f"reads back {show(after)}"
+                row["status"], row["note"] = "failed", f"reads back {shown_value(after)}"
 
 
 def refusal(refused: list[dict[str, Any]], allow: frozenset[str]) -> Refused:

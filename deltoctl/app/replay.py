@@ -34,6 +34,8 @@ from deltoctl.record.commands import (
     commanded_joints,
 )
 
+MAX_DEVIATION = 0.2  # rad or m: a replayed joint further than this from its recording stops
+
 if TYPE_CHECKING:
     from deltoctl.core.driver import Driver
     from deltoctl.core.system import System
@@ -419,11 +421,13 @@ class ReplayResult:
 
 class Deviated(Refused):
     """A replayed joint outside its limits or too far from its recording (exit 5): every
-    block was stopped; ``result`` is the replay so far."""
+    block was stopped; ``result`` is the replay so far (``report``: its comparison, once
+    made)."""
 
     def __init__(self, message: str, result: ReplayResult) -> None:
         super().__init__(message)
         self.result = result
+        self.report: dict[str, Any] | None = None
 
 
 class Track:
@@ -604,6 +608,19 @@ def check_device_targets(profile: Profile, blocks: Sequence[str],
         raise InvalidInput(f"replay --device: name the device of {', '.join(missing)} with "
                            f"-t {missing[0]}=URL (or rehearse with --sim); a replay never "
                            "takes a device from the recording or from a profile's bus URLs")
+
+
+def replay_limits(plan: ReplayPlan, tolerance: str | None,
+                  max_deviation: str | None) -> tuple[float | None, float]:
+    """``--tolerance`` and ``--max-deviation`` (``1deg``, ``2mm``, a bare number in rad or m)
+    in SI, each in the unit of every replayed joint (exit 2 otherwise); the deviation
+    MAX_DEVIATION unless given."""
+    from deltoctl.app.motion import joints_quantity
+
+    joints = plan.recorded.joints
+    limit = joints_quantity(plan.profile, joints, tolerance, "--tolerance")
+    deviation = joints_quantity(plan.profile, joints, max_deviation, "--max-deviation")
+    return limit, MAX_DEVIATION if deviation is None else deviation
 
 
 def where_to_replay(plan: ReplayPlan, device: bool, hardware: Sequence[str],

@@ -19,6 +19,10 @@ from deltoctl.core.runner import check_loop
 from deltoctl.errors import DeviceError, InvalidInput
 
 if TYPE_CHECKING:
+    from deltoctl.app.config import Snapshot
+    from deltoctl.app.motion import HomePlan
+    from deltoctl.app.replay import ReplayPlan
+    from deltoctl.app.sinks import LinkWatch
     from deltoctl.core.system import Member, System
     from deltoctl.profile.model import Profile
 
@@ -58,24 +62,55 @@ def open_robot(profile: str | Path | Profile,
                sim: bool | Mapping[str, Any] = False, hardware: Sequence[str] = (),
                allow_model_mismatch: bool = False, probe: bool = False,
                notice: Callable[[str], None] | None = None,
-               served_by: str | None = None, allow_motion: bool = True) -> Iterator[Robot]:
+               served_by: str | None = None, reuse: bool = False,
+               warn: Callable[[str], None] | None = None,
+               allow_motion: bool = True) -> Iterator[Robot]:
     """The robot of ``profile`` (a catalog name, a file, or a loaded Profile), configured and
     active, its blocks left safe and released on the way out.
 
     ``targets``: where the blocks are (``{"bus": "tcp://…"}``, ``["bus=url"]``, or one URL);
     ``sim``: start each block's simulated device first and drive it through its real
     transport (a mapping: with those faults of ``deltoctl sim serve``, e.g.
-    ``{"missing": ("head_y",)}``); ``hardware``: only these blocks; ``probe``: a bus where
-    nothing answers is still opened (detect); ``notice``: told first when a block runs on its
-    simulator because its profile asks for mock hardware; ``served_by``: the targets are
-    simulators another process serves (``deltoctl agent --sim``), said so on every block;
-    without ``allow_motion``, every move, command and actuation is refused (``Refused``)
-    before a byte is sent."""
-    from deltoctl.core.system import System, mock_blocks, select_blocks
+    ``{"missing": ("head_y",)}``); ``reuse``: with ``sim``, drive the ``deltoctl sim serve``
+    of this profile and faults that runs for this user instead, when one serves every block
+    (told to ``notice``; ``warn`` hears of a server's file that cannot be trusted);
+    ``hardware``: only these blocks; ``probe``: a bus where nothing answers is still opened
+    (detect); ``notice``: told first when a block runs on its simulator because its profile
+    asks for mock hardware; ``served_by``: the targets are simulators another process serves
+    (``deltoctl agent --sim``), said so on every block; without ``allow_motion``, every move,
+    command and actuation is refused (``Refused``) before a byte is sent."""
+    from deltoctl.errors import NotHomed
+    from deltoctl.sim import running
 
     prof = load(profile)
+    found = (running.find(prof, sim if isinstance(sim, Mapping) else {}, hardware,
+                          warn or _ignore) if sim and reuse else None)
+    if found is not None:
+        (notice or _ignore)(f"using {found.name} of {found.profile}; --sim-fresh starts one of "
+                            "its own")
+        targets, sim, served_by = [*_targets(targets), *found.targets], False, found.name
+    try:
+        with _opened(prof, _targets(targets), sim, hardware, allow_model_mismatch, probe,
+                     notice, served_by, allow_motion) as robot:
+            yield robot
+    except NotHomed as exc:
+        if sim and found is None:
+            exc.hint = running.fresh_hint(prof.name)
+        raise
+
+
+def _ignore(message: str) -> None:
+    pass
+
+
+@contextlib.contextmanager
+def _opened(prof: Profile, urls: list[str], sim: bool | Mapping[str, Any],
+            hardware: Sequence[str], allow_model_mismatch: bool, probe: bool,
+            notice: Callable[[str], None] | None, served_by: str | None,
+            allow_motion: bool = True) -> Iterator[Robot]:
+    from deltoctl.core.system import System, mock_blocks, select_blocks
+
     with contextlib.ExitStack() as stack:
-        urls = _targets(targets)
         simulated = (dict.fromkeys(hardware or [hw.name for hw in prof.hardware], "--sim")
                      if sim else mock_blocks(prof, hardware))
         if simulated:
@@ -204,6 +239,14 @@ class Robot:
         """One cycle's state of every block (a copy)."""
         return dict(self.system.read())
 
+    def block_of(self, name: str) -> str:
+        """The block a joint, sensor, GPIO or interface (``gpio/output_1``) belongs to."""
+        return self.system.member(name).name
+
+    def make_safe(self) -> None:
+        """Every block in its safe state (duty 0, torque off, stop), whatever was sent."""
+        self.system.make_safe()
+
     def link_stats(self) -> dict[str, dict[str, int]]:
         """Each block's communication statistics so far: packets, errors, reconnects."""
         return {m.name: dict(m.driver.stats) for m in self.system}
@@ -321,21 +364,38 @@ class Robot:
         return move(self.system, positions, speed, progress)
 
     def home(self, joints: Sequence[str] = (), force: bool = False,
-             velocity: float | str | None = None) -> dict[str, Any]:
-        """Home the robot's joints (or ``joints``): homing routines into their hard stops,
-        the others to the profile's home pose (at ``velocity``: ``20deg/s``, a bare number
-        in rad/s or m/s)."""
+             velocity: float | str | None = None, plan: HomePlan | None = None,
+             progress: Callable[[float], None] | None = None,
+             show: Callable[[str, str, float], None] | None = None) -> dict[str, Any]:
+        """Home the robot's joints (or ``joints``): homing routines into their hard stops
+        (``show`` follows each joint), the others to the profile's home pose (``progress``)
+        at ``velocity`` (``20deg/s``, a bare number in rad/s or m/s). ``plan``: the homing
+        planned already (``motion.plan_home``), e.g. to confirm it first."""
         from deltoctl.app.motion import home, joint_speed, plan_home
 
         self.system.check_allowed("homing")
-        hardware = [m.name for m in self.system]
-        plan = plan_home(self.profile, hardware, joints)
+        if plan is None:
+            plan = plan_home(self.profile, [m.name for m in self.system], joints)
         speed = joint_speed(self.profile, list(plan.targets), velocity, "velocity")
-        return home(self.system, plan, force, speed)
+        return home(self.system, plan, force, speed, progress, show)
+
+    def plan_jog(self, steps: Sequence[tuple[str, float | str | None]],
+                 to: float | str | None = None,
+                 velocity: float | str | None = None) -> tuple[dict[str, float], list[str]]:
+        """Each joint's target — its step (a number in rad or m, or ``5deg``, in the joint's
+        unit) from where it is now, or ``to`` — checked against the envelope at
+        ``velocity``, and each move in words (for a confirmation); nothing moves. The joints
+        are those of ``motion.jog_pairs``."""
+        from deltoctl.app.motion import jog_targets, joint_speed
+
+        targets, moves = jog_targets(self.system, steps, to)
+        self.system.check_move(targets, joint_speed(self.profile, list(targets), velocity,
+                                                    "velocity"))
+        return targets, moves
 
     def jog_targets(self, deltas: Mapping[str, float | str]) -> dict[str, float]:
         """Each joint's target ``delta`` (a number in rad or m, or a quantity such as
-        ``5deg``, in the joint's unit) from where it is now."""
+        ``5deg``, in the joint's unit) from where it is now (not checked yet)."""
         from deltoctl.app.motion import jog_targets, moving_joints
 
         moving_joints(self.profile, list(deltas))
@@ -346,21 +406,62 @@ class Robot:
         """Move joints by ``deltas`` from where they are (``max_jog_step`` bounds each)."""
         return self.move(self.jog_targets(deltas), velocity, progress)
 
+    def new_recording(self, output: Path,
+                      force: bool = False) -> contextlib.AbstractContextManager[Path]:
+        """The file a recording of moves goes to (``{serial}`` filled), created now and
+        removed again when what follows fails before writing to it."""
+        from deltoctl.app.recording import new_output
+
+        return new_output(output, self.system, force)
+
+    def recorded(self, output: Path, moves: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+        """Run ``moves`` (moves of this robot, returning their report) while their cycles'
+        states and commands go to ``output`` (for ``replay``); the report gains
+        ``recording``."""
+        from deltoctl.app.recording import recorded_moves
+
+        return recorded_moves(self.system, output, moves)
+
     # -- calibration and servos ----------------------------------------------------------------
 
     def calibrate_ft(self, samples: int = 50, force_tolerance: float = 0.3,
-                     torque_tolerance: float = 0.03,
-                     output_dir: Path | None = None) -> dict[str, Any]:
-        """Tare every F/T sensor and judge the residual (see ``deltoctl.app.calibrate``)."""
-        from deltoctl.app.calibrate import tare_ft
+                     torque_tolerance: float = 0.03, output_dir: Path | None = None,
+                     confirm: Callable[[str], None] | None = None,
+                     verify: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """Tare every F/T sensor and judge the residual (see ``deltoctl.app.calibrate``);
+        ``confirm`` is told what the tare will do first (it raises to stop); ``verify``: the
+        checks after it, in ``checks`` (the options of ``calibrate.verify_ft``: mass, sensor,
+        watch, ask, timeout, drift_limit)."""
+        from deltoctl.app.calibrate import tare_description, tare_ft, verify_ft
 
-        return tare_ft(self.system, samples, force_tolerance, torque_tolerance, output_dir)
+        if confirm is not None:
+            confirm(tare_description(self.system))
+        result = tare_ft(self.system, samples, force_tolerance, torque_tolerance, output_dir)
+        if verify is not None:
+            result["checks"] = verify_ft(self.system, result, samples=samples, **verify)
+        return result
+
+    def calibrate_imu(self, samples: int = 100, ask: Callable[[str], None] | None = None,
+                      timeout: float = 120.0, output_dir: Path | None = None,
+                      confirm: Callable[[str], None] | None = None) -> dict[str, Any]:
+        """Self-test and gravity check of every IMU; with ``ask`` (told which face to put
+        down), the six-position tumble too, saved in ``output_dir``. ``confirm`` is told
+        what will happen first (it raises to stop)."""
+        from deltoctl.app.imu_calibration import calibrate_imu, self_test_description
+
+        if confirm is not None:
+            confirm(self_test_description(self.system, ask is not None))
+        return calibrate_imu(self.system, samples, ask, timeout, output_dir)
 
     def _registers(self, joint: str) -> Any:
         m = self.system.member(joint)
         if not m.can("registers"):
             raise InvalidInput(f"{joint} is in {m.name}, which has no registers")
         return m.driver
+
+    def servo_named(self, joint: str) -> str:
+        """``head_y (ID 52)``: a joint and the address of its servo on the bus."""
+        return servo_named(self.system, joint)
 
     def registers(self, joint: str, items: Sequence[str] = ()) -> dict[str, Any]:
         """A servo's control table items (every one without ``items``)."""
@@ -401,33 +502,46 @@ class Robot:
     def config_snapshot(self) -> dict[str, Any]:
         """Every block's configuration, as a snapshot document (``config.dump_yaml`` writes
         it)."""
+        return self.config_read()[0]
+
+    def config_read(self) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+        """The snapshot document, and each block's live configuration it was made of (what
+        ``config.write_snapshot`` names the file by)."""
         from deltoctl.app import config
 
-        return config.snapshot(self.system)[0]
+        return config.snapshot(self.system)
 
-    def config_diff(self, snapshot: str | Path) -> list[dict[str, Any]]:
-        """The items where the devices differ from a snapshot file; notes are warnings."""
+    def config_diff(self, snapshot: str | Path | Snapshot) -> list[dict[str, Any]]:
+        """The items where the devices differ from a snapshot (or its file); notes are
+        warnings."""
         from deltoctl.app import config
 
-        rows, notes = config.compare_live(self.system, config.load_snapshot(Path(snapshot)))
+        rows, notes = config.compare_live(self.system, _snapshot(snapshot))
         self.system.notes.extend(notes)
         return rows
 
-    def config_restore(self, snapshot: str | Path,
-                       allow: Sequence[str] = ()) -> list[dict[str, Any]]:
-        """Write back what differs from a snapshot file (safety settings only when ``allow``
-        names them), each item verified by reading it back; returns each item's fate."""
+    def config_restore(self, snapshot: str | Path | Snapshot, allow: Sequence[str] = (),
+                       confirm: Callable[[str], None] | None = None) -> list[dict[str, Any]]:
+        """Write back what differs from a snapshot (or its file) — safety settings only when
+        ``allow`` names them —, each item verified by reading it back; returns each item's
+        fate. Refused (its ``rows`` and ``notes``: the plan) before anything is written or
+        ``confirm`` is told what will be written (it raises to stop)."""
         from deltoctl.app import config
 
         self.system.check_allowed("restoring a configuration")
         permitted = frozenset(config.permission(a) for a in allow)
-        rows, notes = config.plan_restore(self.system, config.load_snapshot(Path(snapshot)),
-                                          permitted)
-        self.system.notes.extend(notes)
+        rows, notes = config.plan_restore(self.system, _snapshot(snapshot), permitted)
         refused = [r for r in rows if r["status"] == "refused"]
         if refused:
-            raise config.refusal(refused, permitted)
-        config.write_changes(self.system, rows, permitted)
+            exc = config.refusal(refused, permitted)
+            exc.rows, exc.notes = rows, notes
+            raise exc
+        self.system.notes.extend(notes)
+        writes = [r for r in rows if r["status"] == "write"]
+        if writes and confirm is not None:
+            confirm(config.description(writes))
+        if writes:
+            config.write_changes(self.system, rows, permitted)
         return rows
 
     # -- data ----------------------------------------------------------------------------------
@@ -466,33 +580,93 @@ class Robot:
             yield Frame(time.time_ns(), {n: values.get(n) for n in names})
 
 
+    def cycles(self, rate: float, duration: float | None,
+               sinks: Sequence[Any]) -> tuple[dict[str, Any], LinkWatch]:
+        """Run the cycle loop at ``rate`` Hz until ``duration`` passes (or Ctrl-C), each
+        cycle's values to ``sinks``; returns the loop's statistics and the lost-link watch,
+        whose ``finish()`` says how the links ended (``Unreachable`` when one is still down,
+        a warning when one came back)."""
+        from deltoctl.app.sinks import LinkWatch
+        from deltoctl.core.runner import run_cycles
+
+        check_loop(rate, duration)
+        links = LinkWatch(self.system)
+        stats = run_cycles(self.system, rate, duration, [*sinks[:1], links, *sinks[1:]])
+        return stats.summary(), links
+
+    def loop_warnings(self, rate: float, loop: Mapping[str, Any]) -> list[str]:
+        """Why a loop ran below ``rate`` when a serial adapter's latency timer explains it."""
+        from deltoctl.app.latency import loop_warnings
+
+        return loop_warnings([m.url for m in self.system.members], rate, loop["real_rate"])
+
     def record(self, output: str | Path, rate: float = 100.0, duration: float | None = None,
                gpio_type: str = "group-values") -> dict[str, Any]:
         """Record every block's state interfaces to MCAP until ``duration`` passes (or
         Ctrl-C); the file is valid either way. A link still down at the end is
         ``Unreachable``; one that came back is a warning."""
-        from deltoctl.app.recording import record
-
-        result, links = record(self.system, Path(output), rate, duration, gpio_type)
+        result, links = self.record_to(Path(output), rate, duration, gpio_type)
         links.finish()
         return result
 
+    def record_to(self, output: Path, rate: float = 100.0, duration: float | None = None,
+                  gpio_type: str = "group-values", sinks: Sequence[Any] = (),
+                  show: Callable[[float, int, float | None], None] | None = None,
+                  force: bool = False) -> tuple[dict[str, Any], LinkWatch]:
+        """``record``, with more ``sinks`` and a ``show`` of its progress, an existing file
+        overwritten with ``force``; the lost-link watch's ``finish()`` is the caller's."""
+        from deltoctl.app.recording import record
 
-    def replay(self, recording: str | Path, max_deviation: float = 0.2,
-               tolerance: float | None = None) -> dict[str, Any]:
+        return record(self.system, output, rate, duration, gpio_type, sinks, show, force)
+
+    def replay(self, recording: str | Path, max_deviation: float = 0.2,  # MAX_DEVIATION
+               tolerance: float | None = None, plan: ReplayPlan | None = None,
+               on_simulator: bool | None = None, on_device: bool | None = None,
+               progress: Callable[[float], None] | None = None,
+               notice: Callable[[str], None] | None = None) -> dict[str, Any]:
         """Play a recording's commands (``jog --record``) back on this robot under its own
         profile's limits (a looser recorded profile is refused; differences are warnings):
         first to the recorded start pose, then at the recorded timing. A joint outside its
         limits or further than ``max_deviation`` from the recording stops every block it
-        commands (``Deviated``, exit 5). Returns the per-joint comparison."""
+        commands (``Deviated``, exit 5; its ``report`` is the replay until then). Returns the
+        per-joint comparison. ``plan``: the recording planned already (its notes are the
+        caller's); ``on_simulator``, ``on_device``: where it runs (by default, simulated when
+        every block is)."""
         from deltoctl.app.replay import plan_replay, replay_report, run_replay
 
         path = Path(recording)
-        plan = plan_replay(path, self.profile, True, [m.name for m in self.system])
-        self.system.notes.extend(plan.notes)
+        if plan is None:
+            plan = plan_replay(path, self.profile, True, [m.name for m in self.system])
+            self.system.notes.extend(plan.notes)
         simulated = all(m.simulated for m in self.system.members)
-        result, stopped = run_replay(self.system, plan.recorded, max_deviation, simulated)
+        on_simulator = simulated if on_simulator is None else on_simulator
+        result, stopped = run_replay(self.system, plan.recorded, max_deviation, on_simulator,
+                                     progress, notice)
+        report = replay_report(path, self.system, plan.recorded, result, tolerance,
+                               not simulated if on_device is None else on_device,
+                               max_deviation, stopped)
         if stopped is not None:
+            stopped.report = report
             raise stopped
-        return replay_report(path, self.system, plan.recorded, result, tolerance,
-                             not simulated, max_deviation)
+        return report
+
+
+def _snapshot(snapshot: str | Path | Snapshot) -> Snapshot:
+    from deltoctl.app.config import load_snapshot
+
+    return load_snapshot(Path(snapshot)) if isinstance(snapshot, (str, Path)) else snapshot
+
+
+SWITCH = {"on": 1.0, "true": 1.0, "off": 0.0, "false": 0.0}
+
+
+def gpio_value(text: str) -> float:
+    """A GPIO value as typed: on, off (true, false) or a finite number."""
+    try:
+        number = SWITCH[text.lower()] if text.lower() in SWITCH else float(text)
+    except ValueError:
+        raise InvalidInput(f"value must be on, off or a number, got {text!r}") from None
+    if not math.isfinite(number):
+        raise InvalidInput(f"value must be finite, got {text!r}")
+    return number
+

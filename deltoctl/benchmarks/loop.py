@@ -15,8 +15,27 @@ from typing import Any
 
 from deltoctl.core.loop import LoopStats
 from deltoctl.core.runner import Sink
-from deltoctl.errors import DeltoctlError, DeviceError
+from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput
 from deltoctl.profile.model import Profile
+
+
+def loop_options(rate: float, duration: float, unpaced: float, hands: str,
+                 hands_per_process: int | None = None) -> tuple[int, ...]:
+    """``bench loop``'s options checked; the numbers of hands (``1,2,4``), sorted."""
+    import math
+
+    if not all(math.isfinite(x) for x in (rate, duration, unpaced)) or rate <= 0 \
+            or duration <= 0 or unpaced < 0:
+        raise InvalidInput("--rate and --duration must be positive, --unpaced not negative")
+    try:
+        counts = tuple(sorted({int(n) for n in hands.split(",") if n.strip()}))
+    except ValueError:
+        raise InvalidInput(f"--hands takes numbers, e.g. 1,2,4; got {hands!r}") from None
+    if not counts or not all(1 <= n <= 16 for n in counts):
+        raise InvalidInput("--hands takes 1 to 16 hands")
+    if hands_per_process is not None and not 1 <= hands_per_process <= 16:
+        raise InvalidInput("--hands-per-process takes 1 to 16")
+    return counts
 
 
 def _serve(profile: str) -> tuple[subprocess.Popen, list[str]]:

@@ -3,14 +3,12 @@ another computer (``deltoctl --robot ROBOT VERB …``, ``deltoctl fleet …``)."
 
 from __future__ import annotations
 
-import math
-import os
 import sys
 from typing import Annotated
 
 import typer
 
-from deltoctl.cli.context import Options, options
+from deltoctl.cli.context import options
 from deltoctl.errors import InvalidInput
 
 # the agent's verb processes: argv[1] the profile, then SIMULATED when --sim serves the robot
@@ -24,15 +22,6 @@ SIMULATED = "simulated"
 
 def register(root: typer.Typer) -> None:
     root.command("agent")(agent)
-
-
-def _links(opts: Options, spec: str) -> list[str]:
-    """The global options that point a verb at the robot: its profile, its links."""
-    links = ["-p", spec, *(f"--target={t}" for t in opts.target)]
-    links += [f"--arg={k}:={v}" for k, v in opts.xacro_args.items()]
-    links += [f"--package-path={k}={v}" for k, v in opts.package_paths.items()]
-    links += [f"--hardware={h}" for h in opts.hardware]
-    return links + (["--xacro"] if opts.xacro else [])
 
 
 NameOpt = Annotated[str | None, typer.Option(
@@ -83,17 +72,16 @@ def agent(
         raise InvalidInput("--sim-option is not for the agent: its simulator serves the "
                            "profile as 'sim serve' does by default")
     robot = check_robot(name or host.default_name())
-    if not (math.isfinite(deadline) and 0.1 <= deadline <= 10):
-        raise InvalidInput(f"--deadline must be 0.1 to 10 seconds, got {deadline:g}")
+    host.check_deadline(deadline)
     workdir = host.workdir(workdir, robot)
     profile = opts.load_profile()  # a bad profile stops here, with its file:line
     own_files = host.profile_files(opts.profile, opts.xacro)
-    spec = opts.profile or profile.name
-    if os.path.exists(spec):
-        spec = os.path.abspath(spec)
+    spec = host.profile_spec(opts.profile, profile.name)
     config, config_files = host.zenoh_config(opts.zenoh_config, listen, connect)
     motion, why_not = host.motion_rule(config, allow_unauthenticated_motion)
-    with host.served_links(_links(opts, spec), opts.sim) as links:
+    links = host.verb_links(spec, opts.target, opts.xacro_args, opts.package_paths,
+                            opts.hardware, opts.xacro)
+    with host.served_links(links, opts.sim) as links:
         marks = [SIMULATED] if opts.sim else []
         children = ([sys.executable, "-c", ZYGOTE, spec, *marks],
                     [sys.executable, "-c", SPARE, spec, *marks])

@@ -38,31 +38,13 @@ def bench_loop(
     its own `sim serve` over loopback TCP, through the cycle runner, recording to MCAP; beside
     it, the same loop idle (what this machine allows). With --foxglove, the paced run again
     while the live view serves it to a Foxglove WebSocket client in another process."""
-    from deltoctl.benchmarks.loop import measure
+    from deltoctl.benchmarks.loop import loop_options, measure
 
     opts = options(ctx)
-    counts = _loop_options(rate, duration, unpaced, hands)
-    if hands_per_process is not None and not 1 <= hands_per_process <= 16:
-        raise InvalidInput("--hands-per-process takes 1 to 16")
+    counts = loop_options(rate, duration, unpaced, hands, hands_per_process)
     prof = opts.load_profile(opts.profile or "dg-5f-right")
     results = measure(prof, rate, duration, unpaced, counts, foxglove, hands_per_process)
     _report(opts.json, results, loop_lines, counts, rate)
-
-
-def _loop_options(rate: float, duration: float, unpaced: float, hands: str) -> tuple[int, ...]:
-    """The options checked; the numbers of hands, sorted."""
-    import math
-
-    if not all(math.isfinite(x) for x in (rate, duration, unpaced)) or rate <= 0 \
-            or duration <= 0 or unpaced < 0:
-        raise InvalidInput("--rate and --duration must be positive, --unpaced not negative")
-    try:
-        counts = tuple(sorted({int(n) for n in hands.split(",") if n.strip()}))
-    except ValueError:
-        raise InvalidInput(f"--hands takes numbers, e.g. 1,2,4; got {hands!r}") from None
-    if not counts or not all(1 <= n <= 16 for n in counts):
-        raise InvalidInput("--hands takes 1 to 16 hands")
-    return counts
 
 
 @app.command("dynamixel")

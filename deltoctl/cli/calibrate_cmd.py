@@ -49,23 +49,21 @@ def calibrate_ft(
     calibration-<model>-<address>-<time>.json. --verify reports each check (id, value,
     limit, verdict); --watch S the drift of each axis over S seconds; --mass KG a known
     mass's weight."""
-    from deltoctl.app import calibrate
-    from deltoctl.app.calibrate import check_tare, check_verify, fail_ft, verify_ft
+    from deltoctl.app.calibrate import check_tare, check_verify, fail_ft
 
     opts = options(ctx)
     drift = _drift_limits(drift_limit or [])
     check_tare(samples, force_tolerance, torque_tolerance, output_dir)
     check_verify(mass, watch, timeout, drift)
     verify = verify or mass is not None or watch is not None
+    checks = {"mass": mass, "sensor": sensor, "watch": watch, "ask": _ask, "timeout": timeout,
+              "drift_limit": drift} if verify else None
     with open_robot(opts, allow_model_mismatch) as robot:
-        confirm(ctx, calibrate.tare_description(robot.system))
-        result = robot.calibrate_ft(samples, force_tolerance, torque_tolerance, output_dir)
-        if verify:
-            result["checks"] = verify_ft(robot.system, result, mass, sensor, watch, _ask,
-                                         timeout, samples, drift)
+        result = robot.calibrate_ft(samples, force_tolerance, torque_tolerance, output_dir,
+                                    lambda what: confirm(ctx, what), checks)
     _show_ft(opts, result, verify)
     fail_ft(result)
-    finish(robot.system)
+    finish(robot)
 
 
 def _drift_limits(items: list[str]) -> dict[str, float]:
@@ -84,16 +82,12 @@ def _ask(text: str) -> None:
 
 
 def _show_ft(opts: Options, result: dict[str, Any], verify: bool) -> None:
-    from deltoctl.render.checks import check_rows, residual_rows
+    from deltoctl.render.checks import ft_table
 
     if opts.json:
         emit_json(result)
         return
-    if verify:
-        table(None, ["check", "value", "unit", "limit", "verdict"], check_rows(result["checks"]))
-    else:
-        table(None, ["block", "sensor", "residual force N", "residual torque N·m", "pass"],
-              residual_rows(result["blocks"]))
+    table(*ft_table(result, verify))
     for r in result["blocks"]:
         info(f"report: {r['report_file']}")
 
@@ -117,27 +111,22 @@ def calibrate_imu(
     axis's bias and scale from six positions, saved as
     calibration-<chip>-<address>-<time>.json — name it in the sensor's `calibration` param
     and stream and record apply it. Exit 1 when a check fails."""
-    from deltoctl.app.imu_calibration import calibrate_imu as run
-    from deltoctl.app.imu_calibration import check_options, fail_imu, self_test_description
-    from deltoctl.render.checks import check_rows
+    from deltoctl.app.imu_calibration import check_options, fail_imu
+    from deltoctl.render.checks import calibration_files, imu_table
 
     opts = options(ctx)
     check_options(samples, timeout, output_dir)
     with open_robot(opts, allow_model_mismatch) as robot:
-        confirm(ctx, self_test_description(robot.system, tumble))
-        result = run(robot.system, samples, _ask if tumble else None, timeout, output_dir)
-    blocks = result["blocks"]
+        result = robot.calibrate_imu(samples, _ask if tumble else None, timeout, output_dir,
+                                     lambda what: confirm(ctx, what))
     if opts.json:
         emit_json(result)
     else:
-        table(None, ["sensor", "check", "value", "unit", "limit", "verdict"],
-              [row for b in blocks for row in check_rows(b["checks"], b["sensor"])])
-        for b in blocks:
-            if "calibration_file" in b:
-                info(f"calibration: {b['calibration_file']} (name it in {b['sensor']}'s "
-                     "calibration param)")
+        table(*imu_table(result))
+        for line in calibration_files(result):
+            info(line)
     fail_imu(result)
-    finish(robot.system)
+    finish(robot)
 
 
 def register(root: typer.Typer) -> None:

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from deltoctl.cli.context import Options, options
-from deltoctl.cli.output import emit_json, info, say, table, warn
+from deltoctl.cli.output import emit_json, info, say, show, table, warn
 from deltoctl.errors import WARNINGS
 
 if TYPE_CHECKING:
@@ -41,10 +41,11 @@ def snapshot(
     firmware and sensors, the IMU's registers. --json prints the document."""
     from deltoctl.app import config
     from deltoctl.cli.device_cmd import finish, open_robot
+    from deltoctl.render.config import snapshot_table
 
     opts = options(ctx)
     with open_robot(opts) as robot:
-        doc, live = config.snapshot(robot.system)
+        doc, live = robot.config_read()
     if output != "-":
         info(f"snapshot: {config.write_snapshot(doc, live, output)}")
     elif not opts.json:
@@ -52,10 +53,8 @@ def snapshot(
     if opts.json:
         emit_json(doc)
     elif output != "-":
-        table(None, ["block", "family", "target", "parts", "items"],
-              [[name, b["family"], b["target"] or "in-process", len(b["parts"]),
-                sum(len(items) for items in b["parts"].values())] for name, b in live.items()])
-    finish(robot.system)
+        table(*snapshot_table(live))
+    finish(robot)
 
 
 def _profile(opts: Options, snap: Snapshot) -> Any:
@@ -78,6 +77,7 @@ def diff(
     """Compare a snapshot with the live devices (or with another snapshot): one row per
     item that differs. Exit 3 when they differ, 0 when they are the same."""
     from deltoctl.app import config
+    from deltoctl.render.config import diff_table
 
     opts = options(ctx)
     snap = config.load_snapshot(snapshot_file)
@@ -88,16 +88,13 @@ def diff(
         from deltoctl.cli.device_cmd import open_robot
 
         with open_robot(opts, profile=_profile(opts, snap)) as robot:
-            rows, notes = config.compare_live(robot.system, snap)
-        notes = robot.warnings() + notes
-        against, column = "live", "live"
+            rows = robot.config_diff(snap)
+        notes, against, column = robot.warnings(), "live", "live"
     if opts.json:
         emit_json({"snapshot": str(snapshot_file), "against": against, "same": not rows,
                    "differences": rows, "warnings": notes})
     elif rows:
-        table(None, ["block", "part", "item", "snapshot", column, "unit"],
-              [[r["block"], r["part"], r["item"], config.show(r["snapshot"]),
-                config.show(r[column]), r["unit"] or ""] for r in rows])
+        table(*diff_table(rows, column))
     else:
         say(f"no differences between {snapshot_file} and "
             f"{'the live devices' if other is None else other}")
@@ -109,19 +106,15 @@ def diff(
 
 def _report(opts: Options, snapshot_file: Path, rows: list[dict[str, Any]],
             notes: list[str]) -> None:
-    from deltoctl.app.config import show, status_counts
+    from deltoctl.app.config import status_counts
+    from deltoctl.render.config import restore_parts
 
     counts = status_counts(rows)
     if opts.json:
         emit_json({"snapshot": str(snapshot_file), "items": rows, "summary": counts,
                    "warnings": notes})
-    elif rows:
-        table(None, ["block", "part", "item", "snapshot", "live", "status", "note"],
-              [[r["block"], r["part"], r["item"], show(r["snapshot"]), show(r["live"]),
-                r["status"], r["note"]] for r in rows])
-        say(", ".join(f"{n} {status}" for status, n in counts.items()))
     else:
-        say(f"nothing to restore: the devices match {snapshot_file}")
+        show(restore_parts(rows, counts, str(snapshot_file)))
     for note in notes:
         warn(note)
 
@@ -152,21 +145,20 @@ def restore(
     from deltoctl.app import config
     from deltoctl.cli.confirm import confirm
     from deltoctl.cli.device_cmd import open_robot
+    from deltoctl.errors import Refused
 
     opts = options(ctx)
-    permitted = frozenset(config.permission(a) for a in allow or ())
+    for name in allow or ():
+        config.permission(name)  # an unknown one stops here, before any device
     snap = config.load_snapshot(snapshot_file)  # a bad snapshot stops here, before any device
     with open_robot(opts, profile=_profile(opts, snap)) as robot:
-        rows, notes = config.plan_restore(robot.system, snap, permitted)
-        writes = [r for r in rows if r["status"] == "write"]
-        refused = [r for r in rows if r["status"] == "refused"]
-        if refused:
-            _report(opts, snapshot_file, rows, notes)
-            raise config.refusal(refused, permitted)
-        if writes:
-            confirm(ctx, config.description(writes))
-            config.write_changes(robot.system, rows, permitted)
-        notes = robot.warnings() + notes
+        try:
+            rows = robot.config_restore(snap, allow or (), lambda what: confirm(ctx, what))
+        except Refused as exc:
+            if hasattr(exc, "rows"):  # refused by the plan: its table first
+                _report(opts, snapshot_file, exc.rows, exc.notes)
+            raise
+        notes = robot.warnings()
     _report(opts, snapshot_file, rows, notes)
     left = config.restore_outcome(rows)  # refused 5, failed 1, not all restored 3
     if left:

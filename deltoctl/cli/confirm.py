@@ -7,7 +7,8 @@ import sys
 from typing import Any
 
 from deltoctl import verbs
-from deltoctl.cli.context import given_options, options
+from deltoctl.cli.context import options
+from deltoctl.cmdline import given_options
 from deltoctl.errors import Refused
 
 _QUESTION = {verbs.MOVES: "Move?", verbs.ACTUATES: "Go on?"}

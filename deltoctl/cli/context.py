@@ -3,7 +3,7 @@ context's meta the verbs read."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -82,26 +82,3 @@ def parse_pairs(items: list[str], sep: str, what: str, example: str) -> dict[str
             raise InvalidInput(f"{what} {item!r} is not of the form {example}")
         pairs[key] = value
     return pairs
-
-
-def given_options(ctx: Any) -> list[str]:
-    """The spellings of the options a context's command line (or environment) gave: not
-    their defaults, nor a flag given as off."""
-    from typer._click.core import ParameterSource
-
-    given: list[str] = []
-    for param in ctx.command.params:
-        if param.param_type_name != "option":
-            continue
-        source = ctx.get_parameter_source(param.name) if param.name else None
-        if source in (None, ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP):
-            continue
-        if ctx.params.get(param.name) is not False:
-            given += getattr(param, "opts", [])
-    return given
-
-
-def complete_profile(incomplete: str) -> list[str]:
-    from deltoctl.profile.catalog import catalog_names
-
-    return [n for n in catalog_names() if n.startswith(incomplete)]

@@ -1,6 +1,6 @@
 """``deltoctl info FILE.mcap`` and ``deltoctl plot FILE.mcap [INTERFACE-GLOB…]``: what a
 recording holds, and its interfaces over time (the reading is record/reader.py's, the plot
-app/plot.py's)."""
+render/plot.py's)."""
 
 from __future__ import annotations
 
@@ -49,7 +49,8 @@ def plot(
 ) -> None:
     """Interfaces over time: in the terminal (plotext), or as a figure with --out
     (matplotlib). Reads only the topics that carry them. Needs pip install 'deltoctl\\[plot]'."""
-    from deltoctl.app.plot import DEFAULT_PLOT, png_plot, read_plot, terminal_plot
+    from deltoctl.app.plot import DEFAULT_PLOT, read_plot
+    from deltoctl.render.plot import png_plot, terminal_plot
 
     opts = options(ctx)
     globs = list(patterns or DEFAULT_PLOT)

@@ -1,26 +1,17 @@
 """The lifecycle verbs on every block of a robot: connect, identify, detect, gpio, stream."""
 
 import contextlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from typing import Annotated, Any
 
 import typer
 
-from deltoctl.app.robot import check_loop
-from deltoctl.app.sinks import LinkWatch
+from deltoctl.cli.completions import complete_gpio
 from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import Options, options
-from deltoctl.cli.output import (
-    emit_json,
-    emit_json_line,
-    info,
-    say,
-    show,
-    stdout_is_terminal,
-    table,
-    warn,
-)
-from deltoctl.errors import WARNINGS, InvalidInput, NotHomed
+from deltoctl.cli.output import emit_json, emit_json_line, info, show, stdout_is_terminal, warn
+from deltoctl.core.runner import check_loop
+from deltoctl.errors import WARNINGS, InvalidInput
 
 AllowMismatch = Annotated[bool, typer.Option(
     "--allow-model-mismatch",
@@ -43,7 +34,6 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
     simulators started first. Pass ``profile`` when the verb loaded it already; ``probe`` for
     a verb that looks at a bus where nothing may answer."""
     from deltoctl.app.robot import open_robot as open_app_robot
-    from deltoctl.sim import running
 
     prof = profile or opts.load_profile()
     sim: Any = opts.sim
@@ -51,33 +41,24 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
         from deltoctl.sim.serve import options_given
 
         sim = options_given(opts.sim_options, "--sim-option", prof, opts.hardware)
-    found = (running.find(prof, sim if isinstance(sim, dict) else {}, opts.hardware, warn)
-             if opts.sim and not opts.sim_fresh else None)
-    if found is not None:
-        info(f"using {found.name} of {found.profile}; --sim-fresh starts one of its own")
-    try:
-        with open_app_robot(prof, [*opts.target, *found.targets] if found else opts.target,
-                            sim=False if found else sim, hardware=opts.hardware,
-                            allow_model_mismatch=allow_model_mismatch, probe=probe, notice=info,
-                            served_by=found.name if found else SERVED_SIMULATED) as robot:
-            try:
-                yield robot
-            finally:
-                if SET_SAFE:
-                    robot.system.make_safe()
-    except NotHomed as exc:
-        if opts.sim and found is None:
-            exc.hint = running.fresh_hint(prof.name)
-        raise
+    with open_app_robot(prof, opts.target, sim=sim, hardware=opts.hardware,
+                        allow_model_mismatch=allow_model_mismatch, probe=probe, notice=info,
+                        served_by=SERVED_SIMULATED, reuse=not opts.sim_fresh,
+                        warn=warn) as robot:
+        try:
+            yield robot
+        finally:
+            if SET_SAFE:
+                robot.make_safe()
 
 
-def finish(system: Any, extra: list[str] | None = None,
+def finish(robot: Any, extra: list[str] | None = None,
            failures: list[dict[str, Any]] | None = None) -> None:
-    """Exit 3 when the verb finished but with warnings (a block left out, a model mismatch
-    allowed, reconnects); exit 1 naming each check of ``failures`` that failed."""
+    """Exit 1 naming each check of ``failures`` that failed; exit 3 when the verb finished but
+    with warnings (a block left out, a model mismatch allowed, reconnects; ``extra``)."""
     from deltoctl.app.checks import fail_on
 
-    warnings = system.warnings() + (extra or [])
+    warnings = robot.warnings() + (extra or [])
     for w in warnings:
         warn(w)
     fail_on(failures or [])
@@ -97,6 +78,23 @@ def register(app: typer.Typer) -> None:
     app.add_typer(gpio_app, name="gpio")
 
 
+def on_robot(ctx: typer.Context, call: Callable[[Any], Any],
+             people: Callable[[Any, Any], Sequence[Any]], allow_model_mismatch: bool = False,
+             profile: Any = None, probe: bool = False, judged: bool = False) -> Any:
+    """A verb's one call on the robot (``call(robot)``); its result as JSON, or for people
+    (``people(result, robot)``: lines and tables); its warnings (exit 3), and with ``judged``
+    its failed ``checks`` (exit 1)."""
+    opts = options(ctx)
+    with open_robot(opts, allow_model_mismatch, profile, probe) as robot:
+        result = call(robot)
+    if opts.json:
+        emit_json(result)
+    else:
+        show(people(result, robot))
+    finish(robot, failures=result["checks"] if judged else None)
+    return result
+
+
 def connect(
     ctx: typer.Context,
     count: Annotated[int, typer.Option("--count", "-n", min=1, max=100000,
@@ -104,103 +102,60 @@ def connect(
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Reach every block, time round trips, and run the lifecycle to active and back."""
-    opts = options(ctx)
-    with open_robot(opts, allow_model_mismatch) as robot:
-        result = robot.connect(count)  # each block's lifecycle goes on to its end
-    if opts.json:
-        emit_json(result)
-    else:
-        from deltoctl.render.identity import connect_lines
+    from deltoctl.render.identity import connect_lines
 
-        show(connect_lines(result, [m.simulated for m in robot.blocks]))
-    finish(robot.system)
+    # each block's lifecycle goes on to its end
+    on_robot(ctx, lambda robot: robot.connect(count), lambda result, robot: connect_lines(
+        result, [m.simulated for m in robot.blocks]), allow_model_mismatch)
 
 
 def identify(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
     """What each block's device says it is (model, firmware, servos, joints), against the
     profile."""
-    opts = options(ctx)
-    with open_robot(opts, allow_model_mismatch) as robot:
-        result = robot.identify()
-    if opts.json:
-        emit_json(result)
-    else:
-        from deltoctl.render.identity import identify_tables
+    from deltoctl.render.identity import identify_tables
 
-        show(identify_tables(result))
-    finish(robot.system)
+    on_robot(ctx, lambda robot: robot.identify(), lambda result, _: identify_tables(result),
+             allow_model_mismatch)
 
 
 def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> None:
     """What is on each block's device or bus (sensors, GPIO, servos, I2C devices), against
     the profile."""
-    opts = options(ctx)
-    with open_robot(opts, allow_model_mismatch, probe=True) as robot:
-        result = robot.detect()
-    if opts.json:
-        emit_json(result)
-    else:
-        from deltoctl.render.identity import detect_parts
+    from deltoctl.render.identity import detect_parts
 
-        show(detect_parts(result))
-    finish(robot.system, failures=result["checks"])
+    on_robot(ctx, lambda robot: robot.detect(), lambda result, _: detect_parts(result),
+             allow_model_mismatch, probe=True, judged=True)
 
 
 def gpio_get(ctx: typer.Context) -> None:
     """Read every GPIO state interface of every block."""
-    opts = options(ctx)
-    profile = opts.load_profile()
+    profile = options(ctx).load_profile()
     if not any(hw.gpios for hw in profile.hardware):
         raise InvalidInput(f"{profile.name} has no GPIO")
-    with open_robot(opts, profile=profile) as robot:
-        gpio = robot.gpio()
-    if opts.json:
-        emit_json(gpio)
-    else:
-        table(None, ["interface", "value"], [[n, f"{v:g}"] for n, v in gpio.items()])
-    finish(robot.system)
-
-
-_ON = {"on": 1.0, "true": 1.0, "off": 0.0, "false": 0.0}
-
-
-def _complete_gpio(ctx: typer.Context, incomplete: str) -> list[str]:
-    """The profile's GPIO command interfaces."""
-    from deltoctl.cli.profile_cmd import _completion_profile
-
-    prof = _completion_profile(ctx)
-    names = [] if prof is None else [n for hw in prof.hardware for c in hw.gpios
-                                     for n in c.interface_names("command")]
-    return [n for n in names if n.startswith(incomplete)]
+    on_robot(ctx, lambda robot: robot.gpio(), lambda gpio, _: [(
+        None, ["interface", "value"], [[n, f"{v:g}"] for n, v in gpio.items()])],
+        profile=profile)
 
 
 def gpio_set(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(
-        autocompletion=_complete_gpio,
+        autocompletion=complete_gpio,
         help="A GPIO command interface, e.g. gpio/output_2 (Delto: motor on, grasp, release), "
              "flange_vacuum/vacuum; output_2 alone when the profile has one GPIO 'gpio'.")],
     value: Annotated[str, typer.Argument(help="on, off or a number.")],
 ) -> None:
     """Set one GPIO output and read it back (a Delto's three outputs travel together)."""
-    import math
+    from deltoctl.app.robot import gpio_value
 
-    opts = options(ctx)
-    try:
-        number = _ON[value.lower()] if value.lower() in _ON else float(value)
-    except ValueError:
-        raise InvalidInput(f"value must be on, off or a number, got {value!r}") from None
-    if not math.isfinite(number):
-        raise InvalidInput(f"value must be finite, got {value!r}")
-    with open_robot(opts) as robot:
+    number = gpio_value(value)
+
+    def set_output(robot: Any) -> dict[str, float]:
         full = robot.gpio_output(name)
-        confirm(ctx, f"set {full} of {robot.system.member(full).name} to {value}")
-        after = robot.set_gpio(name, number)
-    if opts.json:
-        emit_json(after)
-    else:
-        say(f"{full} = {number:g}")
-    finish(robot.system)
+        confirm(ctx, f"set {full} of {robot.block_of(full)} to {value}")
+        return robot.set_gpio(name, number)
+
+    on_robot(ctx, set_output, lambda _, robot: [f"{robot.gpio_output(name)} = {number:g}"])
 
 
 RateOpt = Annotated[float, typer.Option("--rate", "-r", help="Samples per second.")]
@@ -227,43 +182,6 @@ StreamOriginOpt = Annotated[list[str] | None, typer.Option(
     "(repeatable); by default only Foxglove's own and clients that send no Origin.")]
 
 
-@contextlib.contextmanager
-def foxglove_live(enabled: bool, host: str, port: int,
-                  origins: list[str] | None = None) -> Iterator[Any]:
-    """With --foxglove, the Foxglove sink, its address and port checked before the devices
-    are opened (the server starts with ``start_foxglove``, and stops on the way out); else
-    None."""
-    if not enabled:
-        yield None
-        return
-    from deltoctl.record.foxglove_live import FoxgloveLive
-
-    with FoxgloveLive(host, port, origins=tuple(origins or ())) as live:
-        if not live.local:
-            warn(f"--foxglove-host {host}: the robot's data is served beyond this machine, to "
-                 f"anyone who reaches port {port or 'chosen'} there")
-        yield live
-    if live.error:
-        warn(f"the live view stopped: {live.error}")
-    if live.dropped:
-        info(f"Foxglove: {live.dropped} cycles not sent (the live view fell behind)")
-    if live.gate.refused:
-        info(f"Foxglove: {live.gate.refused} connection(s) refused for their origin "
-             "(a web page that is not Foxglove; --foxglove-origin lets one in)")
-
-
-def start_foxglove(live: Any, system: Any, gpio_type: str = "group-values") -> list[Any]:
-    """With --foxglove (``live``), the server started with the topics of the blocks ``system``
-    drives, where it is said on stderr, and the live view as the loop's sink; else no sink."""
-    if live is None:
-        return []
-    from deltoctl.app.recording import driven_profile
-
-    live.begin(driven_profile(system), tuple(system.extra_states()), gpio_type)
-    info(f"Foxglove: connect to {live.url} (Open connection → Foxglove WebSocket)")
-    return [live]
-
-
 def stream(
     ctx: typer.Context,
     rate: RateOpt = 50.0,
@@ -281,25 +199,20 @@ def stream(
     rows that do not fit are counted, -i picks fewer), NDJSON with --json or when piped; with
     --foxglove, to Foxglove as well (every interface, whatever -i picks). Exit 4 when a link
     is down at the end, 3 when one was lost and came back."""
-    from deltoctl.app.latency import loop_warnings
+    from deltoctl.app.live import foxglove_live, start_foxglove
     from deltoctl.app.sinks import LinesSink
-    from deltoctl.core.runner import run_cycles
     from deltoctl.render.stream import LiveSink
 
     opts = options(ctx)
     check_loop(rate, duration)
-    with foxglove_live(foxglove, foxglove_host, foxglove_port, foxglove_origin) as live, \
-            open_robot(opts, allow_model_mismatch) as robot:
-        system = robot.system
+    with foxglove_live(foxglove, foxglove_host, foxglove_port, foxglove_origin, warn,
+                       info) as live, open_robot(opts, allow_model_mismatch) as robot:
         names = robot.interfaces(interfaces or [])
         sink: Any = (LinesSink(names, emit_json_line) if opts.json or not stdout_is_terminal()
                      else LiveSink(names, rate, robot.joint_types()))
-        links = LinkWatch(system)
-        stats = run_cycles(system, rate, duration, [sink, links, *start_foxglove(live, system)])
+        loop, links = robot.cycles(rate, duration, [sink, *start_foxglove(live, robot, info)])
     info(f"{sink.samples} samples of {len(names)} interfaces")
     if opts.json:  # stdout holds the frames: the stream's document goes to stderr
-        emit_json({"samples": sink.samples, "interfaces": len(names),
-                   "loop": stats.summary()}, err=True)
+        emit_json({"samples": sink.samples, "interfaces": len(names), "loop": loop}, err=True)
     links.finish()
-    finish(system, loop_warnings([m.url for m in system.members], rate,
-                                 stats.summary()["real_rate"]))
+    finish(robot, robot.loop_warnings(rate, loop))

@@ -45,7 +45,7 @@ def forward(ctx: typer.Context) -> NoReturn:
     """Run the command line on ``--robot``'s agent: its stdout, stderr (errors naming the
     robot) and exit code, as if run there."""
     from deltoctl.cli.context import ARGV
-    from deltoctl.cli.output import stdout_is_terminal
+    from deltoctl.cli.output import emit_error, stdout_is_terminal
     from deltoctl.fleet import ACTUATING, check_robot
     from deltoctl.fleet.client import ErrorLines, RemoteCall, caller_session
     from deltoctl.fleet.run import strip_remote, verb_of
@@ -68,11 +68,7 @@ def forward(ctx: typer.Context) -> NoReturn:
     except DeltoctlError as exc:  # this side failed (nothing answers): the robot named too
         if not opts.json:
             raise
-        import json
-
-        error = {"message": exc.message, "hint": exc.hint, "exit_code": exc.exit_code,
-                 "robot": robot}
-        _write_err(json.dumps({"error": error}) + "\n")
+        emit_error(exc.message, exc.hint, exc.exit_code, True, robot=robot)
         raise typer.Exit(exc.exit_code) from None
     finally:
         errors.close()
@@ -114,17 +110,11 @@ def _record_command() -> Any:
 
 def _positional(args: list[str]) -> int | None:
     """Where record's FILE argument stands among its arguments."""
-    takes_value = {o for p in _record_command().params if getattr(p, "opts", None)
-                   and p.param_type_name == "option" and not p.is_flag for o in p.opts}
-    i = 0
-    while i < len(args):
-        arg = args[i]
-        if arg == "--":
-            return i + 1 if i + 1 < len(args) else None
-        if not arg.startswith("-") or arg == "-":
-            return i
-        i += 2 if arg in takes_value else 1
-    return None
+    from deltoctl.cmdline import first_argument
+
+    return first_argument(args, {o for p in _record_command().params if getattr(p, "opts", None)
+                                 and p.param_type_name == "option" and not p.is_flag
+                                 for o in p.opts})
 
 
 def record_options(args: list[str]) -> dict[str, Any]:
@@ -132,7 +122,7 @@ def record_options(args: list[str]) -> dict[str, Any]:
     it checks them; those that make no sense remotely refused."""
     from typer._click import exceptions as click_exceptions
 
-    from deltoctl.app.robot import check_loop
+    from deltoctl.core.runner import check_loop
     from deltoctl.record.ros2_msgs import GPIO_TYPES
 
     try:
@@ -170,7 +160,8 @@ def _remote_record(opts: Options, robot: str, argv: list[str], err: Any) -> int:
     from deltoctl.cli.output import emit_json, info, warn
     from deltoctl.fleet.remote_record import record_remote
     from deltoctl.fleet.run import verb_args
-    from deltoctl.render.fleet import not_received_text, recorded_text
+    from deltoctl.render.fleet import not_received_text
+    from deltoctl.render.recording import recorded_lines
 
     params = record_options(verb_args(argv))
     output = planned_output(Path(params["output"]), params["force"])
@@ -185,10 +176,8 @@ def _remote_record(opts: Options, robot: str, argv: list[str], err: Any) -> int:
     if done.result:
         if opts.json:
             emit_json(done.result, profile=done.profile)
-        else:
-            info(recorded_text(robot, done.result))
-        if done.result["link_losses"]:
-            info("the gaps are marked on /diagnostics")
+        for line in recorded_lines(done.result, robot)[1 if opts.json else 0:]:
+            info(line)
         if done.not_received:
             warn(not_received_text(robot, done.result))
     if done.failure is not None:
@@ -248,8 +237,8 @@ def run_cmd(
 
     opts = options(ctx)
     lines, skipped, one_verb = command_lines(command, verbs.modules())
-    forwarded = [flag for name, flag in FORWARDED.items() if getattr(opts, name)]
-    lines = [forwarded + [f"--hardware={h}" for h in opts.hardware] + ln for ln in lines]
+    lines = [[*(flag for name, flag in FORWARDED.items() if getattr(opts, name)),
+              *(f"--hardware={h}" for h in opts.hardware), *ln] for ln in lines]
     for note in skipped:
         info(f"skipped {note}")
     with caller_session(opts.zenoh_config, "fleet") as session:

@@ -15,17 +15,16 @@ from typer._click import exceptions as click_exceptions
 from typer.core import TyperGroup
 
 from deltoctl import verbs
+from deltoctl.cli.completions import complete_blocks, complete_profile
 from deltoctl.cli.context import (
     ARGV,
     DOCUMENT,
     EXIT_LINE,
     TEACH,
     Options,
-    complete_profile,
-    given_options,
     parse_pairs,
 )
-from deltoctl.cmdline import GLOBAL_OPTIONS, hoist_global_options
+from deltoctl.cmdline import GLOBAL_OPTIONS, given_options, hoist_global_options
 from deltoctl.errors import DeltoctlError, InvalidInput
 from deltoctl.version import __version__
 
@@ -180,12 +179,6 @@ def _version(ctx: typer.Context, value: bool) -> None:
         raise typer.Exit()
 
 
-def _complete_hardware(ctx: typer.Context, incomplete: str) -> list[str]:
-    from deltoctl.cli.profile_cmd import complete_blocks
-
-    return complete_blocks(ctx, incomplete)
-
-
 # the global options (root's), each declared once here
 ProfileOpt = Annotated[str | None, typer.Option(
     "--profile", "-p", envvar="DELTOCTL_PROFILE", autocompletion=complete_profile,
@@ -221,7 +214,7 @@ LogFileOpt = Annotated[str | None, typer.Option(
 XacroArgOpt = Annotated[list[str] | None, typer.Option(
     "--arg", metavar="NAME:=VALUE", help="A xacro argument (repeatable).")]
 HardwareOpt = Annotated[list[str] | None, typer.Option(
-    "--hardware", metavar="NAME", autocompletion=_complete_hardware,
+    "--hardware", metavar="NAME", autocompletion=complete_blocks,
     help="Only this <ros2_control> block of the profile (repeatable; default: all).")]
 XacroOpt = Annotated[bool, typer.Option(
     "--xacro", help="Run xacro on a profile file that is not named .xacro.")]

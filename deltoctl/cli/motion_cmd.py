@@ -8,6 +8,7 @@ from typing import Annotated, Any
 
 import typer
 
+from deltoctl.cli.completions import complete_part as complete_joint
 from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
@@ -22,12 +23,6 @@ def register(app: typer.Typer) -> None:
     app.command("home")(home)
     # negative deltas (`jog J -5deg`) are arguments, not unknown options
     app.command("jog", context_settings={"ignore_unknown_options": True})(jog)
-
-
-def complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
-    from deltoctl.cli.profile_cmd import complete_part
-
-    return complete_part(ctx, incomplete)
 
 
 def _said(label: str, report: dict[str, Any]) -> None:
@@ -50,7 +45,7 @@ def home(
     Joints with a `home` command interface (the Bioscara arm) run into their hard stops one at
     a time, in the profile's homing order; the others go to safety.home_pose (zero unless the
     profile says otherwise). Blocks that cannot home are named."""
-    from deltoctl.app.motion import fail_unsettled, home, joint_speed, plan_home
+    from deltoctl.app.motion import fail_unsettled, joint_speed, plan_home
 
     opts = options(ctx)
     profile = opts.load_profile()
@@ -60,7 +55,8 @@ def home(
     bars = _Bars(opts, plan.routine)
     with open_robot(opts, allow_model_mismatch, profile) as robot:
         try:
-            report = home(robot.system, plan, force, speed, bars.move, bars.show)
+            report = robot.home(force=force, velocity=speed, plan=plan, progress=bars.move,
+                                show=bars.show)
         finally:
             bars.stop()
     if opts.json:
@@ -69,7 +65,7 @@ def home(
         _said("home", report)
     if plan.targets:
         fail_unsettled(report, profile)
-    finish(robot.system)
+    finish(robot)
 
 
 class _Bars:
@@ -139,8 +135,8 @@ def jog(
     their unit, and a unit that is not the joint's (an angle on a prismatic joint) is
     refused (exit 2). The confirmation shows the move in the unit typed (else degrees or
     millimetres)."""
-    from deltoctl.app.motion import fail_unsettled, jog_pairs, jog_targets, joint_speed
-    from deltoctl.app.recording import new_output, planned_output
+    from deltoctl.app.motion import fail_unsettled, jog_pairs, joint_speed
+    from deltoctl.app.recording import planned_output
 
     opts = options(ctx)
     profile = opts.load_profile()
@@ -150,31 +146,27 @@ def jog(
     # a file that cannot be written, or exists, is refused (exit 2) before anything opens
     record = planned_output(record, force) if record else None
     with open_robot(opts, allow_model_mismatch, profile) as robot, \
-            new_output(record, robot.system, force) if record else \
+            robot.new_recording(record, force) if record else \
             contextlib.nullcontext() as record:
-        system = robot.system
-        targets, moves = jog_targets(system, pairs, to)  # e.g. not homed: before asking
-        system.check_move(targets, speed)  # the System's envelope, before anyone is asked
+        # e.g. not homed, or outside the System's envelope: before anyone is asked
+        targets, moves = robot.plan_jog(pairs, to, speed)
         confirm(ctx, "jog " + "; ".join(moves))
-        report = _jog(opts, system, targets, speed, record)
+        report = _jog(opts, robot, targets, speed, record)
     if opts.json:
         emit_json(report)
     fail_unsettled(report, profile)
-    finish(robot.system)
+    finish(robot)
 
 
-def _jog(opts: Options, system: Any, targets: dict[str, float], speed: float | None,
+def _jog(opts: Options, robot: Any, targets: dict[str, float], speed: float | None,
          record: Path | None) -> dict[str, Any]:
     """The move with a progress bar, recorded to ``record`` when given; its outcome said."""
-    from deltoctl.app.motion import move
-    from deltoctl.app.recording import recorded_moves
-
     label = f"jog {', '.join(targets)}"
 
     def moving() -> dict[str, Any]:
         bar = progress(opts)
         try:
-            report = move(system, targets, speed, advancing(bar, label))
+            report = robot.move(targets, speed, advancing(bar, label))
         finally:
             if bar is not None:
                 bar.stop()
@@ -184,7 +176,7 @@ def _jog(opts: Options, system: Any, targets: dict[str, float], speed: float | N
 
     if record is None:
         return moving()
-    report = recorded_moves(system, record, moving)
+    report = robot.recorded(record, moving)
     if not opts.json:
         info(f"wrote {record}: {report['recording']['cycles']} cycles of states and commands")
     return report

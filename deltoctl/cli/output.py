@@ -23,9 +23,6 @@ def stdout_is_terminal() -> bool:
 
 
 WARNINGS = "deltoctl.warnings"  # root ctx.meta key: the warnings said so far
-# verbs that report each block of the robot: ``blocks`` beside the envelope's keys, their
-# other data in ``result``
-BLOCK_VERBS = ("connect", "identify", "detect", "home", "jog", "calibrate ft", "calibrate imu")
 # verbs that read no profile (a file, the fleet, this computer): their envelope's is null
 NO_PROFILE = ("info", "plot", "help", "completion", "bench", "fleet", "ports")
 
@@ -43,29 +40,9 @@ def emit_json(data: Any, err: bool = False, profile: str | None = None) -> None:
 
 
 def write_json(data: Any, err: bool = False) -> None:
-    import json
+    from deltoctl.render.envelope import dumps
 
-    if err:
-        typer.echo(json.dumps(data, separators=(",", ":"), default=_jsonable), err=True)
-    else:
-        typer.echo(json.dumps(data, indent=2, default=_jsonable))
-
-
-def envelope(verb: str, data: Any, warnings: list[str], exit_code: int,
-             profile: str | None) -> dict[str, Any]:
-    """Every verb's JSON in one shape, these keys and no others: ``verb``, ``profile``, the
-    data — ``blocks`` for the robot's blocks, ``result`` for the rest (a verb that reports
-    each block has both when it says more than its blocks: home's ``settled``) —,
-    ``warnings`` and ``exit_code``."""
-    named = data.get("profile") if isinstance(data, dict) else None
-    profile = named if isinstance(named, str) else profile
-    if verb in BLOCK_VERBS and isinstance(data, dict) and isinstance(data.get("blocks"), list):
-        rest = {k: v for k, v in data.items() if k not in ("profile", "blocks")}
-        body = {"blocks": data["blocks"], **({"result": rest} if rest else {})}
-    else:
-        body = {"result": data}
-    return {"verb": verb, "profile": profile, **body, "warnings": list(warnings),
-            "exit_code": exit_code}
+    typer.echo(dumps(data, compact=err), err=err)
 
 
 def flush_document(ctx: Any, exit_code: int) -> None:
@@ -74,49 +51,46 @@ def flush_document(ctx: Any, exit_code: int) -> None:
     pending = meta.pop(DOCUMENT, None)
     if pending is None:
         return
+    from deltoctl.render.envelope import envelope
+
     verb, data, err, profile = pending
     if profile is None and verb.split(" ")[0] not in NO_PROFILE:
         profile = getattr(ctx.find_root().obj, "profile", None)
     write_json(envelope(verb, data, meta.get(WARNINGS, []), exit_code, profile), err)
 
 
-def _root() -> Any:
+def _context() -> Any:
+    """The context of the command running, or None outside one."""
     from typer._click.globals import get_current_context
 
-    ctx = get_current_context(silent=True)
-    return None if ctx is None else ctx.find_root()
+    return get_current_context(silent=True)
+
+
+def _root() -> Any:
+    return None if _context() is None else _context().find_root()
 
 
 def _verb() -> str:
     """The command path of the verb running (``gpio get``)."""
-    from typer._click.globals import get_current_context
-
-    ctx = get_current_context(silent=True)
-    return "" if ctx is None else ctx.command_path.partition(" ")[2]
+    return "" if _context() is None else _context().command_path.partition(" ")[2]
 
 
 def emit_json_line(data: Any) -> None:
-    import json
+    from deltoctl.render.envelope import dumps
 
-    sys.stdout.write(json.dumps(data, separators=(",", ":"), default=_jsonable) + "\n")
+    sys.stdout.write(dumps(data, compact=True) + "\n")
     sys.stdout.flush()
 
 
-def _jsonable(value: Any) -> Any:
-    if hasattr(value, "__fspath__"):
-        return str(value)
-    if isinstance(value, (set, tuple)):
-        return list(value)
-    raise TypeError(f"cannot write {type(value).__name__} as JSON")
-
-
-def emit_error(message: str, hint: str | None, exit_code: int, as_json: bool) -> None:
+def emit_error(message: str, hint: str | None, exit_code: int, as_json: bool,
+               **more: str) -> None:
     """An error on stderr: one line (and its hint) for people; with --json one object,
-    ``{"error": {"message", "hint", "exit_code"}}``, so stdout holds data only."""
+    ``{"error": {"message", "hint", "exit_code"}}`` (and ``more``: the robot a remote verb
+    ran on), so stdout holds data only."""
     if as_json:
         import json
 
-        error = {"message": message, "hint": hint, "exit_code": exit_code}
+        error = {"message": message, "hint": hint, "exit_code": exit_code, **more}
         typer.echo(json.dumps({"error": error}), err=True)
         return
     typer.echo(f"deltoctl: error: {message}", err=True)
@@ -146,10 +120,7 @@ def warn(message: str) -> None:
 
 
 def _quiet() -> bool:
-    from typer._click.globals import get_current_context
-
-    ctx = get_current_context(silent=True)
-    return ctx is not None and bool(getattr(ctx.find_root().obj, "quiet", False))
+    return _root() is not None and bool(getattr(_root().obj, "quiet", False))
 
 
 def progress(opts: Any, transient: bool = True, elapsed: bool = False) -> Progress | None:
@@ -158,23 +129,17 @@ def progress(opts: Any, transient: bool = True, elapsed: bool = False) -> Progre
     instead of the time left."""
     if opts.json or opts.quiet or not sys.stderr.isatty():
         return None
-    from rich.console import Console
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+    from deltoctl.render.progress import started_bar
 
-    columns = ((TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn()) if elapsed
-               else Progress.get_default_columns())
-    bar = Progress(*columns, console=Console(stderr=True), transient=transient)
-    bar.start()
-    return bar
+    return started_bar(transient, elapsed)
 
 
 def advancing(bar: Progress | None, label: str) -> Callable[[float], None] | None:
     """A task named ``label`` on ``bar`` and what moves it to a fraction done; None without
     a bar."""
-    if bar is None:
-        return None
-    task = bar.add_task(label, total=1.0)
-    return lambda fraction: bar.update(task, completed=fraction)
+    from deltoctl.render.progress import advancing as task
+
+    return None if bar is None else task(bar, label)
 
 
 def show(parts: Sequence[str | tuple]) -> None:

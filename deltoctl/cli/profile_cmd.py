@@ -5,14 +5,14 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from deltoctl.cli.context import complete_profile, options
+from deltoctl.cli.completions import complete_part, complete_profile
+from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, info, say, table
-from deltoctl.errors import DeltoctlError, InvalidInput
+from deltoctl.errors import InvalidInput
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Iterable
 
-    from deltoctl.profile.model import Profile
+    pass
 
 app = typer.Typer(help="Browse, check and convert device profiles.", no_args_is_help=True)
 
@@ -33,50 +33,6 @@ def list_profiles(ctx: typer.Context) -> None:
         emit_json(summaries)
         return
     table(None, *catalog_table(summaries))
-
-
-def _completion_profile(ctx: typer.Context) -> "Profile | None":
-    """The profile named on the command line being completed, or None.
-
-    Completion runs while a command line is typed, on a file nobody chose to load yet: it
-    reads YAML and plain URDF only, and never runs xacro (a ``.xacro`` file, or ``--xacro``
-    on the line, completes nothing)."""
-    from deltoctl.profile.catalog import load_profile
-
-    root_params = ctx.find_root().params or {}
-    spec = ctx.params.get("profile") or root_params.get("profile")
-    if not spec:
-        return None
-    try:
-        return load_profile(spec, xacro=bool(root_params.get("xacro")), expand=False)
-    except DeltoctlError:
-        return None
-
-
-def _completer(names: "Callable[[Profile], Iterable[str]]") -> Any:
-    """A completion of the names ``names`` finds in the profile on the command line."""
-    def complete(ctx: typer.Context, incomplete: str) -> list[str]:
-        prof = _completion_profile(ctx)
-        return [] if prof is None else [n for n in names(prof) if n.startswith(incomplete)]
-
-    return complete
-
-
-# joint, sensor and GPIO names; the <ros2_control> blocks' (for --hardware); joints only
-complete_part = _completer(lambda prof: [c.name for _, c in prof.components()])
-complete_blocks = _completer(lambda prof: [hw.name for hw in prof.hardware])
-complete_joints = _completer(lambda prof: [j.name for j in prof.joints()])
-
-
-def complete_register_items(ctx: typer.Context, incomplete: str) -> list[str]:
-    """Register item names of the profile's families that have registers (return_delay_time)."""
-    from deltoctl import registry
-
-    def names(prof: "Profile") -> "Iterable[str]":
-        families = {registry.of_block(prof.family_of(hw), hw.plugin) for hw in prof.hardware}
-        return dict.fromkeys(n for f in families if f is not None for n in f.register_names())
-
-    return _completer(names)(ctx, incomplete.lower())
 
 
 @app.command("show")
@@ -119,6 +75,7 @@ def validate_cmd(
     """Check profiles against ros2_control's rules and deltoctl's own (exit 2 if any fails,
     3 if any has warnings)."""
     from deltoctl.profile.summary import validation
+    from deltoctl.render.profile import validation_lines
 
     opts = options(ctx)
     specs = list(profiles or []) or ([opts.profile] if opts.profile else [])
@@ -128,17 +85,8 @@ def validate_cmd(
     for spec in specs:
         result, code = validation(spec, opts.load_profile, strict)
         checked.append((result, code))
-        if opts.json:
-            continue
-        if not result["ok"]:
-            info(f"invalid: {result['error']}")
-            continue
-        say(f"ok: {spec} ({result['joints']} joints, {result['sensors']} sensors, "
-            f"{result['gpios']} gpios)")
-        for note in result["warnings"]:
-            info(f"warning: {note}")
-        for note in result.get("notes", []):
-            info(f"note: {note}")
+        for to_stdout, line in [] if opts.json else validation_lines(spec, result):
+            (say if to_stdout else info)(line)
     if opts.json:
         emit_json([result for result, _ in checked])
     failed = [code for result, code in checked if not result["ok"]]

@@ -11,21 +11,15 @@ larger difference exit 3.
 """
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import Annotated, Any
 
 import typer
 
+from deltoctl.app.replay import MAX_DEVIATION
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
-from deltoctl.cli.output import advancing, emit_json, info, progress, say, table, warn
+from deltoctl.cli.output import advancing, emit_json, info, progress, show, warn
 from deltoctl.errors import WARNINGS
-
-if TYPE_CHECKING:
-    from deltoctl.app.replay import Deviated, ReplayPlan, ReplayResult
-    from deltoctl.app.robot import Robot
-    from deltoctl.profile.model import Profile
-
-MAX_DEVIATION = 0.2  # rad or m: a replayed joint further than this from its recording stops
 
 
 def register(app: typer.Typer) -> None:
@@ -70,7 +64,7 @@ def replay(
     (exit 5)."""
     import copy
 
-    from deltoctl.app.replay import plan_replay, replay_report, where_to_replay
+    from deltoctl.app.replay import Deviated, plan_replay, replay_limits, where_to_replay
     from deltoctl.cli.confirm import confirm
     from deltoctl.units import nonnegative
 
@@ -79,74 +73,41 @@ def replay(
     nonnegative(max_deviation, "--max-deviation")
     named = opts.load_profile() if opts.profile else None
     plan = plan_replay(recording, named, device, opts.hardware)
-    limit = _per_joint(plan, tolerance, "--tolerance")
-    deviation = _per_joint(plan, max_deviation, "--max-deviation")
-    deviation = MAX_DEVIATION if deviation is None else deviation
+    limit, deviation = replay_limits(plan, tolerance, max_deviation)
     run_opts = copy.copy(opts)  # only the blocks it commands, on the simulators unless --device
     run_opts.hardware, run_opts.sim = where_to_replay(plan, device, opts.hardware, opts.target,
                                                       opts.sim)
     for note in plan.notes:
         warn(note)
-    on_device = device and not opts.sim
     confirm(ctx, plan.describe(recording, opts.target or ["the simulators"]))
-    robot, result, stopped = _run(opts, run_opts, allow_model_mismatch, plan, recording,
-                                  deviation)
-    report = replay_report(recording, robot.system, plan.recorded, result, limit, on_device,
-                           deviation, stopped)
-    if stopped is not None:
-        if opts.json:
-            emit_json(report)  # the replay until it was stopped
-        raise stopped
-    _show(opts, report, plan.profile, tolerance)
-    if report["exceeded"]:
-        warn(f"{', '.join(report['exceeded'])}: replayed more than {tolerance} from the "
-             "recording")
-    finish(robot.system)
+    bar = progress(opts)
+    try:
+        with open_robot(run_opts, allow_model_mismatch, plan.profile) as robot:
+            report = robot.replay(recording, deviation, limit, plan, run_opts.sim,
+                                  device and not opts.sim,
+                                  advancing(bar, f"replay {recording.name}"), info)
+    except Deviated as stopped:
+        if opts.json and stopped.report is not None:
+            emit_json(stopped.report)  # the replay until it was stopped
+        raise
+    finally:
+        if bar is not None:
+            bar.stop()
+    _show(opts, report, robot.joint_types(), tolerance)
+    finish(robot)
     if report["exceeded"] or plan.notes:  # the notes: shown before the replay
         raise typer.Exit(WARNINGS)
 
 
-def _per_joint(plan: "ReplayPlan", text: str | None, what: str) -> float | None:
-    """A tolerance in SI, its unit that of every replayed joint (exit 2 otherwise)."""
-    from deltoctl.app.motion import joints_quantity
-
-    return joints_quantity(plan.profile, plan.recorded.joints, text, what)
-
-
-def _run(opts: Options, run_opts: Options, allow_model_mismatch: bool, plan: "ReplayPlan",
-         recording: Path, deviation: float) -> "tuple[Robot, ReplayResult, Deviated | None]":
-    """The replay with a progress bar: (the robot, its result, what stopped it or None)."""
-    from deltoctl.app.replay import run_replay
-
-    bar = progress(opts)
-    try:
-        with open_robot(run_opts, allow_model_mismatch, plan.profile) as robot:
-            result, stopped = run_replay(robot.system, plan.recorded, deviation, run_opts.sim,
-                                         advancing(bar, f"replay {recording.name}"), info)
-    finally:
-        if bar is not None:
-            bar.stop()
-    return robot, result, stopped
-
-
-def _show(opts: Options, report: dict[str, Any], profile: "Profile",
+def _show(opts: Options, report: dict[str, Any], joint_types: dict[str, str],
           tolerance: str | None) -> None:
-    """The report; each joint's differences in the unit of --tolerance (else degrees or
-    millimetres)."""
-    from deltoctl.units import joint_dimension, parse_unit, shown
+    """The report, and the joints beyond --tolerance as a warning."""
+    from deltoctl.render.replay import replay_parts
 
     if opts.json:
         emit_json(report)
-        return
-    say(f"replayed {report['commands']} commands of {Path(report['file']).name} on the "
-        f"{report['on']} in {report['seconds']:.2f} s (recorded: "
-        f"{report['recorded_seconds']:.2f} s; latest command {report['late_max_ms']:.1f} ms "
-        "late)")
-    unit = parse_unit(tolerance).unit if tolerance else ""
-    rows = []
-    for j, d in report["joints"].items():
-        comp = profile.component(j)
-        dim = joint_dimension(comp.joint_type) if comp is not None else None
-        rows.append([j, d["block"], d["samples"], shown(d["rms"], dim, unit),
-                     shown(d["max"], dim, unit)])
-    table("recorded vs replayed position", ["joint", "block", "samples", "RMS", "max"], rows)
+    else:
+        show(replay_parts(report, joint_types, tolerance))
+    if report["exceeded"]:
+        warn(f"{', '.join(report['exceeded'])}: replayed more than {tolerance} from the "
+             "recording")

@@ -1,7 +1,6 @@
 """``deltoctl report``: the commissioning report — the acceptance sequence on a robot, one
 self-contained HTML file and its JSON twin."""
 
-from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -42,6 +41,7 @@ def report(
     from deltoctl.app.checks import fail_on
     from deltoctl.app.report import Plan, check_plan, report_paths, run_report, write_report
     from deltoctl.render.checks import check_rows, verdict_text
+    from deltoctl.render.progress import stages
     from deltoctl.render.report_html import report_html
 
     opts = options(ctx)
@@ -51,7 +51,7 @@ def report(
     check_plan(plan)
     bar = progress(opts, elapsed=True)
     try:
-        said = _shown(opts, bar)
+        said = stages(bar, "report", None if opts.json else info)
         said("connect", 0.0)
         with open_robot(opts, allow_model_mismatch, profile) as robot:
             doc = run_report(robot, plan, said)
@@ -70,18 +70,6 @@ def report(
         for w in doc["warnings"]:
             warn(w)
         raise typer.Exit(WARNINGS)
-
-
-def _shown(opts: Any, bar: Any) -> Callable[[str, float], None]:
-    """The sequence's stages on stderr: ``bar`` on a terminal, a line each otherwise."""
-    task = bar.add_task("report", total=1.0) if bar is not None else None
-
-    def said(label: str, fraction: float) -> None:
-        if bar is not None:
-            bar.update(task, completed=fraction, description=f"report: {label}")
-        elif not opts.json and label != "done":
-            info(f"report: {label}")
-    return said
 
 
 def fleet_summary(runs: list[dict[str, Any]], as_json: bool, code: int) -> None:

@@ -5,35 +5,21 @@ from typing import Annotated, Any
 
 import typer
 
+from deltoctl.cli.completions import complete_register_items, complete_target
 from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import options
-from deltoctl.cli.device_cmd import finish, open_robot
+from deltoctl.cli.device_cmd import finish, on_robot, open_robot
 from deltoctl.cli.motion_cmd import complete_joint
 from deltoctl.cli.output import emit_json, say, table
 from deltoctl.errors import DeviceError, InvalidInput
-
-
-def _complete_target(ctx: typer.Context, incomplete: str) -> list[str]:
-    """The profile's joint groups (their ``group`` param, and arms/legs), all, and joints."""
-    from deltoctl.app.robot import target_names
-    from deltoctl.cli.profile_cmd import _completion_profile
-
-    prof = _completion_profile(ctx)
-    return [n for n in target_names(prof) if n.startswith(incomplete)] if prof else []
 
 
 def _complete_state(incomplete: str) -> list[str]:
     return [s for s in ("on", "off") if s.startswith(incomplete)]
 
 
-def _complete_item(ctx: typer.Context, incomplete: str) -> list[str]:
-    from deltoctl.cli.profile_cmd import complete_register_items
-
-    return complete_register_items(ctx, incomplete)
-
-
 TargetArg = Annotated[str, typer.Argument(
-    autocompletion=_complete_target,
+    autocompletion=complete_target,
     help="A joint, a group (head, left_arm, right_arm, arms, left_leg, right_leg, legs) "
          "or all.")]
 
@@ -56,7 +42,7 @@ def register_get(
     ctx: typer.Context,
     joint: JointArg,
     items: Annotated[list[str] | None, typer.Argument(
-        autocompletion=_complete_item,
+        autocompletion=complete_register_items,
         help="Items to read (default: the whole table, in one read).")] = None,
 ) -> None:
     """Read control table items of one servo."""
@@ -69,25 +55,22 @@ def register_get(
     else:
         table(f"{joint} (ID {result['id']})", ["address", "item", "value", "access"],
               [[i["address"], i["item"], i["value"], i["access"]] for i in result["items"]])
-    finish(robot.system)
+    finish(robot)
 
 
 def register_set(
     ctx: typer.Context,
     joint: JointArg,
-    item: Annotated[str, typer.Argument(autocompletion=_complete_item,
+    item: Annotated[str, typer.Argument(autocompletion=complete_register_items,
                                         help="The item, e.g. return_delay_time.")],
     value: Annotated[int, typer.Argument(help="The raw value.")],
 ) -> None:
     """Write one control table item and read it back (asks first: a write can move)."""
-    from deltoctl.app.robot import servo_named
+    def write(robot: Any) -> dict[str, Any]:
+        confirm(ctx, f"write {item} = {value} to {robot.servo_named(joint)}")
+        return {"joint": joint, "item": item, "value": robot.write_register(joint, item, value)}
 
-    opts = options(ctx)
-    with open_robot(opts) as robot:
-        confirm(ctx, f"write {item} = {value} to {servo_named(robot.system, joint)}")
-        after = robot.write_register(joint, item, value)
-    _report(opts, {"joint": joint, "item": item, "value": after}, f"{joint}: {item} = {after}")
-    finish(robot.system)
+    on_robot(ctx, write, lambda done, _: [f"{joint}: {item} = {done['value']}"])
 
 
 def torque(
@@ -106,10 +89,8 @@ def torque(
     confirm(ctx, f"switch torque {state} for {joints_named(target, joints)}: " + (
         "they hold their position" if state == "on"
         else "they go limp, and an arm under gravity falls"))
-    with open_robot(opts, profile=profile) as robot:
-        done = robot.torque(joints, state == "on")
-    _report(opts, {"torque": state, "joints": done}, f"torque {state}: {len(done)} joint(s)")
-    finish(robot.system)
+    on_robot(ctx, lambda robot: {"torque": state, "joints": robot.torque(joints, state == "on")},
+             lambda done, _: [f"torque {state}: {len(done['joints'])} joint(s)"], profile=profile)
 
 
 def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
@@ -123,15 +104,11 @@ def reboot(ctx: typer.Context, target: TargetArg = "all") -> None:
                  "an arm under gravity falls")
     with open_robot(opts, profile=profile) as robot:
         done = robot.reboot(joints)
-    _report(opts, {"rebooted": done}, f"rebooted {len(done)} of {len(joints)} joint(s)")
+    if opts.json:
+        emit_json({"rebooted": done})
+    else:
+        say(f"rebooted {len(done)} of {len(joints)} joint(s)")
     missing = sorted(set(joints) - set(done))
     if missing:
         raise DeviceError(f"no reboot acknowledgement from {', '.join(missing)}")
-    finish(robot.system)
-
-
-def _report(opts: Any, data: dict, text: str) -> None:
-    if opts.json:
-        emit_json(data)
-    else:
-        say(text)
+    finish(robot)

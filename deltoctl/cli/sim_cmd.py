@@ -5,7 +5,8 @@ from typing import TYPE_CHECKING, Annotated, Any, cast
 
 import typer
 
-from deltoctl.cli.context import complete_profile, options
+from deltoctl.cli.completions import complete_joints, complete_profile
+from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_error, say, warn
 from deltoctl.errors import USAGE, InvalidInput
 
@@ -13,13 +14,6 @@ if TYPE_CHECKING:
     from deltoctl.registry import SimOption
 
 app = typer.Typer(help="Simulated devices that speak the real protocol.", no_args_is_help=True)
-
-
-def _complete_joint(ctx: typer.Context, incomplete: str) -> list[str]:
-    """Joints of the PROFILE argument (or --profile), for the faults that name one."""
-    from deltoctl.cli.profile_cmd import complete_joints
-
-    return complete_joints(ctx, incomplete)
 
 
 def serve(
@@ -73,7 +67,7 @@ def _parameter(option: "SimOption") -> inspect.Parameter:
         "metavar": option.metavar or ("JOINT" if option.kind == "joints" else None),
         "show_default": False}
     if option.kind == "joints":
-        info["autocompletion"] = _complete_joint
+        info["autocompletion"] = complete_joints  # of PROFILE or --profile
     kind: Any = {"flag": bool, "joints": list[str] | None}.get(option.kind, str | None)
     default: Any = False if option.kind == "flag" else None
     return inspect.Parameter(option.name, inspect.Parameter.KEYWORD_ONLY, default=default,

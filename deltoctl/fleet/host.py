@@ -89,6 +89,31 @@ def motion_rule(config: object, allow_unauthenticated: bool) -> tuple[bool, str]
                    "links are not all mutual TLS")
 
 
+def check_deadline(deadline: float) -> None:
+    """Seconds without the caller's heartbeat before a verb is interrupted: 0.1 to 10."""
+    import math
+
+    if not (math.isfinite(deadline) and 0.1 <= deadline <= 10):
+        raise InvalidInput(f"--deadline must be 0.1 to 10 seconds, got {deadline:g}")
+
+
+def profile_spec(given: str | None, name: str) -> str:
+    """How the verb processes name the profile: its file's absolute path, or its name."""
+    spec = given or name
+    return os.path.abspath(spec) if os.path.exists(spec) else spec
+
+
+def verb_links(spec: str, targets: Iterable[str], xacro_args: dict[str, str],
+               package_paths: dict[str, str], hardware: Iterable[str],
+               xacro: bool) -> list[str]:
+    """The global options that point a verb at the robot: its profile, its links."""
+    links = ["-p", spec, *(f"--target={t}" for t in targets)]
+    links += [f"--arg={k}:={v}" for k, v in xacro_args.items()]
+    links += [f"--package-path={k}={v}" for k, v in package_paths.items()]
+    links += [f"--hardware={h}" for h in hardware]
+    return links + (["--xacro"] if xacro else [])
+
+
 def check_record_duration(duration: float | None) -> None:
     """A record the agent runs (``fleet run record``, its file in the agent's directory) has a
     duration of at most AGENT_RECORD_MAX, so that no caller fills the robot's computer's

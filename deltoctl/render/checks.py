@@ -33,3 +33,23 @@ def residual_rows(blocks: list[dict[str, Any]]) -> list[list[Any]]:
     and whether they pass."""
     return [[r["block"], s, v["residual_force_n"], v["residual_torque_nm"],
              "yes" if v["pass"] else "NO"] for r in blocks for s, v in r["sensors"].items()]
+
+
+def ft_table(result: dict[str, Any], verify: bool) -> tuple[None, list[str], list[list[Any]]]:
+    """A tare's table: its checks (``verify``), else each sensor's residual."""
+    if verify:
+        return None, ["check", "value", "unit", "limit", "verdict"], check_rows(result["checks"])
+    return (None, ["block", "sensor", "residual force N", "residual torque N·m", "pass"],
+            residual_rows(result["blocks"]))
+
+
+def imu_table(result: dict[str, Any]) -> tuple[None, list[str], list[list[Any]]]:
+    """An IMU calibration's table: each sensor's checks."""
+    return (None, ["sensor", "check", "value", "unit", "limit", "verdict"],
+            [row for b in result["blocks"] for row in check_rows(b["checks"], b["sensor"])])
+
+
+def calibration_files(result: dict[str, Any]) -> list[str]:
+    """Where an IMU calibration saved each sensor's tumble, and what to do with it."""
+    return [f"calibration: {b['calibration_file']} (name it in {b['sensor']}'s calibration "
+            "param)" for b in result["blocks"] if "calibration_file" in b]

@@ -42,15 +42,6 @@ def run_rows(jobs: Sequence[Job]) -> list[list[Any]]:
              "ok" if j.code == 0 else j.last_error()] for j in jobs]
 
 
-def recorded_text(robot: str, result: dict[str, Any]) -> str:
-    """A remote record's file (its name filled from the robot's blocks), as ``record`` says
-    it: its messages, topics and the robot's cycles."""
-    loop = result["loop"]
-    return (f"wrote {result['output']}: {sum(result['messages'].values())} messages on "
-            f"{len(result['messages'])} topics, {loop['cycles']} cycles of robot {robot} at "
-            f"{loop['real_rate']} Hz (its cycle times)")
-
-
 def not_received_text(robot: str, result: dict[str, Any]) -> str:
     """The cycles a robot ran that a remote record did not receive."""
     loop = result["loop"]

@@ -86,3 +86,14 @@ def interfaces_table(comp: Component) -> Table:
     rows += [["state", i.name, i.min, i.max, i.initial_value, i.data_type]
              for i in comp.state_interfaces]
     return ["direction", "interface", "min", "max", "initial", "type"], rows
+
+
+def validation_lines(spec: str, result: dict[str, Any]) -> list[tuple[bool, str]]:
+    """A profile's validation for people: (on stdout, the line) — what it holds when valid;
+    the error, its warnings and notes on stderr."""
+    if not result["ok"]:
+        return [(False, f"invalid: {result['error']}")]
+    return [(True, f"ok: {spec} ({result['joints']} joints, {result['sensors']} sensors, "
+                   f"{result['gpios']} gpios)"),
+            *((False, f"warning: {note}") for note in result["warnings"]),
+            *((False, f"note: {note}") for note in result.get("notes", []))]

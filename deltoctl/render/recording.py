@@ -9,6 +9,23 @@ from deltoctl.render.identity import Table
 from deltoctl.units import utc_time
 
 
+def recorded_lines(result: dict[str, Any], robot: str | None = None) -> list[str]:
+    """A recording written (by ``record``, or of a remote ``robot``): its file, messages,
+    topics and cycles; where its gaps are marked, when a link was lost."""
+    loop, counts = result["loop"], result["messages"]
+    cycles = f"{loop['cycles']} cycles" + (f" of robot {robot}" if robot else "")
+    lines = [f"wrote {result['output']}: {sum(counts.values())} messages on {len(counts)} "
+             f"topics, {cycles} at {loop['real_rate']} Hz"
+             + (" (its cycle times)" if robot else "")]
+    return lines + (["the gaps are marked on /diagnostics"] if result["link_losses"] else [])
+
+
+def recording_status(name: str, cycles: int, size: int, link: float | None) -> str:
+    """The status line people watch while recording (the time so far is the bar's)."""
+    state = "" if link is None else " · link up" if link else " · [red]link lost[/]"
+    return f"recording {name}: {cycles} cycles, {size / 1e6:.1f} MB{state}"
+
+
 def _size(n: float) -> str:
     for unit in ("B", "kB", "MB", "GB"):
         if n < 1000 or unit == "GB":

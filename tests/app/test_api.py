@@ -165,3 +165,64 @@ def test_a_name_of_no_joint_lists_the_groups_the_profile_has():
         select_joints(load_profile("mh5"), "zzz", "torque")
     with pytest.raises(InvalidInput, match=r"of open-manipulator-x \(groups: all\)$"):
         select_joints(load_profile("open-manipulator-x"), "zzz", "torque")
+
+
+def test_a_restore_tells_its_caller_what_it_will_write_and_a_refusal_carries_its_plan(
+        tmp_path):
+    from deltoctl.app.config import dump_yaml
+
+    with deltoctl.open_robot("mh5", sim=True) as robot:
+        doc = robot.config_snapshot()
+        before = doc["blocks"]["upper_body"]["parts"]["head_y"]["Return Delay Time"]["value"]
+        doc["blocks"]["upper_body"]["parts"]["head_y"]["Return Delay Time"]["value"] = 7
+        path = tmp_path / "mh5.yaml"
+        path.write_text(dump_yaml(doc))
+        told = []
+
+        def no(what):
+            told.append(what)
+            raise Refused("not now")
+
+        with pytest.raises(Refused, match="not now"):
+            robot.config_restore(path, confirm=no)
+        assert told and "upper_body/head_y" in told[0]
+        assert robot.registers("head_y", ["Return Delay Time"])["items"][0]["value"] == before
+        rows = robot.config_restore(path, confirm=told.append)
+        assert [r["status"] for r in rows if r["item"] == "Return Delay Time"] == ["verified"]
+        doc["blocks"]["upper_body"]["parts"]["head_y"]["Max Position Limit"]["value"] = 3000
+        path.write_text(dump_yaml(doc))
+        with pytest.raises(Refused) as refused:
+            robot.config_restore(path, confirm=told.append)
+    assert len(told) == 2  # a refused plan asks no one
+    assert [r["status"] for r in refused.value.rows if r["item"] == "Max Position Limit"] \
+        == ["refused"]
+
+
+def test_a_jog_is_planned_in_words_and_checked_before_it_moves():
+    with deltoctl.open_robot("dg-5f-right", sim=True) as robot:
+        start = robot.read()["rj_dg_2_2/position"]
+        targets, moves = robot.plan_jog([("rj_dg_2_2", "5deg")])
+        assert targets["rj_dg_2_2"] == pytest.approx(start + 0.0873, abs=1e-3)
+        assert moves[0].startswith("rj_dg_2_2 (") and "(+5.0" in moves[0]
+        with pytest.raises(Refused):
+            robot.plan_jog([("rj_dg_2_2", "-90deg")], to=None)
+        assert robot.read()["rj_dg_2_2/position"] == pytest.approx(start, abs=0.01)
+
+
+def test_cycles_feed_sinks_and_watch_the_links():
+    from deltoctl.core.runner import Sink
+
+    class Count(Sink):
+        frames = 0
+
+        def frame(self, t_ns, values):
+            self.frames += 1
+
+    with deltoctl.open_robot("dg-5f-right", sim=True) as robot:
+        count = Count()
+        loop, links = robot.cycles(100, 0.2, [count])
+        links.finish()
+        assert count.frames == loop["cycles"] >= 2
+        assert robot.loop_warnings(100, loop) == []
+        with pytest.raises(InvalidInput, match="--rate"):
+            robot.cycles(0, 0.2, [])
