@@ -1,0 +1,71 @@
+"""Every verb of a Feetech bus from the CLI, on the SO-101 follower's emulated servos."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.conftest import block_of
+
+SO101 = ("-p", "so101-follower", "--sim")
+
+
+def _json(result):
+    assert result.exit_code in (0, 3), (result.exit_code, result.output, result.stderr)
+    return json.loads(result.stdout)
+
+
+def test_every_verb_runs_on_the_so101_follower(cli, tmp_path):
+    assert cli(*SO101, "connect").exit_code == 0
+    servos = block_of(_json(cli(*SO101, "--json", "identify")))
+    assert servos  # the identify report of the one block
+    report = _json(cli(*SO101, "--json", "detect"))
+    assert "6 servos answer (0 missing" in json.dumps(report)
+    assert cli(*SO101, "--yes", "jog", "shoulder_pan", "10deg").exit_code == 0
+    assert cli(*SO101, "--yes", "home").exit_code == 0
+    assert cli(*SO101, "--yes", "torque", "off", "all").exit_code == 0
+    got = cli(*SO101, "register", "get", "gripper", "present_position", "homing_offset")
+    assert got.exit_code == 0 and "Present_Position" in got.stdout and "2048" in got.stdout
+    got = cli(*SO101, "--yes", "register", "set", "gripper", "max_torque_limit", "500")
+    assert got.exit_code == 0 and "500" in got.stdout
+    snap = tmp_path / "snap.yaml"
+    assert cli(*SO101, "config", "snapshot", "-o", str(snap)).exit_code == 0
+    assert cli(*SO101, "config", "diff", str(snap)).exit_code == 0
+    text = snap.read_text().replace("value: 20\n", "value: 21\n", 1)  # a DTs or a default
+    snap.write_text(text)
+    assert cli(*SO101, "--yes", "config", "restore", str(snap)).exit_code in (0, 3)
+    lines = cli(*SO101, "--json", "stream", "--duration", "0.2").stdout.splitlines()
+    assert "gripper/voltage" in json.loads(lines[-1])["values"]
+    assert cli(*SO101, "record", str(tmp_path / "so.mcap"), "--duration", "0.2").exit_code == 0
+    assert (tmp_path / "so.mcap").stat().st_size > 0
+
+
+def test_identify_warns_of_mixed_firmware(cli):
+    result = cli(*SO101, "--sim-option", "old_firmware=gripper", "identify")
+    assert result.exit_code == 3
+    assert "different firmware" in result.stderr and "gripper 3.9" in result.stderr
+
+
+@pytest.mark.parametrize(("fault", "said"), [
+    ("duplicate=wrist_roll", "replies collide at ID 5"),
+    ("wrong_baud=gripper", "gripper (500000)"),
+    ("missing=gripper", "1 missing"),
+])
+def test_detect_names_the_bus_faults(cli, fault, said):
+    result = cli(*SO101, "--sim-option", fault, "--json", "detect")
+    assert said in result.stdout
+
+
+def test_a_latched_overload_is_a_named_fault_that_says_to_cycle_the_power(cli):
+    result = cli(*SO101, "--sim-option", "overload=gripper", "--yes", "jog", "gripper", "5deg")
+    assert result.exit_code == 1
+    assert "overload protection latched" in result.stderr
+    assert "power is cycled" in result.stderr
+
+
+def test_a_voltage_error_is_named_with_what_to_do(cli):
+    result = cli(*SO101, "--sim-option", "voltage=elbow_flex", "register", "get", "elbow_flex",
+                 "present_voltage")
+    assert "160" in result.stdout
+    assert "input voltage error" in result.stderr and "variant" in result.stderr
