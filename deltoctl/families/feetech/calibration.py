@@ -58,6 +58,14 @@ def dump(motors: dict[str, MotorCalibration]) -> str:
     return json.dumps({name: asdict(m) for name, m in motors.items()}, indent=4)
 
 
+def save(path: Path, motors: dict[str, MotorCalibration]) -> Path:
+    """Write LeRobot's file (its folders made), as LeRobot's calibrate saves it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(dump(motors))
+    return path
+
+
 def default_path(device_id: str, leader: bool = False) -> Path:
     """Where LeRobot looks for a calibration: its cache, by device kind and id."""
     root = os.environ.get("HF_LEROBOT_CALIBRATION")

@@ -586,6 +586,24 @@ class FeetechDriver(Driver):
                                f"documented range {item.low}..{item.high}")
         return item
 
+    # -- LeRobot's calibration -------------------------------------------------------------------
+    def lerobot_calibration(self) -> dict[str, calibration.MotorCalibration]:
+        """The calibration the servos hold (Homing_Offset, Min/Max_Position_Limit, written
+        by LeRobot's calibrate into EEPROM), as LeRobot's file has it; drive_mode 0, as
+        LeRobot writes for the SO arms."""
+        motors = {}
+        for device_id, joint in self.joints.items():
+            if device_id not in self.present:
+                continue
+            items = self.model(device_id).by_name
+            offset = items.get("Homing_Offset")
+            motors[joint.name] = calibration.MotorCalibration(
+                id=device_id, drive_mode=0,
+                homing_offset=self.read_register(device_id, offset) if offset else 0,
+                range_min=self.read_register(device_id, items["Min_Position_Limit"]),
+                range_max=self.read_register(device_id, items["Max_Position_Limit"]))
+        return motors
+
     def cleanup(self) -> None:
         self.link.close()
         self.connected = False
