@@ -40,8 +40,13 @@ def _fail(profile: Profile, hw: Hardware, message: str) -> ProfileError:
 
 
 def import_block(profile: Profile, hw: Hardware) -> None:
-    """The block's bus from its plugin's port and baud params (idempotent)."""
-    if hw.plugin not in PARAMS or hw.bus is not None:
+    """The block's bus from its plugin's port and baud params, and each joint's ID from its
+    plugin's ID param or the calibration file (idempotent)."""
+    if hw.plugin not in PARAMS:
+        return
+    for device_id, joint in servo_ids(profile, hw).items():
+        joint.address = device_id
+    if hw.bus is not None:
         return
     port_param, baud_param = PARAMS[hw.plugin][:2]
     port = hw.params.get(port_param)

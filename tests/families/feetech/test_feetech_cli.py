@@ -18,8 +18,9 @@ def _json(result):
 
 def test_every_verb_runs_on_the_so101_follower(cli, tmp_path):
     assert cli(*SO101, "connect").exit_code == 0
-    servos = block_of(_json(cli(*SO101, "--json", "identify")))
-    assert servos  # the identify report of the one block
+    servos = block_of(_json(cli(*SO101, "--json", "identify")))["identity"]["servos"]
+    assert [s["id"] for s in servos.values()] == [1, 2, 3, 4, 5, 6]
+    assert {(s["model"], s["firmware"]) for s in servos.values()} == {("STS3215", "3.10")}
     report = _json(cli(*SO101, "--json", "detect"))
     assert "6 servos answer (0 missing" in json.dumps(report)
     assert cli(*SO101, "--yes", "jog", "shoulder_pan", "10deg").exit_code == 0
