@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import select
-import time
 import tty
 
 import pytest
@@ -13,6 +12,7 @@ import pytest
 from deltoctl.families.feetech import codec
 from deltoctl.families.feetech.emulator import FeetechBus, FeetechPtyServer, Servo
 from deltoctl.families.feetech.models import BY_NUMBER
+from tests.conftest import eventually
 
 scs = pytest.importorskip("scservo_sdk")
 
@@ -85,13 +85,12 @@ def test_sdk_pings_reads_and_writes_the_emulator(bus):
     assert ph.write2ByteTxRx(port, 2, 46, 3000) == (scs.COMM_SUCCESS, 0)
     assert ph.write2ByteTxRx(port, 2, 42, 2148) == (scs.COMM_SUCCESS, 0)
     assert ph.read1ByteTxRx(port, 2, 40)[0] == 1  # a goal turns the torque on
-    time.sleep(0.15)
-    assert ph.read2ByteTxRx(port, 2, 56)[:2] == (2148, scs.COMM_SUCCESS)
+    assert eventually(lambda: ph.read2ByteTxRx(port, 2, 56)[:2] == (2148, scs.COMM_SUCCESS))
     # REG_WRITE waits for ACTION
     assert ph.regWriteTxRx(port, 4, 42, 2, [0x00, 0x07]) == (scs.COMM_SUCCESS, 0)
     assert servos.servos[3].get("Goal_Position") == 2048
     assert ph.action(port, scs.BROADCAST_ID) == scs.COMM_SUCCESS
-    assert servos.servos[3].get("Goal_Position") == 0x700
+    assert eventually(lambda: servos.servos[3].get("Goal_Position") == 0x700)  # no reply
 
 
 def test_sdk_group_sync_read_and_write(bus):
@@ -100,12 +99,15 @@ def test_sdk_group_sync_read_and_write(bus):
     for i in range(1, 7):
         assert writer.addParam(i, [scs.SCS_LOBYTE(2000 + i), scs.SCS_HIBYTE(2000 + i)])
     assert writer.txPacket() == scs.COMM_SUCCESS
-    time.sleep(0.1)
     reader = scs.GroupSyncRead(port, ph, 56, 2)
     for i in range(1, 7):
         reader.addParam(i)
-    assert reader.txRxPacket() == scs.COMM_SUCCESS
-    assert [reader.getData(i, 56, 2) for i in range(1, 7)] == [2000 + i for i in range(1, 7)]
+
+    def arrived() -> bool:  # the servos move at their top speed: some ms
+        assert reader.txRxPacket() == scs.COMM_SUCCESS
+        return [reader.getData(i, 56, 2) for i in range(1, 7)] == [2000 + i for i in range(1, 7)]
+
+    assert eventually(arrived)
 
 
 def test_sdk_reads_a_big_endian_scs_servo(wire):
