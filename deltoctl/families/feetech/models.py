@@ -23,6 +23,11 @@ class Item(items.Item):
     def eeprom(self) -> bool:
         return self.address < 40
 
+    @property
+    def key(self) -> str:
+        """The name --allow takes, as config restore spells it: homing-offset."""
+        return self.name.lower().replace("_", "-")
+
 
 def _sts() -> tuple[Item, ...]:
     step, speed = "0.088°", "0.088°/s"

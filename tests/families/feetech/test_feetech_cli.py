@@ -70,3 +70,19 @@ def test_a_voltage_error_is_named_with_what_to_do(cli):
                  "present_voltage")
     assert "160" in result.stdout
     assert "input voltage error" in result.stderr and "variant" in result.stderr
+
+
+def test_restore_writes_a_safety_item_only_when_allowed(cli, tmp_path):
+    snap = tmp_path / "snap.yaml"
+    assert cli(*SO101, "config", "snapshot", "-o", str(snap)).exit_code == 0
+    text = snap.read_text()
+    at = text.index("value: 0", text.index("Homing_Offset"))
+    snap.write_text(text[:at] + "value: 100" + text[at + len("value: 0"):])
+    refused = cli(*SO101, "--yes", "config", "restore", str(snap))
+    assert refused.exit_code == 5 and "--allow homing-offset" in refused.stderr
+    done = cli(*SO101, "--yes", "config", "restore", str(snap), "--allow", "homing_offset")
+    assert done.exit_code == 0 and "verified" in done.stdout
+    beyond = text[:at] + "value: 2114" + text[at + len("value: 0"):]  # LeRobot's bad offset
+    snap.write_text(beyond)
+    bad = cli(*SO101, "--yes", "config", "restore", str(snap), "--allow", "homing_offset")
+    assert bad.exit_code == 2 and "Homing_Offset" in bad.stderr

@@ -80,7 +80,7 @@ def test_models_bytes_and_encodings():
     # one baud table: LeRobot's codes 5-7 kept beside Feetech's, which the servos follow
     assert [BAUD_RATES[c] for c in (5, 6, 7)] == [76_800, 57_600, 38_400]
     assert [LEROBOT_BAUD_RATES[c] for c in (5, 6, 7)] == [57_600, 38_400, 19_200]
-    assert config_rules()["Homing_Offset"][2] == "homing_offset"  # a safety item: --allow
+    assert config_rules()["Homing_Offset"][2] == "homing-offset"  # a safety item: --allow
 
 
 def test_eeprom_is_kept_only_while_unlocked():
@@ -131,3 +131,42 @@ def test_servos_sharing_an_id_collide():
     assert _exchange(bus, 1, codec.PING).replies == [(1, 0, b"")]  # identical: they agree
     assert _exchange(bus, 1, codec.READ, codec.read_params(56, 2)).replies == []  # garbled
     assert collide([b"\xff\x0f", b"\xf0\xff\x01"]) == b"\xf0\x0f\x01"
+
+
+@pytest.fixture
+def so101():
+    """The SO-101 follower's driver on its emulated bus, and the bus."""
+    from deltoctl.families.feetech.driver import FeetechDriver
+    from deltoctl.families.feetech.emulator import FeetechPtyServer
+    from deltoctl.profile.catalog import load_profile
+    from tests.conftest import block_for
+
+    profile = load_profile("so101-follower")
+    [hw] = profile.hardware
+    bus = FeetechBus([Servo(i) for i in range(1, 7)], baud=1_000_000)
+    with FeetechPtyServer(bus) as server:
+        driver = FeetechDriver(block_for(profile, hw, f"serial://{server.port}?baud=1000000"))
+        driver.configure()
+        yield driver, bus
+        driver.cleanup()
+
+
+def test_an_eeprom_write_is_unlocked_and_locked_again_so_the_servo_keeps_it(so101):
+    driver, bus = so101
+    assert driver.write_register("gripper", "Max_Torque_Limit", 500) == 500
+    gripper = bus.servos[5]
+    assert gripper.get("Lock") == 1  # locked again
+    gripper.power_cycle()
+    assert gripper.get("Max_Torque_Limit") == 500  # saved: it was written unlocked
+    # a RAM item needs no unlock
+    assert driver.write_register("gripper", "acceleration", 254) == 254
+
+
+def test_a_write_to_a_servo_in_fault_is_a_named_device_fault(so101):
+    from deltoctl.errors import DeviceFault
+
+    driver, bus = so101
+    bus.servos[2].latch_overload()
+    with pytest.raises(DeviceFault, match="overload error") as raised:
+        driver.write_register("elbow_flex", "acceleration", 10)
+    assert raised.value.code == OVERLOAD and "power is cycled" in raised.value.hint
