@@ -95,6 +95,8 @@ TABLE: dict[str, Verb] = {
                       stage=LIFECYCLE, subs={
         "ft": Verb(ACTUATES, "deltoctl -p dg-5f-right calibrate ft --samples 200"),
         "imu": Verb(ACTUATES, "deltoctl -p mh5 calibrate imu --tumble"),  # its self-test
+        "servos": Verb(READS, "deltoctl -p so101-follower calibrate servos --half-turn",
+                       when={("--half-turn",): ACTUATES}),
     }),
     "gpio": Verb(READS, "deltoctl -p rrbot-gpio gpio set flange_vacuum/vacuum on", "device_cmd",
                  stage=LIFECYCLE, subs={

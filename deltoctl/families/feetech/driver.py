@@ -604,6 +604,38 @@ class FeetechDriver(Driver):
                 range_max=self.read_register(device_id, items["Max_Position_Limit"]))
         return motors
 
+    def half_turn_homing(self) -> None:
+        """LeRobot's half-turn homing: torque off, Homing_Offset 0, then each servo's offset
+        set so that its present pose reads the middle of the turn (2047 on an STS3215)."""
+        ids = [i for i in self.joints if i in self.present
+               and "Homing_Offset" in self.model(i).by_name]
+        if not ids:
+            return
+        self.set_torque([self.joints[i].name for i in ids], False)
+        for i in ids:
+            items = self.model(i).by_name
+            self.write_register_item(i, items["Homing_Offset"], 0)
+            here = self.read_register(i, items["Present_Position"])
+            offset = here - (self.model(i).resolution - 1) // 2
+            if abs(offset) > 2047:
+                raise DeviceError(f"{self.joints[i].name}: its present position {here} is "
+                                  f"beyond the reach of Homing_Offset (±2047)",
+                                  hint="clear Phase bit 4 (positions in one turn), or cycle "
+                                       "the servo's power, then calibrate again")
+            self.write_register_item(i, items["Homing_Offset"], offset)
+
+    def calibrate_servos(self, half_turn: bool, name: str) -> dict[str, Any]:
+        """LeRobot's calibration file of the servos (after its half-turn homing when asked),
+        and where LeRobot looks for it: a leader's (a block whose joints take no command)
+        under teleoperators/so_leader, a follower's under robots/so_follower."""
+        if half_turn:
+            self.half_turn_homing()
+        motors = self.lerobot_calibration()
+        leader = not any(j.command_interfaces for j in self.hw.joints)
+        return {"format": "LeRobot calibration", "text": calibration.dump(motors),
+                "file": str(calibration.default_path(name, leader)),
+                "parts": {n: dict(vars(m)) for n, m in motors.items()}}
+
     def cleanup(self) -> None:
         self.link.close()
         self.connected = False

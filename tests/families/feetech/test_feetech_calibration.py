@@ -90,3 +90,25 @@ def test_the_servos_calibration_is_written_in_lerobots_format(tmp_path, monkeypa
     assert data["gripper"] == {"id": 6, "drive_mode": 0, "homing_offset": 0,
                                "range_min": 2030, "range_max": 4095}
     assert cal.load(path) == motors
+
+
+def test_calibrate_servos_does_lerobots_half_turn_homing_and_saves_its_file(cli, tmp_path,
+                                                                             monkeypatch):
+    monkeypatch.setenv("HF_LEROBOT_CALIBRATION", str(tmp_path))
+    refused = cli("-p", "so101-follower", "--sim", "calibrate", "servos", "--half-turn")
+    assert refused.exit_code == 5  # it writes into the servos: asked first
+    result = cli("-p", "so101-follower", "--sim", "--yes", "calibrate", "servos",
+                 "--half-turn", "--id", "arm1")
+    assert result.exit_code == 0, result.output
+    path = tmp_path / "robots" / "so_follower" / "arm1.json"
+    motors = cal.load(path)
+    # the emulated servos sit at step 2048: offset = 2048 - 2047, as LeRobot computes it
+    assert {m.homing_offset for m in motors.values()} == {1}
+    assert [m.id for m in motors.values()] == [1, 2, 3, 4, 5, 6]
+    leader = cli("-p", "so101-leader", "--sim", "--yes", "calibrate", "servos", "--id", "l1")
+    assert leader.exit_code == 0, leader.output
+    assert cal.load(tmp_path / "teleoperators" / "so_leader" / "l1.json")["gripper"].id == 6
+    out = tmp_path / "here.json"
+    assert cli("-p", "so101-follower", "--sim", "--yes", "calibrate", "servos", "-o",
+               str(out)).exit_code == 0
+    assert set(cal.load(out)) == set(motors)
