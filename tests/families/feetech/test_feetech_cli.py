@@ -86,3 +86,44 @@ def test_restore_writes_a_safety_item_only_when_allowed(cli, tmp_path):
     snap.write_text(beyond)
     bad = cli(*SO101, "--yes", "config", "restore", str(snap), "--allow", "homing_offset")
     assert bad.exit_code == 2 and "Homing_Offset" in bad.stderr
+
+
+MIXED = """
+name: mixed
+buses:
+  b: serial:///dev/ttyUSB0?baud=1000000
+safety:
+  max_jog_step: 20deg
+ros2_control:
+  - name: mixed
+    type: system
+    plugin: feetech_sts_hardware/FeetechSTSHardware
+    family: feetech
+    bus: b
+    joints:
+      - name: sts
+        limits: {lower: -3, upper: 3, velocity: 5, effort: 3}
+        command_interfaces: [position]
+        state_interfaces: [position, velocity, effort]
+        params: {id: 1, model: STS3215}
+      - name: scs
+        limits: {lower: -2, upper: 2, velocity: 5, effort: 1}
+        command_interfaces: [position]
+        state_interfaces: [position, velocity, effort]
+        params: {id: 2, model: SCS0009}
+"""
+
+
+def test_a_bus_of_little_and_big_endian_servos(cli, tmp_path):
+    path = tmp_path / "mixed.yaml"
+    path.write_text(MIXED)
+    mixed = ("-p", str(path), "--sim")
+    servos = block_of(_json(cli(*mixed, "--json", "identify")))["identity"]["servos"]
+    assert {n: (s["model"], s["byte_order"]) for n, s in servos.items()} == {
+        "sts": ("STS3215", "little-endian"), "scs": ("SCS0009", "big-endian")}
+    lines = cli(*mixed, "--json", "stream", "--duration", "0.1").stdout.splitlines()
+    values = json.loads(lines[-1])["values"]
+    assert values["sts/position"] == 0.0 and values["scs/position"] == 0.0  # mid-turn each
+    assert cli(*mixed, "--yes", "jog", "scs", "10deg").exit_code == 0
+    got = cli(*mixed, "register", "get", "scs", "lock", "present_position")
+    assert "48" in got.stdout and "512" in got.stdout  # SCS: Lock at 48, 1024 steps a turn
