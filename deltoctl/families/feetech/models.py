@@ -124,11 +124,14 @@ SCS = _scs()
 LAYOUTS = {"STS/SMS": STS, "SCS": SCS}
 
 OPERATING_MODES = {0: "position", 1: "constant speed", 2: "PWM (open loop)", 3: "step"}
-# Baud_Rate codes as Feetech's SDK, C++ library and manuals give them; LeRobot's table
-# (its 5-7: 57600, 38400, 19200) disagrees with all of them and with the servos (§1.6)
-BAUD_RATES = {0: 1_000_000, 1: 500_000, 2: 250_000, 3: 128_000, 4: 115_200, 5: 76_800,
-              6: 57_600, 7: 38_400}
-LEROBOT_BAUD_RATES = {**BAUD_RATES, 5: 57_600, 6: 38_400, 7: 19_200}
+# Baud_Rate codes, one row each: (code, the rate Feetech's SDK, C++ library and manuals give,
+# LeRobot's where it differs — None: it agrees). LeRobot's 5-7 disagree with every Feetech
+# source and with the servos; deltoctl follows Feetech's (§1.6)
+BAUD_CODES = ((0, 1_000_000, None), (1, 500_000, None), (2, 250_000, None),
+              (3, 128_000, None), (4, 115_200, None), (5, 76_800, 57_600),
+              (6, 57_600, 38_400), (7, 38_400, 19_200))
+BAUD_RATES = {code: rate for code, rate, _ in BAUD_CODES}
+LEROBOT_BAUD_RATES = {code: lerobot or rate for code, rate, lerobot in BAUD_CODES}
 # what a servo does or is commanded to do: kept in a snapshot, never compared or restored
 READINGS = frozenset({
     "Torque_Enable", "Goal_Position", "Goal_Time", "Running_Time", "Goal_Velocity", "Lock",
