@@ -21,7 +21,7 @@ def cache_file(name: str) -> Path:
     (~/.cache/… by default)."""
     import os
 
-    from deltoctl import __version__
+    from deltoctl.version import __version__
 
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "deltoctl" / f"{name}-{__version__}.json"

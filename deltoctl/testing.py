@@ -15,7 +15,8 @@ invocation directory upward to pytest's rootdir; the command line wins). Without
 the fixtures serve simulators; with targets they open those devices, a test of another
 profile or one that asks for simulator faults is skipped, and so is a test marked
 ``deltoctl_moves`` unless ``--deltoctl-allow-motion`` is on the command line (a file cannot
-allow motion).
+allow motion). Without it the robot the fixture opens on hardware refuses every move,
+command and actuation (``Refused``) before a byte is sent.
 
 ``deltoctl_robot(profile=None, hardware=(), allow_model_mismatch=False, **faults)`` opens the
 robot (``deltoctl.open_robot``), released when the test ends; ``profile`` defaults to the
@@ -27,7 +28,8 @@ profile (the MH5: two serial buses and the I2C bus), with the faults of ``deltoc
 serve`` (``missing=("head_y",)``, ``wrong_baud=…``, ``pace=True``, ``who_am_i=0x12`` …);
 ``deltoctl_sim.control("face -x")`` runs a control line of ``sim serve``'s standard input on
 the devices served (it returns the reply). The devices stop when the test ends; on hardware,
-they are the robot's targets.
+a test that asks for them is skipped, unless ``--deltoctl-allow-motion`` gives it the robot's
+targets (whatever it runs on them drives the hardware).
 
 Kept import-light: pytest loads this module in every run; deltoctl's own modules are imported
 only when a robot is configured or a fixture is used. Neither the options nor the file run
@@ -257,14 +259,22 @@ class SimDevices:
     def buses(self, profile: str, **faults: Any) -> dict[str, str]:
         if self._robot.hardware:
             _no_faults(self._robot, faults)
-            self._robot.chosen(profile)
-            return self._robot.buses()
+            return self._hardware(profile)
         from deltoctl.sim.serve import ServeOptions, serve_profile
 
         options = ServeOptions(**faults)
         buses: dict[str, str] = serve_profile(self._stack, _loaded(profile), options,
                                               controls=self._controls)["buses"]
         return buses
+
+    def _hardware(self, profile: str) -> dict[str, str]:
+        """The robot under test's targets, for a test of ``profile``: only with motion
+        allowed, as any command line or library call run on them drives the hardware."""
+        self._robot.chosen(profile)
+        if not self._robot.allow_motion:
+            pytest.skip("needs the simulators: the robot under test is hardware (with "
+                        "--deltoctl-allow-motion, deltoctl_sim gives its targets)")
+        return self._robot.buses()
 
     def control(self, line: str) -> str:
         """Run a control line (``face -x``, ``tilt 10 0``) on the devices served; its reply,
@@ -276,8 +286,10 @@ class SimDevices:
         if self._robot.hardware:  # a firmware of the simulator's own is a fault too
             _no_faults(self._robot, {"firmware": firmware if firmware != "3.0" else None,
                                      "short_version": short_version, "model_id": model_id})
-        served = self.buses(profile, firmware=firmware, short_version=short_version,
-                            model_id=model_id)
+            served = self._hardware(profile)
+        else:
+            served = self.buses(profile, firmware=firmware, short_version=short_version,
+                                model_id=model_id)
         if len(served) != 1:
             raise ValueError(f"{profile} has {len(served)} buses "
                              f"({', '.join(served)}): use deltoctl_sim.buses({profile!r})")
@@ -301,9 +313,10 @@ def deltoctl_robot(request: pytest.FixtureRequest) -> Iterator[Callable[..., Any
 
             _no_faults(robot, faults)
             chosen = robot.chosen(profile)
-            if robot.hardware:
+            if robot.hardware:  # no motion nor actuation without --deltoctl-allow-motion
                 opened = open_robot(chosen, robot.targets, hardware=hardware,
-                                    allow_model_mismatch=allow_model_mismatch)
+                                    allow_model_mismatch=allow_model_mismatch,
+                                    allow_motion=robot.allow_motion)
             else:
                 opened = open_robot(chosen, sim=faults or True, hardware=hardware,
                                     allow_model_mismatch=allow_model_mismatch)

@@ -3,12 +3,12 @@ it, what it does to the robot (reads, actuates an output or a setting, moves a j
 a robot's agent runs it for a remote caller, and the example its help shows.
 
 The CLI loads verbs and teaches their help from this table; the fleet agent judges a remote
-command line by it. A command's effect may depend on its options (``report`` reads, and moves
-the joints with ``--yes``): the options a command line gives, as the CLI parses them, raise its
-effect. Fail-closed: a command whose effect is not declared here counts as one that moves the
-robot. No typer or click here: the fleet reads the table without loading the CLI,
-and finds which command a command line runs through the resolver the CLI provides
-(``provide_resolver``), the very parse that will run it.
+command line by it. A command's effect may depend on its options (``report`` actuates: it
+tares the F/T sensors and runs the IMUs' self-tests; with ``--yes`` it moves the joints): the
+options a command line gives, as the CLI parses them, raise its effect. Fail-closed: a command
+whose effect is not declared here counts as one that moves the robot. No typer or click here:
+the fleet reads the table without loading the CLI, and finds which command a command line runs
+through the resolver the CLI provides (``provide_resolver``), the very parse that will run it.
 """
 
 from __future__ import annotations
@@ -133,7 +133,8 @@ TABLE: dict[str, Verb] = {
     }),
     "ports": Verb(READS, "deltoctl ports --json", "ports_cmd", stage=TOOLS),
     "doctor": Verb(READS, "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 doctor",
-                   "doctor_cmd", stage=TOOLS),
+                   "doctor_cmd", stage=TOOLS,
+                   when={("--write-udev-rule",): ACTUATES}),  # the host's udev
     "completion": Verb(READS, "deltoctl completion bash > "
                               "~/.local/share/bash-completion/completions/deltoctl",
                        "completion_cmd", stage=TOOLS, remote=False),

@@ -100,6 +100,7 @@ def tare_ft(system: System, samples: int = 50, force_tolerance: float = 0.3,
     """Tare every F/T sensor and check the residual over ``samples``; with ``output_dir``,
     each block's report is saved there (``report_file``). ``pass`` is false when a residual
     is over its tolerance; the caller decides what that means."""
+    system.check_allowed("taring the F/T sensors")
     check_tare(samples, force_tolerance, torque_tolerance, output_dir)
     blocks = ft_blocks(system)
     sensors = [s for names in blocks.values() for s in names]

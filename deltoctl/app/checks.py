@@ -35,3 +35,60 @@ def overall(checks: list[dict[str, Any]]) -> str:
 
 def failed(checks: list[dict[str, Any]]) -> list[str]:
     return [c["id"] for c in checks if c["verdict"] == FAIL]
+
+
+def failures(checks: list[dict[str, Any]]) -> list[str]:
+    """Each failed check as ``id: what is wrong`` (a figure with its limit)."""
+    return [f"{c['id']}: {c['what']}{_figure(c)}" for c in checks if c["verdict"] == FAIL]
+
+
+def fail_on(checks: list[dict[str, Any]], doing: str = "") -> None:
+    """Raise DeviceError (exit 1) naming each failed check and what is wrong with it."""
+    from deltoctl.errors import DeviceError
+
+    if failures(checks):
+        raise DeviceError(doing + "; ".join(failures(checks)))
+
+
+def _figure(c: dict[str, Any]) -> str:
+    value, low, high = c["value"], c["limit"]["min"], c["limit"]["max"]
+    if not isinstance(value, (int, float)) or (low is None and high is None):
+        return ""
+    limit = f"≥ {low:g}" if high is None else f"≤ {high:g}" if low is None \
+        else f"{low:g} … {high:g}"
+    unit = f" {c['unit']}" if c["unit"] else ""
+    return f" is {value:g}{unit}, not {limit}"
+
+
+def _slug(text: str) -> str:
+    return "_".join("".join(ch if ch.isalnum() else " " for ch in text.lower()).split())
+
+
+def _detect_message(c: dict[str, Any]) -> str:
+    what, device = c["what"], c["device"]
+    if c["match"]:
+        return what
+    if c.get("missing"):
+        return f"{what} does not answer" + (
+            "" if device in ("no answer", "missing") else f" ({device})")
+    return f"{what}: {device}, the profile says {c['profile']}"
+
+
+def detect_checks(blocks: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The verdict on what detect found (its blocks, each with the driver's checks), the same
+    for ``detect`` and the commissioning report: a part the profile declares that does not
+    answer fails; any other difference from the profile (a device the profile does not
+    declare, another model or sensor) warns. Each check's id is ``detect.<block>.<part>``."""
+    out: list[dict[str, Any]] = []
+    seen: set[str] = set()
+    for b in blocks:
+        for c in b["checks"]:
+            key = f"detect.{b['name']}.{c.get('part') or _slug(str(c['what']))}"
+            check_id, n = key, 2
+            while check_id in seen:
+                check_id, n = f"{key}.{n}", n + 1
+            seen.add(check_id)
+            verdict = PASS if c["match"] else FAIL if c.get("missing") else WARN
+            out.append(check(check_id, _detect_message(c), str(c["device"]), verdict=verdict,
+                             note=f"profile: {c['profile']}"))
+    return out

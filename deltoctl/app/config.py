@@ -74,7 +74,7 @@ def live_entry(live: dict[str, dict[str, Any]], key: Key) -> dict[str, Any]:
 def document(profile: str, live: dict[str, dict[str, Any]], taken: str) -> dict[str, Any]:
     """The snapshot as written: profile, deltoctl's version, time, and per block its family,
     target and each part's items (without what only describes the device's moment)."""
-    from deltoctl import __version__
+    from deltoctl.version import __version__
 
     def kept(entry: dict[str, Any]) -> dict[str, Any]:
         return {k: entry[k] for k in FILE_KEYS if k in entry and (k != "state" or entry[k])}

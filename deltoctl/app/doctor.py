@@ -169,7 +169,8 @@ def rule_adapters(profile: str | None, load: Callable[[], Profile],
                   hardware: Sequence[str] = ()) -> list[tuple[str, SerialAdapter]]:
     """(the /dev name to give, the adapter) of each serial bus of the profile, named
     PROFILE-BUS; without a profile, of every USB serial adapter, named deltoctl-SERIAL."""
-    from deltoctl.transport.adapters import adapter_of_target, serial_adapters
+    from deltoctl.transport.adapters import serial_adapters
+    from deltoctl.transport.serial_port import adapter_of_target
 
     if not profile:
         return [(f"deltoctl-{a.serial or a.name}", a) for a in serial_adapters(holders=False)

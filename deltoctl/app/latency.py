@@ -14,7 +14,8 @@ def loop_warnings(urls: Iterable[str], asked_hz: float, real_hz: float) -> list[
     asked rate; none when the loop kept up or no timer is to blame."""
     if not asked_hz or real_hz >= SHORTFALL * asked_hz:
         return []
-    from deltoctl.transport.adapters import SYNC_LATENCY_MS, adapter_of_target, latency_fix
+    from deltoctl.transport.adapters import SYNC_LATENCY_MS, latency_fix
+    from deltoctl.transport.serial_port import adapter_of_target
 
     found = []
     for url in sorted(set(urls)):

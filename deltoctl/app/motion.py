@@ -185,11 +185,26 @@ def move(system: System, targets: Mapping[str, float], velocity: float | None = 
     }
 
 
-def fail_unsettled(report: Mapping[str, Any]) -> None:
-    """A move whose joints did not all settle failed (exit 1), naming them."""
-    if report.get("unsettled"):
-        raise DeviceError(f"{len(report['unsettled'])} joint(s) did not settle: "
-                          f"{', '.join(report['unsettled'])}")
+def fail_unsettled(report: Mapping[str, Any], profile: Profile | None = None) -> None:
+    """A move whose joints did not all settle failed (exit 1), naming each with where it
+    ended and its target (in degrees or millimetres when ``profile`` says which)."""
+    unsettled = report.get("unsettled")
+    if not unsettled:
+        return
+    from deltoctl.units import joint_dimension, shown
+
+    ended = {j: e for b in report.get("blocks", ()) for j, e in b["joints"].items()}
+
+    def where(name: str) -> str:
+        entry = ended.get(name, {})
+        position, target = entry.get("position"), entry.get("target")
+        if position is None or target is None:
+            return name
+        dim = joint_dimension(_joint(profile, name).joint_type) if profile else None
+        return f"{name} at {shown(position, dim)}, its target {shown(target, dim)}"
+
+    raise DeviceError(f"{len(unsettled)} joint(s) did not settle: "
+                      f"{'; '.join(where(j) for j in unsettled)}")
 
 
 @dataclass

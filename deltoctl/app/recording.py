@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from deltoctl.app.sinks import LinkWatch
-from deltoctl.core.runner import Sink
+from deltoctl.core.runner import Sink, check_loop
 from deltoctl.errors import DeviceError, InvalidInput
 
 if TYPE_CHECKING:
@@ -129,8 +129,8 @@ def driven_profile(system: System) -> Profile:
 def recording_metadata(system: System) -> tuple[Profile, dict[str, dict[str, str]]]:
     """The profile of the blocks driven, and the metadata a recording of them carries: that
     profile (YAML), each block's identity, deltoctl's version."""
-    from deltoctl import __version__
     from deltoctl.profile.exporter import to_yaml
+    from deltoctl.version import __version__
 
     recorded = driven_profile(system)
     identities = {m.name: {"family": m.family.name, "target": m.url,
@@ -174,7 +174,6 @@ class RecordSink(Sink):
 
 def check_record(output: Path, rate: float, duration: float | None, gpio_type: str) -> None:
     """A recording's options, checked before any device is opened."""
-    from deltoctl.app.robot import check_loop
     from deltoctl.record.ros2_msgs import GPIO_TYPES
 
     check_loop(rate, duration)

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from deltoctl.core.driver import SETPOINT_FIELDS, Setpoint
-from deltoctl.errors import DeviceError, InvalidInput, Refused
+from deltoctl.errors import DeviceError, InvalidInput, OutsideEnvelope, Refused
 from deltoctl.record.commands import (
     COMMANDS_TOPIC,
     STATES_TOPIC,
@@ -321,8 +321,8 @@ def profile_changes(ours: Profile, theirs: Profile) -> tuple[list[str], list[str
 def _bounded(joint: Component, what: str, value: float, bound: float | None, at: str) -> None:
     if not math.isfinite(value) or (bound is not None and abs(value) > bound + 1e-9):
         limit = "" if bound is None else f" (its limit: {bound:.4f})"
-        raise Refused(f"{at}: {joint.name} {what} command {value:.4f} is beyond its "
-                      f"limits{limit}; nothing moved")
+        raise OutsideEnvelope(f"{at}: {joint.name} {what} command {value:.4f} is beyond its "
+                              f"limits{limit}; nothing moved")
 
 
 def commanded_components(profile: Profile, recorded: Recorded) -> dict[str, Component]:
@@ -352,8 +352,9 @@ def check_commands(profile: Profile, recorded: Recorded) -> None:
     for joint, position in last.items():
         try:
             check_target(profile, comps[joint], position, None)
-        except Refused as exc:
-            raise Refused(f"the recorded start pose: {exc.message}; nothing moved") from None
+        except OutsideEnvelope as exc:
+            raise OutsideEnvelope(f"the recorded start pose: {exc.message}; nothing moved") \
+                from None
     t0 = recorded.times[0]
     held: dict[str, int] = {"": t0}  # the last row (""), and each joint's last command
     for t, row in zip(recorded.times, recorded.setpoints):
@@ -374,8 +375,9 @@ def check_commands(profile: Profile, recorded: Recorded) -> None:
                     _bounded(comp, "position", position, None, at)
                 try:
                     check_target(profile, comp, position, last.get(joint))
-                except Refused as exc:
-                    raise Refused(f"{at}: {exc.message}; nothing moved", exc.hint) from None
+                except OutsideEnvelope as exc:
+                    raise OutsideEnvelope(f"{at}: {exc.message}; nothing moved", exc.hint) \
+                        from None
                 last[joint] = position
             if velocity == velocity:
                 _bounded(comp, "velocity", velocity, lim.velocity if lim else None, at)

@@ -37,6 +37,8 @@ PLOTS = (("positions", "*/position", ""), ("forces", "*/force.*", "N"),
          ("accelerations", "*/linear_acceleration.*", "m/s²"))
 MAX_SERIES = 8  # per plot
 MAX_POINTS = 400  # per series, drawn
+# what the sequence is doing and how much of it is done (0 to 1), for the caller to show
+Said = Callable[[str, float], None]
 
 
 @dataclass
@@ -49,6 +51,22 @@ class Plan:
     operator: str = ""
     motion: bool = False  # confirmed (--yes)
     link_seconds: float = 1.0
+
+
+class Steps:
+    """The sequence's progress told to ``said``: each stage as it starts, a stage's own
+    steps (a joint's moves) as a fraction of it."""
+
+    def __init__(self, said: Said | None, stages: int) -> None:
+        self.said, self.stages, self.done = said, max(stages, 1), -1
+
+    def stage(self, label: str) -> None:
+        self.done += 1
+        self.within(label, 0.0)
+
+    def within(self, label: str, fraction: float) -> None:
+        if self.said is not None:
+            self.said(label, min(1.0, (max(self.done, 0) + fraction) / self.stages))
 
 
 def report_paths(output: Path | None, profile: str) -> tuple[Path, Path, Path]:
@@ -102,21 +120,20 @@ def _now() -> str:
 
 # -- identity and the bus scan -------------------------------------------------------------------
 
-def identity_section(robot: Robot) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+def identity_section(robot: Robot, steps: Steps | None = None
+                     ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    steps = steps or Steps(None, 1)
+    steps.stage("identify")
     ident = {b["name"]: b for b in robot.identify()["blocks"]}
-    detected = robot.detect()["blocks"]
-    checks = []
-    for b in detected:
-        for i, c in enumerate(b["checks"]):
-            checks.append(check(f"detect.{b['name']}.{i + 1}", f"{b['name']}: {c['what']}",
-                                str(c["device"]), verdict=PASS if c["match"] else FAIL,
-                                note=f"profile: {c['profile']}"))
+    steps.stage("detect")
+    found = robot.detect()
+    detected = found["blocks"]
     blocks = [{"name": m.name, "family": m.family.name, "target": m.url or None,
                "simulated": m.simulated is not None,
                "identity": ident.get(m.name, {}).get("identity", {}),
                "detect": next((b["summary"] for b in detected if b["name"] == m.name), None)}
               for m in robot.blocks]
-    return {"blocks": blocks}, checks
+    return {"blocks": blocks}, found["checks"]
 
 
 # -- the configuration ---------------------------------------------------------------------------
@@ -221,14 +238,21 @@ def _move_in_steps(robot: Robot, targets: dict[str, float], step: float) -> dict
                     for j, v in b["joints"].items() if v["position"] is not None}
 
 
-def motion_checks(robot: Robot, limits: dict[str, float]) -> list[dict[str, Any]]:
+def motion_checks(robot: Robot, limits: dict[str, float], steps: Steps | None = None
+                  ) -> list[dict[str, Any]]:
     """Every block that can jog: N returns to the home pose, each from a step away (their
     spread per joint), then each joint to its soft limits and back (the error where each
-    move ends)."""
-    profile, checks = robot.profile, []
-    step = profile.safety.max_jog_step or 0.2
+    move ends). A joint whose position is not read (it does not answer) is left out."""
+    checks: list[dict[str, Any]] = []
+    steps = steps or Steps(None, 1)
     for m in robot.system.able("jog"):
+        steps.stage(f"motion: {m.name}")
         ranges = {j.name: r for j in m.hw.joints if (r := _range(j)) is not None}
+        values = robot.read()
+        for j in [j for j in ranges if f"{j}/position" not in values]:
+            del ranges[j]  # its detect check fails
+            checks.append(check(f"motion.{j}", f"{j}: motion", None, verdict=SKIP,
+                                note="no position read: not moved"))
         if not ranges:
             continue
         try:
@@ -237,47 +261,72 @@ def motion_checks(robot: Robot, limits: dict[str, float]) -> list[dict[str, Any]
             checks.append(check(f"motion.{m.name}", f"{m.name}: motion", None, verdict=SKIP,
                                 note=exc.message))
             continue
-        home = {j: min(max(profile.safety.home_pose.get(j, 0.0), lo), hi)
-                for j, (lo, hi) in ranges.items()}
-        seen: dict[str, list[float]] = {j: [] for j in ranges}
-        for i in range(int(limits["homes"])):
-            away = {j: min(max(h + (step / 2 if i % 2 else -step / 2), ranges[j][0]),
-                           ranges[j][1]) for j, h in home.items()}
-            _move_in_steps(robot, away, step)
-            _move_in_steps(robot, home, step)
-            values = robot.read()
-            for j in ranges:
-                seen[j].append(values[f"{j}/position"])
-        errors: dict[str, float] = {}
-        for side in (0, 1):
-            ends = _move_in_steps(robot, {j: r[side] for j, r in ranges.items()}, step)
-            errors = {j: max(errors.get(j, 0.0), e) for j, e in ends.items()}
-        ends = _move_in_steps(robot, home, step)
+        checks += _block_motion(robot, m.name, ranges, limits, steps)
+    return checks
+
+
+def _block_motion(robot: Robot, block: str, ranges: dict[str, tuple[float, float]],
+                  limits: dict[str, float], steps: Steps) -> list[dict[str, Any]]:
+    """One block's returns home and moves to the soft limits and back, its joints' checks."""
+    profile, checks = robot.profile, []
+    step = profile.safety.max_jog_step or 0.2
+    home = {j: min(max(profile.safety.home_pose.get(j, 0.0), lo), hi)
+            for j, (lo, hi) in ranges.items()}
+    seen: dict[str, list[float]] = {j: [] for j in ranges}
+    homes = int(limits["homes"])
+    for i in range(homes):
+        steps.within(f"motion: {block}: return home {i + 1} of {homes}", i / (homes + 2))
+        away = {j: min(max(h + (step / 2 if i % 2 else -step / 2), ranges[j][0]),
+                       ranges[j][1]) for j, h in home.items()}
+        _move_in_steps(robot, away, step)
+        _move_in_steps(robot, home, step)
+        values = robot.read()
         for j in ranges:
-            checks.append(check(f"motion.{j}.home_repeatability",
-                                f"{j}: spread of {len(seen[j])} returns home",
-                                max(seen[j]) - min(seen[j]), "rad", None,
-                                limits["home_repeatability"]))
-            checks.append(check(f"motion.{j}.following_error",
-                                f"{j}: error at its soft limits and back",
-                                max(errors.get(j, 0.0), ends.get(j, 0.0)), "rad", None,
-                                limits["following_error"]))
+            seen[j].append(values[f"{j}/position"])
+    errors: dict[str, float] = {}
+    for side, side_name in enumerate(("lower", "upper")):
+        steps.within(f"motion: {block}: {len(ranges)} joints to their {side_name} soft limits",
+                     (homes + side) / (homes + 2))
+        ends = _move_in_steps(robot, {j: r[side] for j, r in ranges.items()}, step)
+        errors = {j: max(errors.get(j, 0.0), e) for j, e in ends.items()}
+    ends = _move_in_steps(robot, home, step)
+    for j in ranges:
+        checks.append(check(f"motion.{j}.home_repeatability",
+                            f"{j}: spread of {len(seen[j])} returns home",
+                            max(seen[j]) - min(seen[j]), "rad", None,
+                            limits["home_repeatability"]))
+        checks.append(check(f"motion.{j}.following_error",
+                            f"{j}: error at its soft limits and back",
+                            max(errors.get(j, 0.0), ends.get(j, 0.0)), "rad", None,
+                            limits["following_error"]))
     return checks
 
 
 # -- sensors -------------------------------------------------------------------------------------
 
-def sensor_checks(robot: Robot) -> list[dict[str, Any]]:
-    """Each IMU's self-test and gravity check; each F/T sensor's residual after a tare."""
+def sensor_checks(robot: Robot, actuate: bool) -> list[dict[str, Any]]:
+    """Each IMU's gravity check, and with ``actuate`` (--yes) its self-test; each F/T
+    sensor's residual after a tare, with ``actuate`` only: a tare and a self-test write to
+    the devices, and a report without --yes only reads."""
     from deltoctl.app import imu_calibration
     from deltoctl.app.calibrate import tare_ft, verify_ft
 
-    checks = []
+    checks, skipped = [], []
     for m in robot.system.able("calibrate_imu"):
-        checks += imu_calibration.self_test_checks(m.driver)
+        if actuate:
+            checks += imu_calibration.self_test_checks(m.driver)
+        else:
+            skipped.append("each IMU's self-test")
         checks += imu_calibration.gravity_checks(m.driver, 50)
     if any(s.state("force.x") for m in robot.system.able("calibrate_ft") for s in m.hw.sensors):
-        checks += verify_ft(robot.system, tare_ft(robot.system, samples=20))
+        if actuate:
+            checks += verify_ft(robot.system, tare_ft(robot.system, samples=20))
+        else:
+            skipped.append("each F/T sensor's tare")
+    if skipped:
+        runs = " and ".join(sorted(set(skipped)))
+        checks.append(check("sensors.actuated", "sensor checks that write", None, verdict=SKIP,
+                            note=f"not asked for (--yes runs {runs})"))
     return checks
 
 
@@ -352,41 +401,65 @@ def _stage(name: str, run: Any, checks: list[dict[str, Any]]) -> Any:
         return None
 
 
-def run_report(robot: Robot, plan: Plan) -> dict[str, Any]:
-    """The acceptance sequence; the report's JSON, its own hash last."""
-    from deltoctl import __version__
+def _stages(robot: Robot, plan: Plan) -> int:
+    """How many stages the sequence runs (for its progress)."""
+    recording = plan.record_seconds is not None and plan.record_path is not None
+    motion = len(list(robot.system.able("jog"))) if plan.motion else 0
+    return 4 + len(robot.blocks) + motion + recording
 
+
+def run_report(robot: Robot, plan: Plan, said: Said | None = None) -> dict[str, Any]:
+    """The acceptance sequence; the report's JSON, its own hash last. ``said`` is told
+    each stage as it starts (and how much of the sequence is done)."""
     check_plan(plan)
     limits = limits_of(robot)
     start, start_ns = _now(), time.time_ns()
     sections: dict[str, Any] = {}
     checks: list[dict[str, Any]] = []
+    steps = Steps(said, _stages(robot, plan))
 
-    found = _stage("identity", lambda: identity_section(robot), checks)
+    found = _stage("identity", lambda: identity_section(robot, steps), checks)
     if found:
         sections["identity"], more = found
         checks += more
+    steps.stage("configuration")
     found = _stage("configuration", lambda: configuration_section(robot, plan.golden), checks)
     if found:
         sections["configuration"], more = found
         checks += more
     for m in robot.blocks:
+        steps.stage(f"link quality: {m.name}")
         checks += _stage("link", lambda m=m: link_checks(m, limits, plan.link_seconds),
                          checks) or []
     if plan.motion:
-        checks += _stage("motion", lambda: motion_checks(robot, limits), checks) or []
+        checks += _stage("motion", lambda: motion_checks(robot, limits, steps), checks) or []
     else:
         checks.append(check("motion", "motion checks", None, verdict=SKIP,
                             note="not asked for (--yes runs them where the profile allows)"))
-    checks += _stage("sensors", lambda: sensor_checks(robot), checks) or []
+    steps.stage("sensors")
+    checks += _stage("sensors", lambda: sensor_checks(robot, plan.motion), checks) or []
     if plan.record_seconds is not None and plan.record_path is not None:
+        steps.stage(f"recording {plan.record_seconds:g} s")
         sections["recording"] = _stage(
             "recording", lambda: recording_section(robot, plan.record_seconds,
                                                    plan.record_path), checks)
+    steps.within("done", 1.0)
+    return _document(robot, plan, checks, sections, limits, (start, start_ns))
+
+
+def _document(robot: Robot, plan: Plan, checks: list[dict[str, Any]],
+              sections: dict[str, Any], limits: dict[str, float],
+              started: tuple[str, int]) -> dict[str, Any]:
+    """The report's JSON, its own hash last: SIMULATED when a block was simulated, so that
+    a rehearsal is never taken for an acceptance."""
+    from deltoctl.version import __version__
+
+    start, start_ns = started
     warnings = robot.warnings()
     verdict = overall(checks)
     if verdict == PASS and warnings:
         verdict = WARN
+    simulated = [m.name for m in robot.blocks if m.simulated is not None]
     source = robot.profile.source
     profile_hash = _sha256(Path(source).read_bytes()) if source and Path(source).is_file() \
         else None
@@ -397,7 +470,8 @@ def run_report(robot: Robot, plan: Plan) -> dict[str, Any]:
                    "deltoctl": __version__, "host": socket.gethostname(),
                    "operator": plan.operator or _user(), "start": start, "end": _now(),
                    "start_ns": start_ns, "limits": limits},
-        "verdict": verdict, "failed": failed(checks), "warnings": warnings,
+        "verdict": verdict, "simulated": simulated, "failed": failed(checks),
+        "warnings": warnings,
         "sections": sections,
         "checks": sorted(checks, key=lambda c: SEVERITY[c["verdict"]]),
     }

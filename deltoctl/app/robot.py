@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from deltoctl.core.runner import check_loop
 from deltoctl.errors import DeviceError, InvalidInput
 
 if TYPE_CHECKING:
@@ -57,7 +58,7 @@ def open_robot(profile: str | Path | Profile,
                sim: bool | Mapping[str, Any] = False, hardware: Sequence[str] = (),
                allow_model_mismatch: bool = False, probe: bool = False,
                notice: Callable[[str], None] | None = None,
-               served_by: str | None = None) -> Iterator[Robot]:
+               served_by: str | None = None, allow_motion: bool = True) -> Iterator[Robot]:
     """The robot of ``profile`` (a catalog name, a file, or a loaded Profile), configured and
     active, its blocks left safe and released on the way out.
 
@@ -67,7 +68,9 @@ def open_robot(profile: str | Path | Profile,
     ``{"missing": ("head_y",)}``); ``hardware``: only these blocks; ``probe``: a bus where
     nothing answers is still opened (detect); ``notice``: told first when a block runs on its
     simulator because its profile asks for mock hardware; ``served_by``: the targets are
-    simulators another process serves (``deltoctl agent --sim``), said so on every block."""
+    simulators another process serves (``deltoctl agent --sim``), said so on every block;
+    without ``allow_motion``, every move, command and actuation is refused (``Refused``)
+    before a byte is sent."""
     from deltoctl.core.system import System, mock_blocks, select_blocks
 
     prof = load(profile)
@@ -86,7 +89,7 @@ def open_robot(profile: str | Path | Profile,
             simulated = {hw.name: simulated.get(hw.name, served_by)
                          for hw in select_blocks(prof, hardware)}
         with System(prof, urls, hardware, probe=probe, allow_model_mismatch=allow_model_mismatch,
-                    simulated=simulated) as system:
+                    simulated=simulated, allow_motion=allow_motion) as system:
             yield Robot(system)
 
 
@@ -234,19 +237,23 @@ class Robot:
         return {"profile": self.profile.name, "blocks": blocks}
 
     def detect(self) -> dict[str, Any]:
-        """What is on each block's device or bus, against the profile; a difference is a
-        warning."""
+        """What is on each block's device or bus, against the profile, judged
+        (deltoctl.app.checks.detect_checks): ``checks`` and ``failed``; a part that does not
+        answer fails, another difference is a warning."""
+        from deltoctl.app.checks import WARN, detect_checks, failed
+
         blocks = []
         for m in self.system.able("detect"):
             found = m.driver.detect()
             blocks.append(block_entry(m, summary=found.pop("summary"),
                                       checks=found.pop("checks"), details=found))
-        differ = [f"{b['name']}: {c['what']}" for b in blocks for c in b["checks"]
-                  if not c["match"]]
+        checks = detect_checks(blocks)
+        differ = [f"{c['id']}: {c['what']}" for c in checks if c["verdict"] == WARN]
         if differ:
-            self.system.notes.append("the device differs from the profile in: "
-                                     + ", ".join(differ))
-        return {"profile": self.profile.name, "blocks": blocks}
+            self.system.notes.append("the device differs from the profile: "
+                                     + "; ".join(differ))
+        return {"profile": self.profile.name, "blocks": blocks, "checks": checks,
+                "failed": failed(checks)}
 
     # -- GPIO ----------------------------------------------------------------------------------
 
@@ -308,6 +315,7 @@ class Robot:
         ``settled``, ``seconds``, ``unsettled``, in one dict)."""
         from deltoctl.app.motion import joint_positions, joint_speed, move
 
+        self.system.check_allowed(f"moving {', '.join(targets)}")
         positions = joint_positions(self.profile, targets)
         speed = joint_speed(self.profile, list(positions), velocity, "velocity")
         return move(self.system, positions, speed, progress)
@@ -319,6 +327,7 @@ class Robot:
         in rad/s or m/s)."""
         from deltoctl.app.motion import home, joint_speed, plan_home
 
+        self.system.check_allowed("homing")
         hardware = [m.name for m in self.system]
         plan = plan_home(self.profile, hardware, joints)
         speed = joint_speed(self.profile, list(plan.targets), velocity, "velocity")
@@ -359,6 +368,7 @@ class Robot:
 
     def write_register(self, joint: str, item: str, value: int) -> int:
         """Write one item and read it back; a different read-back is a DeviceError."""
+        self.system.check_allowed(f"writing {item} of {joint}")
         after = self._registers(joint).write_register(joint, item, value)
         if after != value:
             raise DeviceError(f"{item} reads back {after} after writing {value}")
@@ -375,12 +385,14 @@ class Robot:
     def torque(self, joints: Sequence[str] | str, on: bool) -> list[str]:
         """Switch the joints' torque (``joints``: their names, or a joint, a group such as
         ``left_arm`` or ``all``); returns those done."""
+        self.system.check_allowed("switching torque")
         return [j for driver, js in self._per_block(joints, "torque").items()
                 for j in driver.set_torque(js, on)]
 
     def reboot(self, joints: Sequence[str] | str) -> list[str]:
         """Reboot the joints' servos (their names, or a joint, a group or ``all``); returns
         those that acknowledged."""
+        self.system.check_allowed("rebooting servos")
         return [j for driver, js in self._per_block(joints, "reboot").items()
                 for j in driver.reboot(js)]
 
@@ -407,6 +419,7 @@ class Robot:
         names them), each item verified by reading it back; returns each item's fate."""
         from deltoctl.app import config
 
+        self.system.check_allowed("restoring a configuration")
         permitted = frozenset(config.permission(a) for a in allow)
         rows, notes = config.plan_restore(self.system, config.load_snapshot(Path(snapshot)),
                                           permitted)
@@ -483,11 +496,3 @@ class Robot:
             raise stopped
         return replay_report(path, self.system, plan.recorded, result, tolerance,
                              not simulated, max_deviation)
-
-
-def check_loop(rate: float, duration: float | None) -> None:
-    """A loop's rate and duration: finite and positive."""
-    if not (math.isfinite(rate) and 0 < rate <= 100_000):
-        raise InvalidInput(f"--rate must be a positive number of Hz up to 100000, got {rate:g}")
-    if duration is not None and not (math.isfinite(duration) and duration > 0):
-        raise InvalidInput(f"--duration must be a positive number of seconds, got {duration:g}")

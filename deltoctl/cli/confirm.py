@@ -7,7 +7,7 @@ import sys
 from typing import Any
 
 from deltoctl import verbs
-from deltoctl.cli.context import options
+from deltoctl.cli.context import given_options, options
 from deltoctl.errors import Refused
 
 _QUESTION = {verbs.MOVES: "Move?", verbs.ACTUATES: "Go on?"}
@@ -17,8 +17,6 @@ _NOT_CONFIRMED = "not confirmed; nothing was done"
 def confirm(ctx: Any, what: str) -> None:
     """Go on when the command reads, with --yes, or on a yes at ``WHAT. Move?``; else Refused
     (exit 5) naming --yes. Ctrl-C at the question raises KeyboardInterrupt (exit 130)."""
-    from deltoctl.cli.main import given_options
-
     chain = []
     while ctx is not None:
         chain.append(ctx)

@@ -1,12 +1,20 @@
-"""The global options every verb shares, and the profile they select."""
+"""The global options every verb shares, the profile they select, and the keys of the root
+context's meta the verbs read."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import typer
 
 from deltoctl.errors import InvalidInput
+
+EXIT_LINE = ("Exit codes: 0 ok · 1 failed · 2 usage or invalid input · 3 warnings · "
+             "4 unreachable · 5 refused for safety · 130 interrupted")
+
+TEACH = "deltoctl.teach"  # ctx.meta key: this run shows help or completes, so verbs are taught
+ARGV = "deltoctl.argv"  # ctx.meta key: the command line, global options first
+DOCUMENT = "deltoctl.document"  # ctx.meta key: the verb's JSON document, written as it exits
 
 if TYPE_CHECKING:
     from deltoctl.profile.model import Profile
@@ -74,3 +82,26 @@ def parse_pairs(items: list[str], sep: str, what: str, example: str) -> dict[str
             raise InvalidInput(f"{what} {item!r} is not of the form {example}")
         pairs[key] = value
     return pairs
+
+
+def given_options(ctx: Any) -> list[str]:
+    """The spellings of the options a context's command line (or environment) gave: not
+    their defaults, nor a flag given as off."""
+    from typer._click.core import ParameterSource
+
+    given: list[str] = []
+    for param in ctx.command.params:
+        if param.param_type_name != "option":
+            continue
+        source = ctx.get_parameter_source(param.name) if param.name else None
+        if source in (None, ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP):
+            continue
+        if ctx.params.get(param.name) is not False:
+            given += getattr(param, "opts", [])
+    return given
+
+
+def complete_profile(incomplete: str) -> list[str]:
+    from deltoctl.profile.catalog import catalog_names
+
+    return [n for n in catalog_names() if n.startswith(incomplete)]

@@ -50,7 +50,7 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
     if opts.sim and opts.sim_options:
         from deltoctl.sim.serve import options_given
 
-        sim = options_given(opts.sim_options, "--sim-option")
+        sim = options_given(opts.sim_options, "--sim-option", prof, opts.hardware)
     found = (running.find(prof, sim if isinstance(sim, dict) else {}, opts.hardware, warn)
              if opts.sim and not opts.sim_fresh else None)
     if found is not None:
@@ -71,12 +71,16 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
         raise
 
 
-def finish(system: Any, extra: list[str] | None = None) -> None:
+def finish(system: Any, extra: list[str] | None = None,
+           failures: list[dict[str, Any]] | None = None) -> None:
     """Exit 3 when the verb finished but with warnings (a block left out, a model mismatch
-    allowed, reconnects)."""
+    allowed, reconnects); exit 1 naming each check of ``failures`` that failed."""
+    from deltoctl.app.checks import fail_on
+
     warnings = system.warnings() + (extra or [])
     for w in warnings:
         warn(w)
+    fail_on(failures or [])
     if warnings:
         raise typer.Exit(WARNINGS)
 
@@ -139,7 +143,7 @@ def detect(ctx: typer.Context, allow_model_mismatch: AllowMismatch = False) -> N
         from deltoctl.render.identity import detect_parts
 
         show(detect_parts(result))
-    finish(robot.system)
+    finish(robot.system, failures=result["checks"])
 
 
 def gpio_get(ctx: typer.Context) -> None:
@@ -223,6 +227,43 @@ StreamOriginOpt = Annotated[list[str] | None, typer.Option(
     "(repeatable); by default only Foxglove's own and clients that send no Origin.")]
 
 
+@contextlib.contextmanager
+def foxglove_live(enabled: bool, host: str, port: int,
+                  origins: list[str] | None = None) -> Iterator[Any]:
+    """With --foxglove, the Foxglove sink, its address and port checked before the devices
+    are opened (the server starts with ``start_foxglove``, and stops on the way out); else
+    None."""
+    if not enabled:
+        yield None
+        return
+    from deltoctl.record.foxglove_live import FoxgloveLive
+
+    with FoxgloveLive(host, port, origins=tuple(origins or ())) as live:
+        if not live.local:
+            warn(f"--foxglove-host {host}: the robot's data is served beyond this machine, to "
+                 f"anyone who reaches port {port or 'chosen'} there")
+        yield live
+    if live.error:
+        warn(f"the live view stopped: {live.error}")
+    if live.dropped:
+        info(f"Foxglove: {live.dropped} cycles not sent (the live view fell behind)")
+    if live.gate.refused:
+        info(f"Foxglove: {live.gate.refused} connection(s) refused for their origin "
+             "(a web page that is not Foxglove; --foxglove-origin lets one in)")
+
+
+def start_foxglove(live: Any, system: Any, gpio_type: str = "group-values") -> list[Any]:
+    """With --foxglove (``live``), the server started with the topics of the blocks ``system``
+    drives, where it is said on stderr, and the live view as the loop's sink; else no sink."""
+    if live is None:
+        return []
+    from deltoctl.app.recording import driven_profile
+
+    live.begin(driven_profile(system), tuple(system.extra_states()), gpio_type)
+    info(f"Foxglove: connect to {live.url} (Open connection → Foxglove WebSocket)")
+    return [live]
+
+
 def stream(
     ctx: typer.Context,
     rate: RateOpt = 50.0,
@@ -242,7 +283,6 @@ def stream(
     is down at the end, 3 when one was lost and came back."""
     from deltoctl.app.latency import loop_warnings
     from deltoctl.app.sinks import LinesSink
-    from deltoctl.cli.record_cmd import foxglove_live, start_foxglove
     from deltoctl.core.runner import run_cycles
     from deltoctl.render.stream import LiveSink
 

@@ -8,6 +8,7 @@ from typing import Annotated, Any, NoReturn
 
 import typer
 
+from deltoctl import verbs
 from deltoctl.cli.confirm import confirmed_remotely
 from deltoctl.cli.context import Options, options
 from deltoctl.errors import DeltoctlError, InvalidInput
@@ -43,7 +44,7 @@ def _write_err(text: str) -> None:
 def forward(ctx: typer.Context) -> NoReturn:
     """Run the command line on ``--robot``'s agent: its stdout, stderr (errors naming the
     robot) and exit code, as if run there."""
-    from deltoctl.cli.main import ARGV
+    from deltoctl.cli.context import ARGV
     from deltoctl.cli.output import stdout_is_terminal
     from deltoctl.fleet import ACTUATING, check_robot
     from deltoctl.fleet.client import ErrorLines, RemoteCall, caller_session
@@ -84,14 +85,13 @@ def _record_file_dropped(argv: list[str]) -> list[str]:
     """The command line as the agent judges it: a remote record's FILE is written on this
     computer and never sent, so the agent's path rule (files in its directory only) does not
     judge it. Any other command line as it is."""
-    from deltoctl.cli.main import command_path
     from deltoctl.cmdline import hoist_global_options
     from deltoctl.fleet.run import verb_args
 
     hoisted = hoist_global_options(argv)
     args = verb_args(hoisted)
     try:
-        if command_path(hoisted)[0] != ("record",) or {"--help", "-h"} & set(args):
+        if verbs.resolve(hoisted) != "record" or {"--help", "-h"} & set(args):
             return argv
     except InvalidInput:
         return argv
@@ -130,8 +130,9 @@ def _positional(args: list[str]) -> int | None:
 def record_options(args: list[str]) -> dict[str, Any]:
     """The record's own options, parsed as ``deltoctl record`` parses them, and checked as
     it checks them; those that make no sense remotely refused."""
+    from typer._click import exceptions as click_exceptions
+
     from deltoctl.app.robot import check_loop
-    from deltoctl.cli.main import click_exceptions
     from deltoctl.record.ros2_msgs import GPIO_TYPES
 
     try:
@@ -240,14 +241,13 @@ def run_cmd(
 ) -> None:
     """Run one verb (or a script's verbs) on many robots in parallel: a live table while they
     run, one report at the end; the exit code is the worst of the robots'."""
-    from deltoctl.cli.main import VERBS
     from deltoctl.cli.output import emit_json, info, table
     from deltoctl.fleet.client import agents, caller_session
     from deltoctl.fleet.run import choose, command_lines, confirmed, start, verb_of, wait_for, worst
     from deltoctl.render.fleet import live_run, run_rows
 
     opts = options(ctx)
-    lines, skipped, one_verb = command_lines(command, VERBS)
+    lines, skipped, one_verb = command_lines(command, verbs.modules())
     forwarded = [flag for name, flag in FORWARDED.items() if getattr(opts, name)]
     lines = [forwarded + [f"--hardware={h}" for h in opts.hardware] + ln for ln in lines]
     for note in skipped:

@@ -9,8 +9,7 @@ from typing import Annotated, Any
 import typer
 
 from deltoctl import verbs
-from deltoctl.cli.context import options
-from deltoctl.cli.main import EXIT_LINE, TEACH, VERBS
+from deltoctl.cli.context import EXIT_LINE, TEACH, options
 from deltoctl.errors import EXIT_CODES, InvalidInput
 
 # one example per verb, shown in its help (command path without "deltoctl")
@@ -91,7 +90,7 @@ def help_cmd(
     ctx: typer.Context,
     topic: Annotated[list[str] | None, typer.Argument(
         metavar="[TOPIC | schema VERB... | VERB...]", autocompletion=lambda incomplete: [
-            t for t in (*_topics(), *VERBS) if t.startswith(incomplete)],
+            t for t in (*_topics(), *verbs.modules()) if t.startswith(incomplete)],
         help="A topic (exit-codes, examples, targets, trust-model, security, "
              "shell-completion, global-options, diagnostics, pytest), schema VERB (its --json "
              "document's JSON Schema), or a verb (e.g. register get).")] = None,

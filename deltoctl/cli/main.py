@@ -14,22 +14,25 @@ import typer
 from typer._click import exceptions as click_exceptions
 from typer.core import TyperGroup
 
-from deltoctl import __version__, verbs
-from deltoctl.cli.context import Options, parse_pairs
+from deltoctl import verbs
+from deltoctl.cli.context import (
+    ARGV,
+    DOCUMENT,
+    EXIT_LINE,
+    TEACH,
+    Options,
+    complete_profile,
+    given_options,
+    parse_pairs,
+)
 from deltoctl.cmdline import GLOBAL_OPTIONS, hoist_global_options
 from deltoctl.errors import DeltoctlError, InvalidInput
+from deltoctl.version import __version__
 
 # verb → the module of deltoctl.cli whose register(app) adds it (deltoctl.verbs declares
 # them). A module is imported only when one of its verbs runs: every line of a bring-up script
 # pays for what it imports.
 VERBS = verbs.modules()
-
-EXIT_LINE = ("Exit codes: 0 ok · 1 failed · 2 usage or invalid input · 3 warnings · "
-             "4 unreachable · 5 refused for safety · 130 interrupted")
-
-TEACH = "deltoctl.teach"  # ctx.meta key: this run shows help or completes, so verbs are taught
-ARGV = "deltoctl.argv"  # ctx.meta key: the command line, global options first
-DOCUMENT = "deltoctl.document"  # ctx.meta key: the verb's JSON document, written as it exits
 
 
 class DeltoctlGroup(TyperGroup):
@@ -175,12 +178,6 @@ def _version(ctx: typer.Context, value: bool) -> None:
     if value and not ctx.resilient_parsing:  # not while a command line is only resolved
         typer.echo(f"deltoctl {__version__}")
         raise typer.Exit()
-
-
-def complete_profile(incomplete: str) -> list[str]:
-    from deltoctl.profile.catalog import catalog_names
-
-    return [n for n in catalog_names() if n.startswith(incomplete)]
 
 
 def _complete_hardware(ctx: typer.Context, incomplete: str) -> list[str]:
@@ -334,23 +331,6 @@ def command_path(args: Sequence[str]) -> tuple[tuple[str, ...], frozenset[str]]:
         raise InvalidInput(exc.format_message()) from None
     except (click_exceptions.ClickException, typer.Exit, typer.Abort):
         return (verbs.UNRESOLVED,), frozenset()
-
-
-def given_options(ctx: Any) -> list[str]:
-    """The spellings of the options a context's command line (or environment) gave: not
-    their defaults, nor a flag given as off."""
-    from typer._click.core import ParameterSource
-
-    given: list[str] = []
-    for param in ctx.command.params:
-        if param.param_type_name != "option":
-            continue
-        source = ctx.get_parameter_source(param.name) if param.name else None
-        if source in (None, ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP):
-            continue
-        if ctx.params.get(param.name) is not False:
-            given += getattr(param, "opts", [])
-    return given
 
 
 verbs.provide_resolver(command_path)

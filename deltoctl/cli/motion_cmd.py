@@ -68,7 +68,7 @@ def home(
     elif plan.targets:
         _said("home", report)
     if plan.targets:
-        fail_unsettled(report)
+        fail_unsettled(report, profile)
     finish(robot.system)
 
 
@@ -159,7 +159,7 @@ def jog(
         report = _jog(opts, system, targets, speed, record)
     if opts.json:
         emit_json(report)
-    fail_unsettled(report)
+    fail_unsettled(report, profile)
     finish(robot.system)
 
 

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from deltoctl.cli.main import DOCUMENT  # root ctx.meta key: the document, until the verb exits
+from deltoctl.cli.context import DOCUMENT  # root ctx.meta key: the document, until the verb exits
 
 if TYPE_CHECKING:
     from rich.progress import Progress

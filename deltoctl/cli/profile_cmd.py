@@ -5,8 +5,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from deltoctl.cli.context import options
-from deltoctl.cli.main import complete_profile
+from deltoctl.cli.context import complete_profile, options
 from deltoctl.cli.output import emit_json, info, say, table
 from deltoctl.errors import DeltoctlError, InvalidInput
 

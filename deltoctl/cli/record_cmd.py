@@ -1,7 +1,6 @@
 """``deltoctl record OUT.mcap``: interface values to MCAP (ROS 2 encoding)."""
 
-import contextlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -17,9 +16,11 @@ from deltoctl.cli.device_cmd import (
     FoxglovePortOpt,
     RateOpt,
     finish,
+    foxglove_live,
     open_robot,
+    start_foxglove,
 )
-from deltoctl.cli.output import emit_json, info, progress, warn
+from deltoctl.cli.output import emit_json, info, progress
 
 if TYPE_CHECKING:
     from rich.progress import Progress
@@ -43,43 +44,6 @@ GpioTypeOpt = Annotated[str, typer.Option(
     help="/gpio's type: group-values (control_msgs/DynamicInterfaceGroupValues, control_msgs "
          "4.7+ on Humble, 5.3+ on Jazzy) or joint-state (control_msgs/DynamicJointState, "
          "every control_msgs).")]
-
-
-@contextlib.contextmanager
-def foxglove_live(enabled: bool, host: str, port: int,
-                  origins: list[str] | None = None) -> Iterator[Any]:
-    """With --foxglove, the Foxglove sink, its address and port checked before the devices
-    are opened (the server starts with ``start_foxglove``, and stops on the way out); else
-    None."""
-    if not enabled:
-        yield None
-        return
-    from deltoctl.record.foxglove_live import FoxgloveLive
-
-    with FoxgloveLive(host, port, origins=tuple(origins or ())) as live:
-        if not live.local:
-            warn(f"--foxglove-host {host}: the robot's data is served beyond this machine, to "
-                 f"anyone who reaches port {port or 'chosen'} there")
-        yield live
-    if live.error:
-        warn(f"the live view stopped: {live.error}")
-    if live.dropped:
-        info(f"Foxglove: {live.dropped} cycles not sent (the live view fell behind)")
-    if live.gate.refused:
-        info(f"Foxglove: {live.gate.refused} connection(s) refused for their origin "
-             "(a web page that is not Foxglove; --foxglove-origin lets one in)")
-
-
-def start_foxglove(live: Any, system: Any, gpio_type: str = "group-values") -> list[Any]:
-    """With --foxglove (``live``), the server started with the topics of the blocks ``system``
-    drives, where it is said on stderr, and the live view as the loop's sink; else no sink."""
-    if live is None:
-        return []
-    from deltoctl.app.recording import driven_profile
-
-    live.begin(driven_profile(system), tuple(system.extra_states()), gpio_type)
-    info(f"Foxglove: connect to {live.url} (Open connection → Foxglove WebSocket)")
-    return [live]
 
 
 def record(

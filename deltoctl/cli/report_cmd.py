@@ -1,6 +1,7 @@
 """``deltoctl report``: the commissioning report — the acceptance sequence on a robot, one
 self-contained HTML file and its JSON twin."""
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -8,8 +9,8 @@ import typer
 
 from deltoctl.cli.context import options
 from deltoctl.cli.device_cmd import AllowMismatch, open_robot
-from deltoctl.cli.output import emit_json, info, say, table, warn
-from deltoctl.errors import WARNINGS, DeviceError
+from deltoctl.cli.output import emit_json, info, progress, say, table, warn
+from deltoctl.errors import WARNINGS
 
 
 def register(root: typer.Typer) -> None:
@@ -38,8 +39,9 @@ def report(
     report's hash. With --yes, motion checks where the profile allows motion: returns home
     and each joint to its soft limits and back. Limits come from the profile's `report:`
     section. Exit 0 when every check passes, 1 when one fails (named), 3 with warnings."""
+    from deltoctl.app.checks import fail_on
     from deltoctl.app.report import Plan, check_plan, report_paths, run_report, write_report
-    from deltoctl.render.checks import check_rows
+    from deltoctl.render.checks import check_rows, verdict_text
     from deltoctl.render.report_html import report_html
 
     opts = options(ctx)
@@ -47,21 +49,39 @@ def report(
     html, twin, mcap = report_paths(output, profile.name)
     plan = Plan(golden, record, mcap if record is not None else None, operator, opts.yes)
     check_plan(plan)
-    with open_robot(opts, allow_model_mismatch, profile) as robot:
-        doc = run_report(robot, plan)
+    bar = progress(opts, elapsed=True)
+    try:
+        said = _shown(opts, bar)
+        said("connect", 0.0)
+        with open_robot(opts, allow_model_mismatch, profile) as robot:
+            doc = run_report(robot, plan, said)
+    finally:
+        if bar is not None:
+            bar.stop()
     write_report(doc, html, report_html)
     if opts.json:
         emit_json(doc)
     else:
         table(None, ["check", "value", "unit", "limit", "verdict"], check_rows(doc["checks"]))
-        say(f"verdict: {doc['verdict']}")
+        say(f"verdict: {verdict_text(doc)}")
     info(f"report: {html} and {twin.name}")
-    if doc["failed"]:
-        raise DeviceError(f"acceptance failed: {', '.join(doc['failed'])}")
+    fail_on(doc["checks"], "acceptance failed: ")
     if doc["verdict"] == "warn":
         for w in doc["warnings"]:
             warn(w)
         raise typer.Exit(WARNINGS)
+
+
+def _shown(opts: Any, bar: Any) -> Callable[[str, float], None]:
+    """The sequence's stages on stderr: ``bar`` on a terminal, a line each otherwise."""
+    task = bar.add_task("report", total=1.0) if bar is not None else None
+
+    def said(label: str, fraction: float) -> None:
+        if bar is not None:
+            bar.update(task, completed=fraction, description=f"report: {label}")
+        elif not opts.json and label != "done":
+            info(f"report: {label}")
+    return said
 
 
 def fleet_summary(runs: list[dict[str, Any]], as_json: bool, code: int) -> None:

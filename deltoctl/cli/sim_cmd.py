@@ -5,8 +5,7 @@ from typing import TYPE_CHECKING, Annotated, Any, cast
 
 import typer
 
-from deltoctl.cli.context import options
-from deltoctl.cli.main import complete_profile
+from deltoctl.cli.context import complete_profile, options
 from deltoctl.cli.output import emit_error, say, warn
 from deltoctl.errors import USAGE, InvalidInput
 

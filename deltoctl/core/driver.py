@@ -35,6 +35,12 @@ CycleHook = Callable[[int, dict[str, float], dict[str, Setpoint]], None]
 
 @dataclass
 class MoveResult:
+    """How a move ended. A joint has settled when its device says it stopped (a servo's
+    moving flag, a drive's target-reached bit, or its velocity near zero over consecutive reads
+    where the device has no such signal) within the profile's home_tolerance of its target;
+    being within tolerance while still on the way is not settled. A joint that has not when the
+    move's time runs out is unsettled."""
+
     settled: bool
     seconds: float
     errors: dict[str, float]  # final |error| per joint
@@ -157,7 +163,9 @@ class Driver:
         raise Unsupported(f"{self.hw.name} cannot identify")
 
     def detect(self) -> dict[str, Any]:
-        """``{"checks": [{what, profile, device, match}], "summary": str, ...}``."""
+        """``{"checks": [{what, profile, device, match}], "summary": str, ...}``; a check
+        about one part of the profile names it (``part``: its id in the report) and says
+        when it does not answer (``missing``: a failure; other differences warn)."""
         raise Unsupported(f"{self.hw.name} cannot detect")
 
     def check_motion(self, joints: list[str]) -> None:
@@ -170,6 +178,8 @@ class Driver:
 
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:
+        """Send each joint to its target and return once every one has settled (see
+        MoveResult), the move's time has run out, or ``halted`` is set."""
         raise Unsupported(f"{self.hw.name} cannot move its joints")
 
     def follow(self, setpoints: dict[str, Setpoint]) -> None:

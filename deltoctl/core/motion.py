@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from deltoctl.errors import InvalidInput, Refused
+from deltoctl.errors import InvalidInput, OutsideEnvelope, Refused
 from deltoctl.profile.model import Component, Profile
 
 DEFAULT_TOLERANCE = math.radians(2)
@@ -48,35 +48,39 @@ def check_finite(joint: Component, what: str, value: float) -> None:
 
 
 def check_target(profile: Profile, joint: Component, target: float, start: float | None) -> None:
-    """Refuse (exit 5) a target outside the joint's limits or its soft limits (a URDF
-    ``<safety_controller>``), or a jog larger than allowed."""
+    """Refuse (OutsideEnvelope, exit 5) a target outside the joint's limits or its soft limits
+    (a URDF ``<safety_controller>``), or a jog larger than allowed."""
     check_finite(joint, "target", target)
     lim = joint.limits
     if lim is not None and not lim.contains(target):
-        raise Refused(f"{joint.name} target {target:.4f} is outside its limits "
-                      f"[{_bound(lim.lower, '-inf')}, {_bound(lim.upper, 'inf')}]"
-                      + _people(joint, target, lim.lower, lim.upper))
+        raise OutsideEnvelope(
+            f"{joint.name} target {target:.4f} is outside its limits "
+            f"[{_bound(lim.lower, '-inf')}, {_bound(lim.upper, 'inf')}]"
+            + _people(joint, target, lim.lower, lim.upper))
     soft = joint.soft_limits
     if soft is not None and not soft.contains(target):
-        raise Refused(f"{joint.name} target {target:.4f} is outside its soft limits "
-                      f"[{soft.lower:.4f}, {soft.upper:.4f}]"
-                      + _people(joint, target, soft.lower, soft.upper) + " (<safety_controller>)")
+        raise OutsideEnvelope(
+            f"{joint.name} target {target:.4f} is outside its soft limits "
+            f"[{soft.lower:.4f}, {soft.upper:.4f}]"
+            + _people(joint, target, soft.lower, soft.upper) + " (<safety_controller>)")
     step = profile.safety.max_jog_step
     if start is not None and step is not None and abs(target - start) > step + 1e-9:
-        raise Refused(f"{joint.name}: a move of {abs(target - start):.4f} is larger than the "
-                      f"profile's max_jog_step {step:.4f}"
-                      + _people(joint, abs(target - start), bound=step),
-                      hint="jog in smaller steps, or raise safety.max_jog_step in the profile")
+        raise OutsideEnvelope(
+            f"{joint.name}: a move of {abs(target - start):.4f} is larger than the "
+            f"profile's max_jog_step {step:.4f}" + _people(joint, abs(target - start), bound=step),
+            hint="jog in smaller steps, or raise safety.max_jog_step in the profile")
 
 
 def check_magnitude(joint: Component, what: str, value: float, limit: float | None,
                     cap: float | None = None) -> None:
-    """Refuse (exit 5) a velocity or effort beyond the joint's limit, or beyond the cap its
-    family derives from the profile's safety section (an effort from ``current_cap``)."""
+    """Refuse (OutsideEnvelope, exit 5) a velocity or effort beyond the joint's limit, or beyond
+    the cap its family derives from the profile's safety section (an effort from
+    ``current_cap``)."""
     check_finite(joint, what, value)
     for bound, whose in ((limit, "its limit"), (cap, "the profile's safety cap")):
         if bound is not None and abs(value) > bound + 1e-9:
-            raise Refused(f"{joint.name} {what} {value:.4f} is beyond {whose} {bound:.4f}")
+            raise OutsideEnvelope(
+                f"{joint.name} {what} {value:.4f} is beyond {whose} {bound:.4f}")
 
 
 def check_move(profile: Profile, joint: Component, target: float, start: float | None,

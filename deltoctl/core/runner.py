@@ -5,14 +5,24 @@ timing and the buses' communication statistics. Ctrl-C, SIGTERM and SIGHUP end i
 from __future__ import annotations
 
 import contextlib
+import math
 import signal
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
 from deltoctl.core.loop import CommLoop, CycleLoop, LoopStats
+from deltoctl.errors import InvalidInput
 
 STATS_PERIOD = 1.0  # s between the sinks' statistics
+
+
+def check_loop(rate: float, duration: float | None) -> None:
+    """A loop's rate and duration: finite and positive."""
+    if not (math.isfinite(rate) and 0 < rate <= 100_000):
+        raise InvalidInput(f"--rate must be a positive number of Hz up to 100000, got {rate:g}")
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise InvalidInput(f"--duration must be a positive number of seconds, got {duration:g}")
 
 
 class Sink:

@@ -10,7 +10,8 @@ and releases its link.
 The safety envelope is the System's, whoever calls it: a move, a command to a joint's
 position, velocity or effort interface and a replayed setpoint are checked against the joint's
 limits and soft limits, its velocity and effort limits and ``max_jog_step`` (core/motion.py)
-before a byte is sent to any block; a target outside is ``Refused`` (exit 5).
+before a byte is sent to any block; a target outside is ``OutsideEnvelope`` (a ``Refused``,
+exit 5).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from deltoctl import registry, trace
 from deltoctl.core import motion
 from deltoctl.core.driver import Block, Driver, Links, MoveResult, Progress, Setpoint
 from deltoctl.core.lifecycle import Lifecycle
-from deltoctl.errors import DeltoctlError, InvalidInput, Unreachable
+from deltoctl.errors import DeltoctlError, InvalidInput, Refused, Unreachable
 from deltoctl.profile.model import Component, Hardware, Profile
 from deltoctl.registry import Family
 
@@ -129,10 +130,13 @@ class System:
     def __init__(self, profile: Profile, targets: list[str] | tuple[str, ...] = (),
                  hardware: list[str] | tuple[str, ...] = (), *, probe: bool = False,
                  allow_model_mismatch: bool = False,
-                 simulated: dict[str, str] | None = None) -> None:
+                 simulated: dict[str, str] | None = None, allow_motion: bool = True) -> None:
         """``probe``: a bus where nothing answers is still opened (for ``detect``);
-        ``simulated``: the blocks served by an emulator, each with why."""
+        ``simulated``: the blocks served by an emulator, each with why; without
+        ``allow_motion`` every command, move and actuation is refused before a byte is sent
+        (the robot under a pytest run without --deltoctl-allow-motion)."""
         self.profile = profile
+        self.allow_motion = allow_motion
         self.links = Links()
         self.members: list[Member] = []
         self.notes: list[str] = []  # the System's own warnings (blocks left out)
@@ -325,10 +329,18 @@ class System:
         values[STATUS] = up
         return values
 
+    def check_allowed(self, what: str) -> None:
+        """Refused when this System allows no motion or actuation (``allow_motion``)."""
+        if not self.allow_motion:
+            raise Refused(f"{what}: this robot allows no motion or actuation",
+                          "run pytest with --deltoctl-allow-motion to let its tests move the "
+                          "robot and switch its outputs")
+
     def set_command(self, name: str, value: float) -> None:
         """One command interface by name (``joint/position``, ``gpio/output_1``). A joint's
         position, velocity or effort command is checked against the envelope first: a
         position as a move from where the joint is (``max_jog_step``)."""
+        self.check_allowed(f"command {name}")
         m = self.member(name)
         part, _, interface = name.rpartition("/")
         comp = self.component(part or name)
@@ -377,8 +389,8 @@ class System:
 
     def check_move(self, targets: Mapping[str, float], velocity: float | None = None, *,
                    jog: bool = True) -> None:
-        """Refuse (``Refused``, exit 5) a move that leaves the envelope, before anything is
-        sent: a target outside a joint's limits or soft limits, a velocity beyond its limit,
+        """Refuse (``OutsideEnvelope``, exit 5) a move that leaves the envelope, before anything
+        is sent: a target outside a joint's limits or soft limits, a velocity beyond its limit,
         a step beyond ``max_jog_step`` from where the joint is (its last read). ``jog``
         False: a move to a known pose (``home``, a replay's start pose), within the limits
         but not bounded by ``max_jog_step``."""
@@ -402,6 +414,7 @@ class System:
         setpoint before (the first: from where the joint is), its velocity and effort within
         the joint's limits (the family clamps an effort to its cap, as its moves do).
         ``stop`` forgets the setpoints before."""
+        self.check_allowed("following setpoints")
         before = self._followed
         fresh = [j for j in setpoints if j not in before]
         present = self._positions(fresh) if fresh else {}
@@ -422,6 +435,7 @@ class System:
         Ctrl-C or an error in one block halts them all. Every target is checked first
         (``check_move``), and every block's motion rules (homed first): a refused one sends
         nothing to any block."""
+        self.check_allowed(f"moving {', '.join(targets)}")
         self.check_move(targets, velocity, jog=jog)
         self.check_ready(targets)
         self._followed.clear()

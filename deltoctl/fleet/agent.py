@@ -497,7 +497,7 @@ class Agent:
             self.check(verb, argv)
 
     def _launch(self, rid: str, verb: str, argv: list[str], beat: bytes = b"") -> Running:
-        # by what this command line does (report reads; report --yes moves); undeclared
+        # by what this command line does (report actuates; report --yes moves); undeclared
         # commands too
         if verb in ACTUATING and not self.motion_allowed:
             what = ("a command deltoctl cannot classify (it counts as motion)"

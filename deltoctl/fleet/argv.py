@@ -28,8 +28,9 @@ MAX_ARG = 4096  # bytes in one argument
 FORBIDDEN = ("--profile", "--target", "--sim", "--sim-fresh", "--sim-option", "--arg",
              "--package-path", "--xacro", "--log-file", "--robot", "--zenoh-config", "--foxglove",
              "--foxglove-host", "--foxglove-port")
-# options that write outside the agent's directory (the shell's start-up files)
-WRITES_OUTSIDE = ("--install-completion", "--show-completion")
+# options that write outside the agent's directory (the shell's start-up files, the host's
+# udev rules)
+WRITES_OUTSIDE = ("--install-completion", "--show-completion", "--write-udev-rule")
 _SHORT_FORBIDDEN = re.compile(r"-[yqv]*[pt]")  # -p, -t, -yp …: a cluster naming them
 
 

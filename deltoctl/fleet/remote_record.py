@@ -130,7 +130,7 @@ class RemoteRecord:
     # -- the run ----------------------------------------------------------------------------
 
     def run(self) -> int:
-        from deltoctl import __version__
+        from deltoctl.version import __version__
 
         info = agent_info(self.session, self.robot)
         self.profile = load_profile_text(info.get(PROFILE_YAML),

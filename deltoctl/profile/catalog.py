@@ -10,15 +10,13 @@ from deltoctl import entry_points
 from deltoctl.data import cache_file as data_cache_file
 from deltoctl.data import data_dir
 from deltoctl.errors import InvalidInput, ProfileError
+from deltoctl.profile.files import MAX_PROFILE_BYTES, check_profile_file
 
 if TYPE_CHECKING:
     from deltoctl.profile.model import Profile
 
 YAML_SUFFIXES = (".yaml", ".yml")
 URDF_SUFFIXES = (".urdf", ".xacro", ".xml")
-MAX_PROFILE_BYTES = 16 << 20  # checked before a profile file is read
-
-
 PROFILES_GROUP = entry_points.PROFILES
 
 
@@ -94,21 +92,6 @@ def merge_interface_limits(profile: Profile) -> Profile:
 def runs_xacro(path: Path, xacro: bool = False) -> bool:
     """Whether loading ``path`` runs xacro: a ``.xacro`` file, or ``--xacro`` on a URDF."""
     return path.suffix.lower() in URDF_SUFFIXES and (path.name.endswith(".xacro") or xacro)
-
-
-def check_profile_file(path: Path) -> None:
-    """Refuse what is not a regular file of at most MAX_PROFILE_BYTES, before reading it."""
-    import stat
-
-    try:
-        info = path.stat()
-    except OSError as exc:
-        raise ProfileError(f"cannot read the file: {exc.strerror}", str(path)) from None
-    if not stat.S_ISREG(info.st_mode):
-        raise ProfileError("not a regular file", str(path))
-    if info.st_size > MAX_PROFILE_BYTES:
-        raise ProfileError(f"{info.st_size} bytes: larger than {MAX_PROFILE_BYTES >> 20} MiB, "
-                           "the limit for a profile", str(path))
 
 
 def load_profile(

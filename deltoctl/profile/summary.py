@@ -91,7 +91,7 @@ def validation(spec: str, load: Callable[[str], Profile],
     code (0; 3 with warnings; the error's when it is invalid). ``strict``: warnings are
     errors."""
     from deltoctl.profile.validate import validate
-    from deltoctl.transport.adapters import stable_hint
+    from deltoctl.transport.serial_port import stable_hint
 
     try:
         prof = load(spec)

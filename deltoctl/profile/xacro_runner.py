@@ -160,7 +160,7 @@ class _Run:
 
     def read(self, filename: str, what: str) -> str:
         """The text of a file xacro wants, if it is inside the allowed directories."""
-        from deltoctl.profile.catalog import check_profile_file
+        from deltoctl.profile.files import check_profile_file
 
         real = self.inside(filename, what)
         if not real.exists():

@@ -202,7 +202,7 @@ def parse_yaml(text: str, source: str) -> Any:
 def read_text(path: Path, what: str, limit: int | None = None, kind: str = "profile") -> str:
     """The text of a ``kind`` of file (a profile, a snapshot …), refusing one larger than
     ``limit`` (MAX_PROFILE_BYTES by default) or not a regular file, before reading it."""
-    from deltoctl.profile.catalog import MAX_PROFILE_BYTES
+    from deltoctl.profile.files import MAX_PROFILE_BYTES
 
     limit = MAX_PROFILE_BYTES if limit is None else limit
     source = str(path)
@@ -379,6 +379,7 @@ def _component(r: _Reader, kind: str, item: Any, line: int) -> Component:
         comp.offset = r.number(d, "offset", what) or 0.0
         if "limits" in d:
             ld = r.mapping(d["limits"], f"limits of {what}", d.lines["limits"], _LIMIT_KEYS)
+            _limit_units(r, ld, comp, "limits")
             comp.limits = Limits(**{k: r.number(ld, k, what) for k in sorted(_LIMIT_KEYS)})
         if "soft_limits" in d:
             comp.soft_limits = _soft_limits(r, d, comp, what)
@@ -398,6 +399,7 @@ def _soft_limits(r: _Reader, d: LineDict, joint: Component, what: str) -> SoftLi
     loader (and ros2_control) clamps them."""
     sd = r.mapping(d["soft_limits"], f"soft_limits of {what}", d.lines["soft_limits"],
                    _SOFT_LIMIT_KEYS)
+    _limit_units(r, sd, joint, "soft_limits")
     soft = SoftLimits(**{k: r.number(sd, k, f"soft_limits of {what}") or 0.0
                          for k in sorted(_SOFT_LIMIT_KEYS)})
     return clamp_soft_limits(soft, merge_interface_limits(joint.limits, joint))
@@ -515,8 +517,19 @@ def _check_safety_units(r: _Reader, profile: Profile, safety: LineDict) -> None:
                 _fits(r, safety[key], joint, f"safety.{key}", safety.lines[key])
 
 
-def _fits(r: _Reader, value: Any, joint: Component, what: str, line: int | None) -> None:
-    wrong = mismatch(parse_unit(value), joint_dimension(joint.joint_type))
+def _limit_units(r: _Reader, limits: LineDict, joint: Component, key: str) -> None:
+    """A joint's (soft) limits in its unit: lower and upper its positions (no ``20deg`` on a
+    prismatic joint, no ``/s``), velocity its speed."""
+    for name, speed in (("lower", False), ("upper", False), ("velocity", True)):
+        if limits.get(name) is not None:
+            with contextlib.suppress(ValueError):  # not a quantity: r.number names it
+                _fits(r, limits[name], joint, f"{key}.{name} of joint {joint.name!r}",
+                      limits.lines[name], speed)
+
+
+def _fits(r: _Reader, value: Any, joint: Component, what: str, line: int | None,
+          speed: bool = False) -> None:
+    wrong = mismatch(parse_unit(value), joint_dimension(joint.joint_type), speed)
     if wrong:
         raise r.fail(f"{what} ({value}): {joint.name} is a {joint.joint_type} joint, so it "
                      f"takes {wrong}", line)

@@ -82,8 +82,8 @@ class McapRecorder:
         the records instead of mcap's Writer on ``stream`` (the same methods: the live view's
         ``FoxgloveWriter``). ``commands``: a /joint_commands topic too, each cycle's
         setpoints (``record.commands``: ``<joint>/position_command`` …)."""
-        from deltoctl import __version__
         from deltoctl.record.mcap_cycles import CycleAppender
+        from deltoctl.version import __version__
 
         if gpio_type not in GPIO_TYPES:
             raise ValueError(f"gpio_type {gpio_type!r}: one of {', '.join(GPIO_TYPES)}")
@@ -354,7 +354,7 @@ class McapRecorder:
         record (rosbag2_storage's BagMetadata as YAML, the keys in its order)."""
         import yaml
 
-        from deltoctl import __version__
+        from deltoctl.version import __version__
 
         start = self.first_ns or 0
         duration = {"nanoseconds": max(self.last_ns - start, 0)}

@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import Any, BinaryIO, cast
 
 from deltoctl.errors import InvalidInput
-from deltoctl.profile.catalog import MAX_PROFILE_BYTES
+from deltoctl.profile.files import MAX_PROFILE_BYTES
 from deltoctl.record.commands import COMMAND_SUFFIX, COMMANDS_TOPIC
 
 MAGIC = b"\x89MCAP0\r\n"

@@ -20,6 +20,14 @@ def check_rows(checks: list[dict[str, Any]], *first: str) -> list[list[Any]]:
              c["verdict"].upper() if c["verdict"] == "fail" else c["verdict"]] for c in checks]
 
 
+def verdict_text(doc: dict[str, Any]) -> str:
+    """A report's verdict as people read it: a failure in capitals, and SIMULATED before it
+    when simulators stood in for devices (a rehearsal, not an acceptance)."""
+    verdict = doc["verdict"].upper() if doc["verdict"] == "fail" else doc["verdict"]
+    simulated = doc.get("simulated") or []
+    return f"SIMULATED ({', '.join(simulated)}): {verdict}" if simulated else verdict
+
+
 def residual_rows(blocks: list[dict[str, Any]]) -> list[list[Any]]:
     """One table row per F/T sensor of a tare: its block, the residual force and torque left,
     and whether they pass."""

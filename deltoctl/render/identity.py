@@ -9,25 +9,37 @@ from typing import Any
 Table = tuple[str | None, list[str], list[list[Any]]]
 
 
+def label(key: Any) -> str:
+    """A field's key as words: ``configured_model`` → ``configured model``."""
+    return str(key).replace("_", " ")
+
+
+def word(value: Any) -> Any:
+    """A value as people read it: a yes/no for a flag, the value otherwise."""
+    return ("yes" if value else "no") if isinstance(value, bool) else value
+
+
 def identity_tables(ident: dict[str, Any], title: str | None = None) -> list[Table]:
     """Plain fields in one table; each list of parts (joints, servos) in a table of its own,
     one row per part; nested groups recursively."""
     tables: list[Table] = []
-    flat = [[k, v] for k, v in ident.items() if not isinstance(v, dict)]
+    flat = [[label(k), word(v)] for k, v in ident.items() if not isinstance(v, dict)]
     if flat:
         tables.append((title, ["field", "value"], flat))
     for key, value in ident.items():
         if not isinstance(value, dict):
             continue
-        name = f"{title} {key}" if title else key
+        name = f"{title} {label(key)}" if title else label(key)
         rows = list(value.values())
         if rows and all(isinstance(r, dict) and not any(isinstance(x, dict) for x in r.values())
                         for r in rows):
             columns = list(dict.fromkeys(c for r in rows for c in r))
-            tables.append((name, ["name", *columns],
-                           [[part, *(r.get(c, "") for c in columns)] for part, r in value.items()]))
+            tables.append((name, ["name", *map(label, columns)],
+                           [[part, *(word(r.get(c, "")) for c in columns)]
+                            for part, r in value.items()]))
         elif rows and not any(isinstance(r, dict) for r in rows):
-            tables.append((name, ["field", "value"], [[k, v] for k, v in value.items()]))
+            tables.append((name, ["field", "value"],
+                           [[label(k), word(v)] for k, v in value.items()]))
         else:
             tables.extend(identity_tables(value, name))
     return tables

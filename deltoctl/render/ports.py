@@ -3,7 +3,16 @@ computer, a few lines each, with what needs doing before a bus runs on it."""
 
 from __future__ import annotations
 
+import re
 from typing import Any
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
+
+
+def _printable(value: Any) -> Any:
+    """A string from a device (sysfs: manufacturer, product, serial) with its control
+    characters shown as "?": an escape sequence would drive the terminal."""
+    return _CONTROL.sub("?", value) if isinstance(value, str) else value
 
 
 def ports_lines(found: dict[str, Any]) -> list[str]:
@@ -13,7 +22,7 @@ def ports_lines(found: dict[str, Any]) -> list[str]:
         lines += _serial(a)
     for c in found["can"]:
         lines += _can(c)
-    for i in found["i2c"]:
+    for i in ({k: _printable(v) for k, v in i.items()} for i in found["i2c"]):
         state = "" if i["access"] else ("  (no access)" if i["present"] else "  (no /dev node)")
         lines.append(f"{i['device']}  I2C  {i['adapter'] or '?'}{state}")
     if not lines:
@@ -22,6 +31,7 @@ def ports_lines(found: dict[str, Any]) -> list[str]:
 
 
 def _serial(a: dict[str, Any]) -> list[str]:
+    a = {k: _printable(v) for k, v in a.items()}
     ident = f"{a['vid']}:{a['pid']}" if a["vid"] else "on-board"
     names = " ".join(x for x in (a["manufacturer"], a["product"]) if x)
     known = f" = {a['known']}" if a["known"] else ""
@@ -47,6 +57,7 @@ def _serial(a: dict[str, Any]) -> list[str]:
 
 
 def _can(c: dict[str, Any]) -> list[str]:
+    c = {k: _printable(v) for k, v in c.items()}
     usb = f"  {c['vid']}:{c['pid']}" if c["vid"] else ""
     known = f" = {c['known']}" if c["known"] else ""
     lines = [f"{c['name']}  CAN{usb}{known}  {'up' if c['up'] else 'DOWN'}"

@@ -40,7 +40,7 @@ def limits_text(joint: Component) -> str:
 def heading(profile: Profile) -> list[str]:
     """The profile's name and description, then its buses (a port named in plug-in order with
     what names its adapter instead)."""
-    from deltoctl.transport.adapters import stable_hint
+    from deltoctl.transport.serial_port import stable_hint
 
     discontinued = " (discontinued)" if profile.status == "discontinued" else ""
     lines = [f"{profile.name}: {profile.description}{discontinued}"]

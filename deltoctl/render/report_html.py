@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from deltoctl.render import svg_plot
+from deltoctl.render.identity import label, word
 
 VERDICTS = ("pass", "fail", "warn", "skip")
 
@@ -32,7 +33,8 @@ def _environment() -> Any:
 
     env = jinja2.Environment(loader=jinja2.PackageLoader("deltoctl.render", "templates"),
                              autoescape=True, trim_blocks=True, lstrip_blocks=True)
-    env.filters["num"] = _number
+    env.filters["num"] = lambda value: _number(word(value))
+    env.filters["label"] = label
     env.filters["figure"] = _figure
     return env
 

@@ -107,17 +107,26 @@ def serve_profile(stack: contextlib.ExitStack, prof: Profile, options: ServeOpti
     return result
 
 
-def options_given(items: Sequence[str], what: str) -> dict[str, Any]:
+_WHERE = ("host", "port", "profile")  # what serving is, not a fault: never a --sim-option
+
+
+def options_given(items: Sequence[str], what: str, prof: Profile | None = None,
+                  hardware: Sequence[str] = ()) -> dict[str, Any]:
     """``NAME=VALUE`` items (``faces=+z:2,-z:2``, ``missing=head_y`` repeated, ``pace`` for a
     flag) as ServeOptions' faults, each value checked later by its declaration; an item not
-    of that form, a flag given a value other than true or false, or a single-valued option
-    given twice is one InvalidInput naming it."""
-    declared = registry.sim_options()
+    of that form, a name no family of ``prof``'s blocks (``hardware``; of any profile
+    without) declares — where to listen is not one —, a flag given a value other than true
+    or false, or a single-valued option given twice is one InvalidInput naming it."""
+    declared = registry.sim_options(_family_names(prof, hardware) if prof else None)
     faults: dict[str, Any] = {}
     for item in items:
         key, has_value, value = item.partition("=")
         name = key.strip().removeprefix("--").replace("-", "_")
-        option = declared.get(name)
+        option = None if name in _WHERE else declared.get(name)
+        if name and option is None:
+            takes = ", ".join(sorted(declared)) or "no options"
+            raise InvalidInput(f"{what} {name!r}: not for {prof.name if prof else 'a simulator'}"
+                               f" (its simulator takes: {takes})")
         if option is not None and option.kind == "flag":
             if value.lower() not in (("true", "false") if has_value else ("",)):
                 raise InvalidInput(f"{what} {item!r}: {option.flag} is on or off: {name} or "
@@ -132,6 +141,15 @@ def options_given(items: Sequence[str], what: str) -> dict[str, Any]:
         else:
             faults[name] = value
     return faults
+
+
+def _family_names(prof: Profile, hardware: Sequence[str]) -> list[str]:
+    """The names of the families of the profile's blocks (or of those ``hardware``)."""
+    from deltoctl.core.system import select_blocks
+
+    found = (registry.of_block(prof.family_of(hw), hw.plugin)
+             for hw in select_blocks(prof, list(hardware)))
+    return [f.name for f in found if f is not None]
 
 
 def serve_until_stopped(prof: Profile, options: ServeOptions, hardware: Sequence[str],

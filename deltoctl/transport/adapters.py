@@ -10,6 +10,7 @@ but sysfs files and directory links; no byte reaches a device.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 from dataclasses import asdict, dataclass, field
@@ -185,8 +186,6 @@ def serial_adapters(base: str | None = None, holders: bool = True) -> list[Seria
         found.append(_adapter(base, name, real, usb, driver, by_id.get(name, []),
                               by_path.get(name, [])))
     if holders and found:
-        from deltoctl.transport.doctor import holders_of_each
-
         held = holders_of_each([a.device for a in found])
         for a in found:
             a.holders = held[a.device]
@@ -236,18 +235,6 @@ def adapter_of(path: str, base: str | None = None) -> SerialAdapter | None:
     return next((adapters[n] for n in _chain(path) if n in adapters), None)
 
 
-def adapter_of_target(url: str) -> SerialAdapter | None:
-    """The serial adapter a target URL reaches; None for a URL of another transport, or one
-    that reaches no adapter (doctor's checks say why)."""
-    from deltoctl.errors import DeltoctlError
-    from deltoctl.transport.serial_port import parse_serial_url, port_path
-
-    try:
-        return adapter_of(port_path(parse_serial_url(url)[0]))
-    except DeltoctlError:
-        return None
-
-
 ENUMERATED = re.compile(r"^tty(USB|ACM)\d+$")  # names the kernel hands out in plug-in order
 
 
@@ -257,25 +244,6 @@ def stable_targets(url: str, a: SerialAdapter) -> list[str]:
     query = url.partition("?")[2]
     tail = f"?{query}" if query else ""
     return [f"serial://{p}{tail}" for p in a.by_id[:1]] + ([a.usb + tail] if a.usb else [])
-
-
-def stable_hint(url: str) -> str | None:
-    """For a target named in plug-in order (/dev/ttyUSB0, /dev/ttyACM0), what names its
-    adapter instead; None for any other target."""
-    from deltoctl.errors import DeltoctlError
-    from deltoctl.transport.serial_port import parse_serial_url
-
-    try:
-        path = parse_serial_url(url)[0]
-    except DeltoctlError:
-        return None
-    if not ENUMERATED.match(os.path.basename(path)):
-        return None
-    adapter = adapter_of(path)
-    choices = stable_targets(url, adapter) if adapter is not None else []
-    return (f"{path} is named in plug-in order (a reboot may swap it): name the adapter by "
-            + (" or ".join(choices) if choices else "its /dev/serial/by-id/ link or "
-               "usb:VID:PID[:SERIAL] (deltoctl ports lists them)"))
 
 
 # -- usb:VID:PID[:SERIAL] ---------------------------------------------------------------------
@@ -446,12 +414,16 @@ def udev_rule(adapters: list[tuple[str, SerialAdapter]]) -> str:
              f"# install: sudo deltoctl doctor --write-udev-rule   (or copy to {RULES_FILE};",
              "# then: sudo udevadm control --reload && sudo udevadm trigger)"]
     for name, a in adapters:
-        if not a.vid or not a.pid:
+        # every string here but the rule's own words comes from the device (sysfs) or the
+        # profile: only safe characters reach the rule, a comment line included
+        if not _USB_ID.match(a.vid or "") or not _USB_ID.match(a.pid or ""):
             continue
         match = f'ATTRS{{idVendor}}=="{a.vid}", ATTRS{{idProduct}}=="{a.pid}"'
         if a.serial and _SAFE.match(a.serial):  # a serial udev could not match is left out
             match += f', ATTRS{{serial}}=="{a.serial}"'
-        lines.append(f"# {name}: {a.known or a.product or 'USB serial adapter'} ({a.usb})")
+        what = _UNSAFE_COMMENT.sub("_", f"{name}: {a.known or a.product or 'USB serial adapter'}"
+                                        f" ({a.usb})")
+        lines.append(f"# {what}")
         lines.append(f'SUBSYSTEM=="tty", {match}, SYMLINK+="{_SAFE_NAME.sub("_", name)}"')
         if a.driver == "ftdi_sio":
             lines.append(f'ACTION=="add", SUBSYSTEM=="usb-serial", DRIVER=="ftdi_sio", {match}, '
@@ -459,7 +431,9 @@ def udev_rule(adapters: list[tuple[str, SerialAdapter]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-_SAFE = re.compile(r"^[A-Za-z0-9_.+-]+$")
+_SAFE = re.compile(r"^[A-Za-z0-9_.+-]+\Z")
+_USB_ID = re.compile(r"^[0-9a-fA-F]{4}\Z")
+_UNSAFE_COMMENT = re.compile(r"[^A-Za-z0-9 _.,:;()/+-]")
 _SAFE_NAME = re.compile(r"[^A-Za-z0-9_.+-]")
 
 
@@ -468,3 +442,31 @@ def latency_fix(a: SerialAdapter, base: str | None = None) -> str:
     path = under(base or root(), f"/sys/bus/usb-serial/devices/{a.name}/latency_timer")
     return (f"echo {SYNC_LATENCY_MS} | sudo tee {path}   (until it is unplugged; for good: "
             "deltoctl doctor --write-udev-rule)")
+
+
+def holders_of_each(paths: list[str]) -> dict[str, list[str]]:
+    """path → ``PID (name)`` of the processes with it open, from one look through /proc."""
+    real = {os.path.realpath(p): p for p in paths}
+    found: dict[str, list[str]] = {p: [] for p in paths}
+    try:
+        pids = [p for p in os.listdir("/proc") if p.isdigit() and int(p) != os.getpid()]
+    except OSError:
+        return found
+    for pid in pids:
+        with contextlib.suppress(OSError):
+            fds = os.listdir(f"/proc/{pid}/fd")
+            held = {real[t] for t in (_target(f"/proc/{pid}/fd/{fd}") for fd in fds)
+                    if t in real}
+            if held:
+                with open(f"/proc/{pid}/comm") as f:
+                    name = f.read().strip()
+                for path in held:
+                    found[path].append(f"{pid} ({name})")
+    return found
+
+
+def _target(link: str) -> str | None:
+    try:
+        return os.readlink(link)
+    except OSError:
+        return None

@@ -8,7 +8,6 @@ for when it fails.
 
 from __future__ import annotations
 
-import contextlib
 import os
 from typing import TYPE_CHECKING, Any
 
@@ -129,35 +128,9 @@ def _permission(bus: str, path: str, st: Any, kind: str) -> Check:
 
 def holders_of(path: str) -> list[str]:
     """``PID (name)`` of the processes (that this user may see) with ``path`` open."""
+    from deltoctl.transport.adapters import holders_of_each
+
     return holders_of_each([path])[path]
-
-
-def holders_of_each(paths: list[str]) -> dict[str, list[str]]:
-    """path → ``PID (name)`` of the processes with it open, from one look through /proc."""
-    real = {os.path.realpath(p): p for p in paths}
-    found: dict[str, list[str]] = {p: [] for p in paths}
-    try:
-        pids = [p for p in os.listdir("/proc") if p.isdigit() and int(p) != os.getpid()]
-    except OSError:
-        return found
-    for pid in pids:
-        with contextlib.suppress(OSError):
-            fds = os.listdir(f"/proc/{pid}/fd")
-            held = {real[t] for t in (_target(f"/proc/{pid}/fd/{fd}") for fd in fds)
-                    if t in real}
-            if held:
-                with open(f"/proc/{pid}/comm") as f:
-                    name = f.read().strip()
-                for path in held:
-                    found[path].append(f"{pid} ({name})")
-    return found
-
-
-def _target(link: str) -> str | None:
-    try:
-        return os.readlink(link)
-    except OSError:
-        return None
 
 
 def present_nodes(globs: tuple[str, ...], kind: str, none: str, fix: str,

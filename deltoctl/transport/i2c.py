@@ -10,6 +10,7 @@ not answer, or a permission problem.
 from __future__ import annotations
 
 import errno
+from collections.abc import Callable
 from typing import Any
 from urllib.parse import parse_qsl
 
@@ -136,6 +137,29 @@ class I2CBus:
     def close(self) -> None:
         trace.link("i2c %s: closed", self.url)
         self.smbus.close()
+
+
+# an exchange policy's run (deltoctl.core.exchange): attempt, what it is, failures tallied
+PolicyRun = Callable[[Callable[[], bytes], str, dict[str, int]], bytes]
+
+
+def exchange(bus: I2CBus, address: int, attempt: Callable[[], bytes], run: PolicyRun,
+             tries: int) -> bytes:
+    """One transaction with the device at ``address``, ``attempt`` tried as ``run`` (an
+    exchange policy's, of ``tries`` tries) tries it: the bus counts it once in ``packets``
+    and each failed try in ``errors``; no answer is one NoAnswer naming the device and bus."""
+    failed: dict[str, int] = {}
+    bus.stats["packets"] += 1
+    try:
+        return run(attempt, f"{address:#04x}", failed)
+    except NoAnswer:
+        raise NoAnswer(f"no answer from {address:#04x} on {bus.url} ({tries} tries)",
+                       hint="check the device's power, wiring and address") from None
+    except DeviceError:
+        failed["errors"] = failed.get("errors", 0) + 1
+        raise
+    finally:
+        bus.stats["errors"] += failed.get("errors", 0)
 
 
 def wire_bits(write: int, read: int) -> int:

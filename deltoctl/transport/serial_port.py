@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import errno
 import os
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs
 
 from deltoctl import trace
-from deltoctl.errors import InvalidInput, Unreachable
+from deltoctl.errors import DeltoctlError, InvalidInput, Unreachable
 from deltoctl.transport import Check, Target, Transport, split_url, url_hint
+
+if TYPE_CHECKING:
+    from deltoctl.transport.adapters import SerialAdapter
 
 KEYS = ("baud", "rs485")
 MAX_BAUD = 12_000_000
@@ -58,6 +61,35 @@ def port_path(path: str) -> str:
     from deltoctl.transport.adapters import resolve_usb
 
     return resolve_usb(path)
+
+
+def adapter_of_target(url: str) -> SerialAdapter | None:
+    """The serial adapter a target URL reaches; None for a URL of another transport, or one
+    that reaches no adapter (doctor's checks say why)."""
+    from deltoctl.transport.adapters import adapter_of
+
+    try:
+        return adapter_of(port_path(parse_serial_url(url)[0]))
+    except DeltoctlError:
+        return None
+
+
+def stable_hint(url: str) -> str | None:
+    """For a target named in plug-in order (/dev/ttyUSB0, /dev/ttyACM0), what names its
+    adapter instead; None for any other target."""
+    from deltoctl.transport.adapters import ENUMERATED, adapter_of, stable_targets
+
+    try:
+        path = parse_serial_url(url)[0]
+    except DeltoctlError:
+        return None
+    if not ENUMERATED.match(os.path.basename(path)):
+        return None
+    adapter = adapter_of(path)
+    choices = stable_targets(url, adapter) if adapter is not None else []
+    return (f"{path} is named in plug-in order (a reboot may swap it): name the adapter by "
+            + (" or ".join(choices) if choices else "its /dev/serial/by-id/ link or "
+               "usb:VID:PID[:SERIAL] (deltoctl ports lists them)"))
 
 
 # errno of a port another process holds: its flock (pyserial's exclusive), or TIOCEXCL
@@ -152,7 +184,6 @@ def _checks(target: Target) -> list[Check]:
     """The port is there (a ``usb:`` target: the one adapter it names), this user may open
     it, no process holds it; its adapter (a stable name, the rate its driver sets, the
     latency timer a loop at the asked rate needs); and (rs485=1) its kernel RS-485 mode."""
-    from deltoctl.errors import DeltoctlError
     from deltoctl.transport.adapters import adapter_of
     from deltoctl.transport.doctor import adapter_checks, check, device_checks
 

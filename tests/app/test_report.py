@@ -73,8 +73,10 @@ def test_a_sound_gripper_passes_and_both_files_agree(cli, tmp_path):
         assert set(c) >= KEYS and set(c["limit"]) == {"min", "max"}, c
     ids = {c["id"] for c in doc["checks"]}
     assert {"link.dg4f_driver.rtt_p99", "link.dg4f_driver.error_rate",
-            "fingertip_finger_1.residual_force", "detect.dg4f_driver.1"} <= ids
-    assert next(c for c in doc["checks"] if c["id"] == "motion")["verdict"] == "skip"
+            "detect.dg4f_driver.fingertip_f_t_sensors"} <= ids
+    skipped = {c["id"] for c in doc["checks"] if c["verdict"] == "skip"}
+    assert {"motion", "sensors.actuated"} <= skipped  # without --yes: no motion, no tare
+    assert "fingertip_finger_1.residual_force" not in ids
     (block,) = doc["sections"]["identity"]["blocks"]
     assert block["identity"]["firmware"] == "3.0" and block["simulated"] is True
     assert re.fullmatch(r"[0-9a-f]{64}", doc["sections"]["configuration"]["fingerprint"])
@@ -92,7 +94,7 @@ def test_a_sound_gripper_passes_and_both_files_agree(cli, tmp_path):
 def test_a_failing_check_is_exit_1_naming_it_and_the_report_is_kept(cli, tmp_path):
     firmware = firmware_for_profile(load_profile("dg-4f"), firmware=(2, 2), seed=2)
     with DeltoServer(firmware) as server:  # before 2.3: no tare
-        result, out = report(cli, tmp_path, target=server.endpoint)
+        result, out = report(cli, tmp_path, "--yes", target=server.endpoint, profile=hand(tmp_path, ", homes: 1"))
     assert result.exit_code == 1
     assert "acceptance failed: fingertip_finger_" in result.stderr
     doc = json.loads(out.with_suffix(".json").read_text())
@@ -182,6 +184,23 @@ def test_motion_checks_run_only_with_yes(cli, tmp_path):
     error = motion["motion.j_dg_1_1.following_error"]
     assert error["unit"] == "rad" and error["verdict"] == "pass"
     assert motion["motion.j_dg_2_2.home_repeatability"]["value"] == 0  # one return
+    assert "fingertip_finger_1.residual_force" in {c["id"] for c in doc["checks"]}  # tared
+
+
+def test_a_report_without_yes_writes_nothing_to_the_sensors(cli, tmp_path, monkeypatch):
+    """A report without --yes only reads: no F/T tare (SET_FT_OFFSET), no IMU self-test."""
+    import deltoctl.app.calibrate as calibrate
+    import deltoctl.app.imu_calibration as imu_calibration
+
+    def refuse(*_, **__):
+        raise AssertionError("a report without --yes wrote to a sensor")
+
+    monkeypatch.setattr(calibrate, "tare_ft", refuse)
+    monkeypatch.setattr(imu_calibration, "self_test_checks", refuse)
+    result, _ = report(cli, tmp_path)
+    assert result.exit_code == 0, result.stderr
+    result = cli("-p", "mh5", "--sim", "report", "-o", str(tmp_path / "mh5.html"), "--json")
+    assert result.exit_code in (0, 3) or "link." in result.stderr, result.stderr
 
 
 @pytest.mark.parametrize("section, message", [

@@ -163,8 +163,9 @@ CASES = {
                                       "register", "set", "head_y", "led", "1"],
 }
 # the robots' agents run each line of a fleet run, and ask by this rule there (and the
-# caller once for them all: tests/cli/test_verbs.py)
-ELSEWHERE = {"fleet run"}
+# caller once for them all: tests/cli/test_verbs.py); doctor actuates the host, not the robot,
+# and only with --write-udev-rule, which is itself the word (as root: tests/transport)
+ELSEWHERE = {"fleet run", "doctor"}
 
 
 def _confirmed_by_yes_alone(entry: verbs.Verb) -> bool:

@@ -134,9 +134,12 @@ def test_deltoctl_toml_names_the_robot(pytester, served_robots, monkeypatch):
         "    deltoctl_robot().home(['head_y'])\n")
     monkeypatch.chdir(sub)
     result = pytester.runpytest_subprocess("-rs")
-    result.assert_outcomes(passed=1, skipped=1)
+    result.assert_outcomes(skipped=2)  # the targets drive hardware: with motion allowed only
     result.stdout.fnmatch_lines([f"deltoctl: mh5 on * ({pytester.path / 'deltoctl.toml'}); "
-                                 "motion: skipped*"])
+                                 "motion: skipped*",
+                                 "SKIPPED * needs the simulators: the robot under test is "
+                                 "hardware*"])
+    pytester.runpytest_subprocess("--deltoctl-allow-motion").assert_outcomes(passed=2)
     # the command line over the file: its profile without targets serves the simulators
     result = pytester.runpytest_subprocess("--deltoctl-target=upper_body=serial:///dev/null",
                                           "--deltoctl-profile=dg-5f-right")
@@ -243,3 +246,32 @@ def test_profile_tests_leaves_files_alone_and_names_come_in_as_literals(cli, tmp
     assert cli("profile", "tests", str(profile), "-o", str(out), "--force").exit_code == 0
     missing = cli("profile", "tests", "no-such-robot", "-o", str(out))
     assert missing.exit_code == 2 and "Traceback" not in missing.stderr
+
+
+def test_simulator_tests_do_not_drive_the_robot_under_test(pytester, served_robots):
+    """On hardware, a test written for the simulators is skipped (its CLI jog would move the
+    robot), and the robot the fixture opens refuses motion and actuation, before a byte is
+    sent, unless --deltoctl-allow-motion; with it, deltoctl_sim(profile) gives the robot's
+    target (the default firmware asks for no fault)."""
+    target = served_robots["dg-5f-right"]
+    pytester.makepyfile(
+        "import pytest\n"
+        "from deltoctl.errors import Refused\n\n"
+        "def test_sim(deltoctl_sim):\n"
+        f"    assert deltoctl_sim('dg-5f-right') == {target[0].split('=', 1)[-1]!r}\n\n"
+        "def test_refused(deltoctl_robot):\n"
+        "    robot = deltoctl_robot()\n"
+        "    for call in (lambda: robot.jog({'rj_dg_1_2': '1deg'}), lambda: robot.home(),\n"
+        "                 lambda: robot.set_gpio('gpio/output_1', 1.0),\n"
+        "                 lambda: robot.system.set_command('rj_dg_1_2/effort', 0.0),\n"
+        "                 lambda: robot.calibrate_ft(samples=5)):\n"
+        "        with pytest.raises(Refused, match='allows no motion') as refused:\n"
+        "            call()\n"
+        "        assert '--deltoctl-allow-motion' in refused.value.hint\n"
+        "    assert robot.identify()['blocks']  # reading still works\n")
+    args = hardware("dg-5f-right", target)
+    result = pytester.runpytest_subprocess(*args, "-rs")
+    result.assert_outcomes(passed=1, skipped=1)
+    result.stdout.fnmatch_lines(["SKIPPED * needs the simulators*"])
+    result = pytester.runpytest_subprocess(*args, "--deltoctl-allow-motion", "-k", "not refused")
+    result.assert_outcomes(passed=1, deselected=1)

@@ -186,3 +186,15 @@ def test_deltoctl_target_holds_several_targets_and_t_wins(cli, serve):
     assert result.exit_code == 2 and "unknown bus 'nope'" in result.stderr
     result = cli("-p", "bioscara-arm", "-t", target, "connect", "-n", "1", env=two)
     assert result.exit_code == 0, result.stderr
+
+
+@pytest.mark.parametrize("item", ["host=0.0.0.0", "port=502", "profile=mh5", "lost=1",
+                                  "missing=head_y"])  # missing: a Dynamixel option
+def test_a_sim_option_the_profiles_simulator_does_not_declare_is_refused(cli, item):
+    """Where the simulator listens is not a --sim-option (host=0.0.0.0 would serve every
+    interface), nor is a name no family of the profile declares."""
+    result = cli("-p", "dg-5f-right", "--sim-fresh", "--sim-option", item, "identify")
+    assert result.exit_code == 2, result.output
+    name = item.split("=")[0]
+    assert f"--sim-option {name!r}: not for dg-5f-right" in result.stderr
+    assert "firmware" in result.stderr and "stall" in result.stderr  # what it takes

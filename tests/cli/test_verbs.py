@@ -53,7 +53,7 @@ def test_the_fleet_sets_and_help_examples_come_from_the_table():
     assert MOTION.declared() == {"home", "jog", "replay", "report", "fleet run"}
     assert ACTUATING.declared() == MOTION.declared() | {
         "gpio set", "torque", "reboot", "register set", "config restore", "calibrate ft",
-        "calibrate imu", "calibrate servos"}
+        "calibrate imu", "calibrate servos", "doctor"}
     assert sorted(NOT_REMOTE) == ["agent", "bench", "completion", "fleet", "sim"]
     assert EXAMPLES["gpio set"] == verbs.lookup("gpio set").example  # type: ignore[union-attr]
     assert list(cli_main.VERBS) == list(verbs.TABLE)
@@ -125,8 +125,9 @@ def test_a_command_line_is_judged_by_the_clis_own_resolution(argv, path):
     (["-q", "report", "-vy"], True),
 ])
 def test_an_option_raises_a_commands_effect_as_the_cli_parses_it(argv, moves):
-    """`report` reads; with the global --yes/-y, before or after the verb, in a cluster too,
-    its motion checks move the joints."""
+    """`report` reads (its tares, self-tests and motion checks need --yes); with the global
+    --yes/-y, before or after the verb, in a cluster too, it tares, self-tests and moves the
+    joints."""
     command = check_argv(argv)
     assert command == "report"
     assert verbs.effect(command) == (verbs.MOVES if moves else verbs.READS)
@@ -141,6 +142,8 @@ def test_the_effect_of_an_option_is_in_the_table_and_in_help():
     assert verbs.describe("report") == "reads the robot; moves with --yes/-y"
     assert verbs.describe("jog") == "moves the robot"
     assert verbs.effect(verbs.Command("report", {"-o"})) == verbs.READS
+    assert verbs.effect(verbs.Command("doctor", {"--write-udev-rule"})) == verbs.ACTUATES
+    assert verbs.effect(verbs.Command("doctor", {"--udev-rule"})) == verbs.READS
     assert verbs.effect(verbs.Command("spin", {"--yes"})) == verbs.MOVES  # undeclared
 
 
@@ -161,7 +164,8 @@ def test_the_callers_confirmation_follows_the_parse():
 
 def test_a_verbs_help_says_its_effect(cli):
     out = cli("report", "--help").stdout
-    assert "Effect: reads the robot; moves with --yes/-y." in " ".join(out.split())
+    assert ("Effect: reads the robot; moves with --yes/-y."
+            in " ".join(out.split()))
 
 
 @pytest.mark.parametrize("argv, message", [

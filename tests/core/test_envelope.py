@@ -514,3 +514,26 @@ def test_a_gripper_never_driven_is_left_as_it_is_unless_set_safe(hand):
     system.make_safe()
     system.read()
     assert received.codes.count(delto.SET_DUTY) == 1
+
+
+def test_a_system_that_allows_no_motion_refuses_every_command_before_a_byte():
+    """What the pytest plugin's robot is on hardware without --deltoctl-allow-motion."""
+    from deltoctl.app.robot import Robot
+
+    profile = load_profile("dg-5f-right")
+    firmware = firmware_for_block(profile.hardware[0])
+    received = Received(DELTO_WRITES)
+    received.spy(firmware, "handle", lambda data: data[2])
+    with DeltoServer(firmware) as server, \
+            System(profile, [server.endpoint], allow_motion=False) as system:
+        robot = Robot(system)
+        for call in (lambda: system.move({"rj_dg_2_2": 0.2}),
+                     lambda: system.set_command("rj_dg_2_2/effort", 0.1),
+                     lambda: system.follow({"rj_dg_2_2": (0.2, NAN, NAN)}),
+                     lambda: robot.jog({"rj_dg_2_2": "1deg"}), lambda: robot.home(),
+                     lambda: robot.set_gpio("gpio/output_1", 1.0),
+                     lambda: robot.calibrate_ft(samples=5)):
+            refused_without_a_write(system, received, call, "allows no motion or actuation")
+        system.make_safe()  # stopping is always allowed
+        system.read()
+        assert received.count() == 1

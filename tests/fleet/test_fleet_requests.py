@@ -85,14 +85,16 @@ def test_reading_verbs_still_run_for_an_unauthenticated_peer(agent):
 
 
 def test_a_report_reads_for_an_unauthenticated_peer_and_moves_only_with_yes(agent):
-    """What a command line does is its parse: `report` reads (it runs), `report --yes` and
-    `-y report` would move the joints (refused without mTLS)."""
+    """What a command line does is its parse: `report` only reads (it runs: no tare, no
+    self-test, no motion), `report --yes` and `-y report` would tare, self-test and move the
+    joints (refused without mTLS)."""
     code, out, err = call(agent, ["report", "--json", "-o", "acceptance.html"])
     doc = json.loads(out)["result"]
     assert doc["kind"] == "deltoctl_report" and "refused" not in err
     # it ran: 0 or 3, or 1 when a loaded machine misses one of the profile's link timings
     assert code in (0, 3) or (code == 1 and all(f.startswith("link.") for f in doc["failed"]))
-    assert [c["verdict"] for c in doc["checks"] if c["id"] == "motion"] == ["skip"]
+    skipped = {c["id"] for c in doc["checks"] if c["verdict"] == "skip"}
+    assert {"motion", "sensors.actuated"} <= skipped
     for argv in (["report", "--yes"], ["-y", "report"], ["report", "-qy", "--json"]):
         code, _, err = call(agent, argv)
         assert code == 5, err
@@ -100,7 +102,8 @@ def test_a_report_reads_for_an_unauthenticated_peer_and_moves_only_with_yes(agen
 
 
 @pytest.mark.parametrize("argv", [["--install-completion"], ["--show-completion", "bash"],
-                                  ["identify", "--install-completion=bash"]])
+                                  ["identify", "--install-completion=bash"],
+                                  ["doctor", "--write-udev-rule"]])
 def test_options_that_write_outside_the_workdir_are_refused(agent, argv):
     code, _, err = call(agent, argv)
     assert code == 2 and "writes outside the agent's directory" in err

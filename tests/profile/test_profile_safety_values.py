@@ -191,3 +191,39 @@ def test_the_catalog_still_validates(cli):
 
     result = cli("profile", "validate", *catalog_names())
     assert result.exit_code == 0, result.stderr
+
+
+UNIT_CASES = [
+    # the joint's type, the limits line, what the message names
+    ("prismatic", "limits: {lower: -1, upper: 20deg, velocity: 2}", "limits.upper of joint 'j1'"),
+    ("prismatic", "limits: {lower: -1, upper: 1, velocity: 30deg/s}",
+     "limits.velocity of joint 'j1'"),
+    ("revolute", "limits: {lower: -1, upper: 5mm, velocity: 2}", "limits.upper of joint 'j1'"),
+    ("revolute", "limits: {lower: -1rad/s, upper: 1, velocity: 2}", "limits.lower of joint 'j1'"),
+    ("revolute", "limits: {lower: -1, upper: 1, velocity: 2m/s}",
+     "limits.velocity of joint 'j1'"),
+    ("prismatic", "limits: {lower: -1, upper: 1, velocity: 2}\n"
+                  "        soft_limits: {lower: -10deg, upper: 0.5}",
+     "soft_limits.lower of joint 'j1'"),
+]
+
+
+@pytest.mark.parametrize("joint_type,limits,expect", UNIT_CASES)
+def test_a_limit_in_another_unit_than_its_joints_is_refused(cli, tmp_path, joint_type, limits,
+                                                              expect):
+    """20deg on a prismatic joint would be 0.349 m; a /s unit is no position."""
+    text = YAML.replace("        limits: {lower: -1, upper: 1, velocity: 2, effort: 3}",
+                        f"        type: {joint_type}\n        {limits}")
+    path, result = _validate(cli, tmp_path, "units.yaml", text)
+    assert result.exit_code == 2, result.output
+    assert f"{path}:{JOINT_LINE + 2 + limits.count(chr(10))}: " in result.stderr, result.stderr
+    assert expect in result.stderr and f"is a {joint_type} joint" in result.stderr
+
+
+def test_limits_in_their_joints_unit_are_valid(cli, tmp_path):
+    text = YAML.replace("        limits: {lower: -1, upper: 1, velocity: 2, effort: 3}",
+                        "        type: prismatic\n"
+                        "        limits: {lower: -10mm, upper: 0.02, velocity: 30mm/s}")
+    text = text.replace("10deg", "5mm").replace("1deg", "1mm")
+    _, result = _validate(cli, tmp_path, "units.yaml", text)
+    assert result.exit_code == 0, result.stderr

@@ -188,7 +188,7 @@ def test_a_baud_scan_leaves_out_the_rates_its_adapter_cannot_set(cli, tree, koch
     ft232r = Usb("1-7", "0403", "6001", "FTDI", "FT232R USB UART", "A50285BI", "ftdi_sio")
     tree.serial("ttyUSB0", ft232r, latency_ms=1, node=koch_bus(missing=frozenset({6})))
     result = cli("-p", "koch-arm", "-t", "dxl=usb:0403:6001?baud=1000000", "detect", "--json")
-    assert result.exit_code == 3, result.output  # the gripper's servo is missing
+    assert result.exit_code == 1, result.output  # the gripper's servo does not answer
     block = json.loads(result.stdout)["blocks"][0]
     unscanned = block["details"]["unscanned"]
     assert sorted(map(int, unscanned)) == [4_000_000, 4_500_000]  # an FT232R's limit: 3 Mbaud
@@ -317,3 +317,32 @@ def test_profile_show_and_validate_suggest_the_stable_name_of_a_ttyusb_bus(cli, 
     (tree.root / "sys/class/tty/ttyUSB0").unlink()  # unplugged: what would name one
     shown = cli("profile", "show", "koch-arm").stdout
     assert "its /dev/serial/by-id/ link or usb:VID:PID[:SERIAL] (deltoctl ports" in shown
+
+
+HOSTILE = Usb("1-7", "1234", "5678", "ACME", 'Cable\nACTION=="add", RUN+="/bin/sh -c id"',
+              'S1\nRUN+="/bin/touch /tmp/owned"', "ch341")
+
+
+def test_the_udev_rule_keeps_only_safe_characters_of_what_the_device_says(cli, tree):
+    """An adapter's product and serial come from the device: a newline in them would start a
+    rule line of its own (RUN+=…), comments included."""
+    tree.serial("ttyUSB0", HOSTILE)
+    result = cli("doctor", "--udev-rule")
+    assert result.exit_code == 0, result.output
+    for line in result.stdout.splitlines():
+        assert line.startswith(("#", 'SUBSYSTEM=="tty"', 'ACTION=="add", SUBSYSTEM=="usb-serial"'))
+    assert "RUN+=" not in result.stdout and '"/bin/sh' not in result.stdout
+    assert 'ATTRS{idVendor}=="1234", ATTRS{idProduct}=="5678", SYMLINK+=' in result.stdout
+
+
+def test_ports_shows_no_control_character_a_device_sends(cli, tree):
+    """Manufacturer, product and serial come from the device: an escape sequence in them
+    does not reach the terminal (in --json they are JSON strings)."""
+    tree.serial("ttyUSB0", Usb("1-8", "1234", "5678", "\x1b]0;owned\x07ACME",
+                               "Cable\x1b[2J", "S\x1b[31m1", "ch341"))
+    result = cli("ports")
+    assert result.exit_code == 0, result.output
+    assert "\x1b" not in result.stdout and "\x07" not in result.stdout
+    assert "?]0;owned?ACME" in result.stdout and "Cable?[2J" in result.stdout
+    (a,) = _doc(cli("ports", "--json"))["serial"]
+    assert a["product"] == "Cable\x1b[2J"

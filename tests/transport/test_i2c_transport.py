@@ -97,3 +97,19 @@ def test_wire_bits():
     # [addr W][reg] Sr [addr R][4 payload + flags]: 8 bytes of 9 bits
     assert wire_bits(1, 5) == 72
     assert wire_bits(5, 0) == 54  # a write alone: address + 5 bytes
+
+
+def test_an_exchange_under_a_policy_counts_once_and_names_the_device():
+    """What every I2C family's exchange is (Bioscara joints, the LSM6DS3): one packet on the
+    bus however many tries, each failed try an error, no answer naming the device and bus."""
+    from deltoctl.core.exchange import ExchangePolicy
+    from deltoctl.transport.i2c import exchange
+
+    policy = ExchangePolicy(tries=3)
+    bus = I2CBus(Flaky({0x6A: Lsm6ds3Chip()}, failures=2), "i2c:///dev/i2c-1")
+    assert exchange(bus, 0x6A, lambda: bus.transfer(0x6A, b"\x0f", 1), policy.run, 3) == b"\x6a"
+    assert bus.stats["packets"] == 1 and bus.stats["errors"] == 2
+    bus = I2CBus(Flaky({0x6A: Lsm6ds3Chip()}, failures=5), "i2c:///dev/i2c-1")
+    with pytest.raises(NoAnswer, match=r"^no answer from 0x6a on i2c:///dev/i2c-1 \(3 tries\)$"):
+        exchange(bus, 0x6A, lambda: bus.transfer(0x6A, b"\x0f", 1), policy.run, 3)
+    assert bus.stats["packets"] == 1 and bus.stats["errors"] == 3

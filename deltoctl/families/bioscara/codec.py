@@ -152,7 +152,7 @@ class Host:
             raise InvalidInput(f"{request.name} takes no {len(request.args)} arguments")
         try:
             data = bytes([request.command]) + layout.pack(*request.args)
-        except struct.error as exc:
+        except (struct.error, OverflowError) as exc:  # OverflowError: a float past float32
             raise InvalidInput(f"{request.name}: {request.args} do not fit ({exc})") from None
         return data, request.payload_size + 1
 

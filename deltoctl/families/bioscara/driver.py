@@ -27,36 +27,32 @@ from deltoctl.errors import (
 )
 from deltoctl.families.bioscara import codec
 from deltoctl.profile.model import Component
+from deltoctl.transport import i2c
 from deltoctl.transport.i2c import I2CBus  # what every I2C link gives
 
 POLL_HOMING = 0.1  # s between flag polls while homing, as the Bioscara driver does
 POLL_MOVE = 0.02
 TOLERANCE = 1e-3  # rad or m: the closed-loop steppers settle far closer than this
+# a position move raises no flag: a joint has arrived when it is within tolerance, not BUSY,
+# and its encoder says it is still (under STILL of its profile's speed) this many reads in a row
+SETTLE_READS = 3
+STILL = 0.05
 SCAN = range(0x08, 0x78)  # the addresses i2cdetect scans
 NAN = float("nan")
 POLICY = ExchangePolicy(tries=3, pause=50e-6)  # as the Bioscara driver's I2C layer
 
 
 def transfer(bus: I2CBus, address: int, data: bytes, length: int) -> bytes:
-    """One combined transaction under the joints' exchange policy: the bus counts it once in
-    ``packets`` and each failed try in ``errors``."""
-    failed: dict[str, int] = {}
-    bus.stats["packets"] += 1
-    try:
-        return POLICY.run(lambda: bus.transfer(address, data, length), f"{address:#04x}",
-                          failed)
-    except NoAnswer:
-        raise NoAnswer(f"no answer from {address:#04x} on {bus.url} ({POLICY.tries} tries)",
-                       hint="check the device's power, wiring and address") from None
-    except DeviceError:
-        failed["errors"] = failed.get("errors", 0) + 1
-        raise
-    finally:
-        bus.stats["errors"] += failed.get("errors", 0)
+    """One combined transaction under the joints' exchange policy (i2c.exchange)."""
+    return i2c.exchange(bus, address, lambda: bus.transfer(address, data, length), POLICY.run,
+                        POLICY.tries)
 
 
 def _encoded(request: codec.Request) -> tuple[codec.Request, tuple[bytes, int]]:
     return request, codec.Host.encode(request)
+
+
+FLOAT32_MAX = 3.4028234663852886e38  # the largest value a joint's float register holds
 
 
 class Joint:
@@ -79,6 +75,13 @@ class Joint:
                                "(i2c_address, reduction, min, max, drive_current, hold_current, "
                                "stall_threshold, max_acceleration, max_velocity, and the home "
                                "interface's speed, threshold, current, acceleration)") from None
+        wide = {k: v for k, v in (("max_acceleration", self.max_acceleration),
+                                  ("max_velocity", self.max_velocity), *self.homing.items())
+                if not abs(v) <= FLOAT32_MAX}
+        if wide:
+            named = ", ".join(f"{k} {v:g}" for k, v in wide.items())
+            raise InvalidInput(f"joint {comp.name}: {named}: the joint takes a 32-bit float, "
+                               f"up to {FLOAT32_MAX:.3g}")
         self.bus, self.name = bus, comp.name
         self.offset = 0.0
         self.flags = codec.INITIAL_FLAGS
@@ -267,7 +270,7 @@ class BioscaraDriver(Driver):
     def joint(self, name: str) -> Joint:
         joint = self.joints.get(name)
         if joint is None or joint not in self.present:
-            raise DeviceError(f"joint {name!r} does not answer on {self.url}")
+            raise NoAnswer(f"joint {name!r} does not answer on {self.url}")
         return joint
 
     def set_command(self, name: str, value: float) -> None:
@@ -362,8 +365,9 @@ class BioscaraDriver(Driver):
         missing = [expected[a] for a in sorted(set(expected) - set(found))]
         unexpected = [f"{a:#04x}" for a in found if a not in expected]
         checks = [{"what": f"{name} at {addr:#04x}", "profile": "joint",
-                   "device": "answers" if addr in found else "no answer",
-                   "match": addr in found} for addr, name in sorted(expected.items())]
+                   "device": "answers" if addr in found else "no answer", "part": name,
+                   "match": addr in found, "missing": addr not in found}
+                  for addr, name in sorted(expected.items())]
         checks += [{"what": f"device at {a}", "profile": "—", "device": "answers",
                     "match": False} for a in unexpected]
         return {"bus": self.url, "found": [f"{a:#04x}" for a in found], "missing": missing,
@@ -383,7 +387,9 @@ class BioscaraDriver(Driver):
 
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:
-        """Position moves (the joints run their own profiles); fails naming a stalled joint,
+        """Position moves (the joints run their own profiles); settled once every joint is
+        within tolerance, not BUSY and still for SETTLE_READS reads, no sooner than its
+        profile could end; unsettled when the timeout passes. Fails naming a stalled joint,
         which is left disabled."""
         profile = self.profile
         self.check_motion(list(targets))
@@ -391,18 +397,20 @@ class BioscaraDriver(Driver):
         start = self.read()
         first = max((abs(t - start[f"{j}/position"]) for j, t in targets.items()),
                     default=0.0) or 1.0
+        speeds = {j: min(velocity or math.inf, self.joint(j).max_velocity) for j in targets}
         for name, target in targets.items():
-            self._goal(name, target, min(velocity, self.joint(name).max_velocity)
-                       if velocity else None)
+            self._goal(name, target, speeds[name] if velocity else None)
+        # no profile ends sooner than its distance at full speed
+        soonest = {j: abs(t - start[f"{j}/position"]) / speeds[j] for j, t in targets.items()}
         hook = self.on_cycle
         # the setpoint each cycle: the goal, and the speed limit of its profile
-        setpoints = {j: (t, min(velocity or math.inf, self.joints[j].max_velocity), NAN)
-                     for j, t in targets.items()} if hook is not None else {}
+        setpoints = {j: (t, speeds[j], NAN) for j, t in targets.items()} if hook is not None else {}
         if hook is not None:  # the state the goals were sent from
             hook(time.time_ns(), start, setpoints)
         began = time.monotonic()
         timeout = profile.safety.home_timeout or 30.0
         errors: dict[str, float] = {}
+        still = dict.fromkeys(targets, 0)  # reads in a row each joint has been still
         while True:
             values = self.read()
             if hook is not None:
@@ -415,10 +423,14 @@ class BioscaraDriver(Driver):
             if progress:
                 progress(max(0.0, 1.0 - worst / first))
             elapsed = time.monotonic() - began
-            if worst <= tolerance or elapsed > timeout or self.halted.is_set():
+            for j in targets:
+                here = (errors[j] <= tolerance and not self.joints[j].busy
+                        and abs(values.get(f"{j}/velocity", math.inf)) <= STILL * speeds[j])
+                still[j] = still[j] + 1 if here else 0
+            unsettled = [j for j in targets if still[j] < SETTLE_READS or elapsed < soonest[j]]
+            if not unsettled or elapsed > timeout or self.halted.is_set():
                 break
             time.sleep(POLL_MOVE)
-        unsettled = [j for j, e in errors.items() if e > tolerance]
         return MoveResult(not unsettled, elapsed, errors, unsettled)
 
     def _goal(self, name: str, target: float, speed: float | None) -> None:
@@ -500,6 +512,15 @@ class BioscaraDriver(Driver):
             except DeltoctlError:
                 self.warnings.append(f"{name} did not answer the stop; its deadman stops it")
         self.touched.clear()
+
+    def make_safe(self) -> None:
+        """STOP to every joint, whatever this session commanded: a move or homing a killed
+        process started ends."""
+        for name, joint in self.joints.items():
+            try:
+                joint.stop()
+            except DeltoctlError:
+                self.warnings.append(f"{name} did not answer the stop; its deadman stops it")
 
     def cleanup(self) -> None:
         self.bus = None  # the System closes the shared bus

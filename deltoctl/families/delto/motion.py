@@ -1,14 +1,17 @@
 """Current-bounded position moves on the effort interface.
 
 A PD loop turns position error into an effort command, clamped to the profile's current cap;
-the setpoint ramps at the requested velocity. The move settles when every joint stays within
-tolerance, or fails naming the joints that did not. The caller's System sets duty 0 after.
+the setpoint ramps at the requested velocity. The gripper has no moving flag: the move settles
+once the ramp has reached every target and each joint then stays within tolerance and still
+(slower than SETTLE_SPEED) for SETTLE_CYCLES reads in a row, or fails when its time runs out,
+naming the joints that did not. The caller's System sets duty 0 after.
 Each cycle's setpoints (the ramped position, the effort sent) go to the driver's ``on_cycle``
 hook when a verb set one (``jog --record``); ``replay`` sends the recorded efforts again.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any, Protocol
 
@@ -77,16 +80,17 @@ def move_to(driver: EffortDriver, targets: dict[str, float], velocity: float | N
         if driver.halted.is_set():
             break
         efforts = {}
-        moving = False
+        moving = False  # still ramping, or a joint not yet still
         for joint, target in targets.items():
             sp = setpoints[joint]
-            setpoints[joint] = sp + max(-step, min(step, target - sp))
+            setpoints[joint] = (target if abs(target - sp) <= step
+                                else sp + math.copysign(step, target - sp))
             pos = values[f"{joint}/position"]
             vel = values.get(f"{joint}/velocity", 0.0)
             effort = kp * (setpoints[joint] - pos) - kd * vel
             efforts[joint] = max(-max_effort, min(max_effort, effort))
             errors[joint] = abs(target - pos)
-            moving = moving or abs(vel) > SETTLE_SPEED
+            moving = moving or abs(vel) > SETTLE_SPEED or setpoints[joint] != target
         driver.write_efforts(efforts)
         hook = driver.on_cycle
         if hook is not None:

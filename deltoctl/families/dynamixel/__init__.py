@@ -24,6 +24,7 @@ FAMILY = Family(
         SimOption("missing", "joints", "Fault: a joint that never answers (repeatable)."),
         SimOption("pace", "flag", "Serial buses take the wire time of every byte at the baud "
                   "rate the host set, as a real bus does.", False),
+        SimOption("stall", "joints", "Fault: a joint that cannot move (repeatable)."),
         SimOption("wrong_baud", "joints",
                   "Fault: a servo set to another baud rate than its bus (repeatable)."),
     ),
@@ -34,8 +35,8 @@ FAMILY = Family(
         hint="switch the torque off first (deltoctl torque off), or pass --allow torque-off "
              "to have it switched off for the writes and on again (support the robot)"),),
     identity_fields=(("servos", "{} Dynamixel servos"),),
-    register_items="deltoctl.families.dynamixel.control_table:item_names",
-    config_rules="deltoctl.families.dynamixel.control_table:config_rules",
+    register_items="deltoctl.families.dynamixel.models:item_names",
+    config_rules="deltoctl.families.dynamixel.models:config_rules",
 )
 
 

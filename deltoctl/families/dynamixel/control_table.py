@@ -9,7 +9,6 @@ items (addresses below 64) are writable only while Torque Enable is 0.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 from deltoctl.servo import items
 
@@ -133,30 +132,3 @@ READINGS = frozenset({
 # servo (the profile addresses it by ID at the bus's rate); `register set` changes them
 BUS_ITEMS = frozenset({"ID", "Baud Rate", "Protocol Type", "Status Return Level"})
 OPERATING_MODES = {1: "velocity", 3: "position", 4: "extended position", 16: "PWM"}
-
-
-def config_rules() -> dict[str, tuple[int | None, int | None, str | None]]:
-    """For `config restore`: each item's documented range over every model (the driver
-    checks each servo's own model's before writing), and the --allow that a safety setting
-    needs to be written (None for the others)."""
-    from deltoctl.families.dynamixel.models import MODELS
-
-    rules: dict[str, tuple[int | None, int | None, str | None]] = {}
-    for model in MODELS:
-        for i in model.table:
-            low, high, _ = rules.get(i.name, (i.low, i.high, None))
-            rules[i.name] = (_widest(low, i.low, min), _widest(high, i.high, max),
-                             i.key if i.safety else None)
-    return rules
-
-
-def _widest(a: int | None, b: int | None, pick: Any) -> int | None:
-    return None if a is None or b is None else pick(a, b)
-
-
-def item_names() -> list[str]:
-    """Item names as the register verbs take them (return_delay_time), of every model."""
-    from deltoctl.families.dynamixel.models import MODELS
-
-    names = dict.fromkeys(i.name.lower().replace(" ", "_") for m in MODELS for i in m.table)
-    return list(names)

@@ -32,6 +32,7 @@ RAD_PER_RAW = 0.001533980787886  # 2π/4096
 CENTER = 2047
 RAD_S_PER_RAW = 0.023980823922402  # 0.229 rpm
 DRIVE_MODE = BY_NAME["Drive Mode"]
+MOVING = BY_NAME["Moving"]
 PVL = struct.Struct("<hii")  # Present Load, Velocity, Position (126, 10 bytes)
 LOAD_SCALE = 0.0014
 # 3 tries of 100 ms; a lost port reopened once a second
@@ -45,7 +46,7 @@ LOOPS = {"pvl_reader": 0.0, "tv_reader": 1.0, "pv_writer": 0.0, "t_writer": 0.0}
 def refused_rates(url: str, bauds: list[int]) -> dict[int, str]:
     """The rates of ``bauds`` the bus's adapter cannot set (its driver's), each with why:
     a scan leaves them out rather than fail in the middle."""
-    from deltoctl.transport.adapters import adapter_of_target
+    from deltoctl.transport.serial_port import adapter_of_target
 
     adapter = adapter_of_target(url)
     why = {b: adapter.refuses(b) for b in bauds} if adapter is not None else {}
@@ -305,11 +306,10 @@ class DynamixelDriver(Driver):
         wrong = sorted(i for i in set(found) & set(expected)
                        if expected[i] is not None and found[i] != expected[i])
         name = {i: j.name for i, j in self.joints.items()}
-        checks = [{"what": f"{self.hw.name}: servos", "profile": sorted(expected),
-                   "device": sorted(found),
-                   "match": not (missing or unexpected or wrong)}]
-        checks += [{"what": f"{name.get(i, i)} (ID {i}) baud rate", "profile": self.port.baudrate,
-                    "device": baud, "match": False} for i, baud in sorted(elsewhere.items())]
+        checks = [self._servo_check(i, name.get(i), model, found.get(i), elsewhere.get(i))
+                  for i, model in sorted(expected.items())]
+        checks += [{"what": f"ID {i}", "profile": "no servo", "device": label(found[i]),
+                    "match": False} for i in unexpected]
         summary = (f"{self.hw.name}: {len(found)} servos answer ({len(missing)} missing, "
                    f"{len(unexpected)} unexpected)")
         if elsewhere:
@@ -321,6 +321,18 @@ class DynamixelDriver(Driver):
                 "wrong_model": wrong, "wrong_baud": {str(i): b for i, b in elsewhere.items()},
                 "unscanned": {str(b): why for b, why in unscanned.items()},
                 "checks": checks, "summary": summary}
+
+    def _servo_check(self, servo_id: int, joint: str | None, model: int | None,
+                     answer: int | None, baud: int | None) -> dict:
+        """A servo the profile declares, as the bus answers for it: its model, no answer, or
+        an answer at another baud rate only (``missing``: not at the bus's rate)."""
+        device = "no answer" if answer is None else label(answer)
+        if baud is not None:
+            device = f"found at {baud} baud, not {self.port.baudrate}"
+        return {"what": f"{joint or 'servo'} (ID {servo_id})", "part": joint,
+                "profile": "a servo" if model is None else label(model), "device": device,
+                "match": answer is not None and model in (None, answer),
+                "missing": answer is None}
 
     def send_goals(self, goals: dict[str, float], seconds: float) -> None:
         """Torque on, then a profile to each goal through the PV writer (108, 12):
@@ -393,7 +405,8 @@ class DynamixelDriver(Driver):
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:
         """A time profile to each goal (the servos run their own position loop); returns once
-        all joints are within tolerance, the timeout passes or the System halts the move."""
+        every servo says it stopped (Moving, 122, is 0) within tolerance of its goal, the
+        timeout passes or the System halts the move."""
         import time
 
         from deltoctl.core.motion import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
@@ -414,6 +427,7 @@ class DynamixelDriver(Driver):
             hook(time.time_ns(), values, setpoints)
         start = time.monotonic()
         errors: dict[str, float] = {}
+        arrived: list[str] = []
         while time.monotonic() - start < seconds + timeout and not self.halted.is_set():
             values = self.read()
             if hook is not None:
@@ -423,12 +437,21 @@ class DynamixelDriver(Driver):
             worst = max(errors.values(), default=0.0)
             if progress:
                 progress(max(0.0, 1.0 - worst / (distance or 1.0)))
-            if worst <= tolerance:
+            still = self._stopped(list(targets))
+            arrived = [j for j, e in errors.items() if e <= tolerance and j in still]
+            if len(arrived) == len(targets):
                 self.moving.clear()
                 return MoveResult(True, time.monotonic() - start, errors, [])
             time.sleep(0.02)
         return MoveResult(False, time.monotonic() - start, errors,
-                          [j for j, e in errors.items() if e > tolerance])
+                          [j for j in targets if j not in arrived])
+
+    def _stopped(self, joints: list[str]) -> set[str]:
+        """The joints whose servo says its profile is done (Moving, 122, reads 0); a servo
+        that does not answer is not known to have stopped."""
+        ids = {i: c.name for i, c in self.joints.items() if c.name in joints and i in self.present}
+        replies = self._sync_read(MOVING.address, 1, list(ids)) if ids else []
+        return {ids[i] for i, error, data in replies if i in ids and data and data[0] == 0}
 
     def follow(self, setpoints: dict[str, tuple[float, float, float]]) -> None:
         """A recorded goal (position) and its profile's speed (velocity) each, sent when they
@@ -453,7 +476,7 @@ class DynamixelDriver(Driver):
         for device_id, comp in self.joints.items():
             if comp.name == joint:
                 if device_id not in self.present:
-                    raise DeviceError(f"{joint} (ID {device_id}) does not answer on {self.url}")
+                    raise NoAnswer(f"{joint} (ID {device_id}) does not answer on {self.url}")
                 return device_id
         raise InvalidInput(f"{joint!r} is not a servo joint of {self.hw.name}")
 
@@ -632,6 +655,12 @@ class DynamixelDriver(Driver):
                 return
         self.warnings.append(f"{self.hw.name}: no present position from "
                              f"{', '.join(self.joints[i].name for i in ids)} to stop them at")
+
+    def make_safe(self) -> None:
+        """Every servo of the block stops where it is (goal = present position), whatever
+        this session moved; the torque stays on (an arm must not fall)."""
+        self.moving.update(self.joints)
+        self.stop()
 
     def cleanup(self) -> None:
         self.link.close()

@@ -11,7 +11,8 @@ honours REG_WRITE and ACTION, reboot and factory reset, and answers only at its 
 rate the host set on the pty). Who answers what (Status Return Level, broadcast, sync, fast
 sync and bulk reads) is the device session's (deltoctl.servo.session), the pty and its pacing
 the kit's server (deltoctl.servo.pty_server). Faults: a missing servo, a corrupted CRC, no
-reply, a servo at another baud rate. Paced, the bus takes the wire time of every byte.
+reply, a servo at another baud rate, a stalled servo (held where it is, Moving stays 1). Paced,
+the bus takes the wire time of every byte.
 """
 
 from __future__ import annotations
@@ -64,6 +65,7 @@ class Servo:
         self.position = 2047.0
         self._move: tuple[float, float, float, float] | None = None  # start, goal, t0, duration
         self._turned_at = time.monotonic()  # velocity mode: when the position was last moved
+        self.stalled = False  # fault: held where it is, its goal never reached (Moving stays 1)
 
     # -- the table ---------------------------------------------------------------------------
     def get(self, name: str) -> int:
@@ -153,6 +155,7 @@ class Servo:
             rev_per_s = units * RPM_PER_UNIT / 60.0
             duration = distance / (rev_per_s * RAW_PER_REV)
         self._move = (self.position, goal, time.monotonic(), duration)
+        self.set("Moving", 1)  # from the goal's write until the profile ends, however short
 
     def update(self) -> None:
         now = time.monotonic()
@@ -167,14 +170,17 @@ class Servo:
             start, goal, t0, duration = self._move
             fraction = 1.0 if duration <= 0 else min(1.0, (time.monotonic() - t0) / duration)
             previous = self.position
-            self.position = start + (goal - start) * fraction
+            if self.stalled:  # held: the shaft stays, the error never closes
+                fraction, duration = min(fraction, 0.5), 0.0
+            else:
+                self.position = start + (goal - start) * fraction
             velocity = 0.0 if duration <= 0 else (goal - start) / duration  # raw/s
             self.set("Present Velocity", round(velocity * 60 / RAW_PER_REV / 0.229)
                      if fraction < 1.0 else 0)
             self.set("Moving", 1 if fraction < 1.0 else 0)
             if fraction >= 1.0:
                 self._move = None
-            self._effort(previous != self.position)
+            self._effort(self.stalled or previous != self.position)
         self.memory[self._at:self._at + 4] = round(self.position).to_bytes(4, "little",
                                                                           signed=True)
 
@@ -358,6 +364,9 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
         bus = DynamixelBus([Servo(i, model=_model_of(hw, j))
                             for i, j in servo_ids(ctx.profile, hw).items()], baud=baud)
         bus.faults.missing |= {ids[j.name] for j in ctx.named("missing", hw) if j.name in ids}
+        for joint in ctx.named("stall", hw):
+            if joint.name in ids:
+                bus.servos[ids[joint.name]].stalled = True
         for joint in ctx.named("wrong_baud", hw):
             if joint.name in ids:  # 57600 (or 115200 on a 57600 bus)
                 bus.servos[ids[joint.name]].memory[8] = 1 if baud != 57600 else 2

@@ -18,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import Any
 
 from deltoctl.families.dynamixel.control_table import XL430, Item
 
@@ -270,3 +271,26 @@ def expected_model(block: Mapping[str, str], joint: Mapping[str, str], name: str
             raise InvalidInput(f"{name}: {key} {text!r} is not a Dynamixel X-series model "
                                "deltoctl knows (e.g. XM430-W350 or 1020)")
     return None
+
+
+def config_rules() -> dict[str, tuple[int | None, int | None, str | None]]:
+    """For `config restore`: each item's documented range over every model (the driver
+    checks each servo's own model's before writing), and the --allow that a safety setting
+    needs to be written (None for the others)."""
+    rules: dict[str, tuple[int | None, int | None, str | None]] = {}
+    for model in MODELS:
+        for i in model.table:
+            low, high, _ = rules.get(i.name, (i.low, i.high, None))
+            rules[i.name] = (_widest(low, i.low, min), _widest(high, i.high, max),
+                             i.key if i.safety else None)
+    return rules
+
+
+def _widest(a: int | None, b: int | None, pick: Any) -> int | None:
+    return None if a is None or b is None else pick(a, b)
+
+
+def item_names() -> list[str]:
+    """Item names as the register verbs take them (return_delay_time), of every model."""
+    names = dict.fromkeys(i.name.lower().replace(" ", "_") for m in MODELS for i in m.table)
+    return list(names)

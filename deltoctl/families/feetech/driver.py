@@ -322,13 +322,11 @@ class FeetechDriver(Driver):
         wrong = sorted(i for i in set(found) & set(expected)
                        if expected[i] is not None and found[i] not in (None, expected[i]))
         name = {i: j.name for i, j in self.joints.items()}
-        checks = [{"what": f"{self.hw.name}: servos", "profile": sorted(expected),
-                   "device": sorted(found),
-                   "match": not (missing or unexpected or wrong or collided)}]
-        checks += [{"what": f"{name.get(i, i)} (ID {i}) baud rate", "profile": self.port.baudrate,
-                    "device": baud, "match": False} for i, baud in sorted(elsewhere.items())]
-        checks += [{"what": f"ID {i} replies", "profile": "one servo", "device": "collide",
-                    "match": False} for i in collided]
+        checks = [self._servo_check(i, name.get(i), model, i in found, found.get(i),
+                                    elsewhere.get(i)) for i, model in sorted(expected.items())]
+        checks += [{"what": f"ID {i}", "profile": "no servo",
+                    "device": label(found[i]) if found[i] else "replies collide",
+                    "match": False} for i in unexpected]
         summary = (f"{self.hw.name}: {len(found)} servos answer ({len(missing)} missing, "
                    f"{len(unexpected)} unexpected)")
         if collided:
@@ -345,8 +343,21 @@ class FeetechDriver(Driver):
                 "unscanned": {str(b): why for b, why in unscanned.items()},
                 "checks": checks, "summary": summary}
 
+    def _servo_check(self, servo_id: int, joint: str | None, model: int | None,
+                     answered: bool, answer: int | None, baud: int | None) -> dict:
+        """A servo the profile declares, as the bus answers for it: its model, no answer, an
+        answer at another baud rate only, or replies that collide (two servos at its ID)."""
+        device = "no answer" if not answered else \
+            label(answer) if answer is not None else "replies collide: two servos share the ID"
+        if baud is not None:
+            device = f"found at {baud} baud, not {self.port.baudrate}"
+        return {"what": f"{joint or 'servo'} (ID {servo_id})", "part": joint,
+                "profile": "a servo" if model is None else label(model), "device": device,
+                "match": answer is not None and model in (None, answer),
+                "missing": not answered}
+
     def _other_rates(self, found: dict[int, int | None]) -> tuple[dict[int, int], dict[int, str]]:
-        from deltoctl.transport.adapters import adapter_of_target
+        from deltoctl.transport.serial_port import adapter_of_target
 
         adapter = adapter_of_target(self.url)
         unscanned = {}
@@ -427,7 +438,8 @@ class FeetechDriver(Driver):
             worst = max(errors.values(), default=0.0)
             if progress:
                 progress(max(0.0, 1.0 - worst / (distance or 1.0)))
-            if worst <= tolerance:
+            # settled: within tolerance and stopped (the servo's own Present_Velocity)
+            if worst <= tolerance and not any(values.get(f"{j}/velocity") for j in targets):
                 self.moving.clear()
                 return MoveResult(True, time.monotonic() - start, errors, [])
             self._latched(targets)
@@ -585,6 +597,12 @@ class FeetechDriver(Driver):
             raise InvalidInput(f"{part}: {name} {value} is outside the {model.name}'s "
                                f"documented range {item.low}..{item.high}")
         return item
+
+    def make_safe(self) -> None:
+        """Every servo of the block stops where it is (goal = present position), whatever
+        this session moved; the torque stays on (an arm must not fall)."""
+        self.moving.update(i for i in self.joints if i in self.present)
+        self.stop()
 
     # -- LeRobot's calibration -------------------------------------------------------------------
     def lerobot_calibration(self) -> dict[str, calibration.MotorCalibration]:

@@ -15,8 +15,9 @@ from typing import Any
 from deltoctl import registry
 from deltoctl.core.driver import Block, Driver
 from deltoctl.core.exchange import ExchangePolicy
-from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, NoAnswer, ProtocolError
+from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, ProtocolError
 from deltoctl.families.lsm6ds3 import codec
+from deltoctl.transport import i2c
 from deltoctl.transport.i2c import I2CBus  # what every I2C link gives
 
 AXES = ("x", "y", "z")
@@ -28,8 +29,8 @@ POLICY = ExchangePolicy(tries=3, pause=50e-6)  # as every I2C device of the MH5
 
 
 def exchange(bus: I2CBus, address: int, request: codec.Read | codec.Write) -> bytes:
-    """One transaction through the host role, under the exchange policy: the bus counts it
-    once in ``packets`` and each failed try in ``errors``; what a read brought back."""
+    """One transaction through the host role, under the exchange policy (i2c.exchange);
+    what a read brought back."""
     data, length = codec.Host.encode(request)
 
     def attempt() -> bytes:
@@ -38,19 +39,8 @@ def exchange(bus: I2CBus, address: int, request: codec.Read | codec.Write) -> by
         bus.write(address, data)
         return b""
 
-    failed: dict[str, int] = {}
-    bus.stats["packets"] += 1
-    try:
-        reply = POLICY.run(attempt, f"{address:#04x}", failed)
-    except NoAnswer:
-        raise NoAnswer(f"no answer from {address:#04x} on {bus.url} ({POLICY.tries} tries)",
-                       hint="check the device's power, wiring and address") from None
-    except DeviceError:
-        failed["errors"] = failed.get("errors", 0) + 1
-        raise
-    finally:
-        bus.stats["errors"] += failed.get("errors", 0)
-    return codec.Host.decode(request, reply)
+    return codec.Host.decode(request, i2c.exchange(bus, address, attempt, POLICY.run,
+                                                    POLICY.tries))
 
 
 class Lsm6ds3Driver(Driver):
@@ -168,7 +158,8 @@ class Lsm6ds3Driver(Driver):
     def detect(self) -> dict:
         check = {"what": f"{self.sensor.name} at {self.address:#04x}",
                  "profile": "LSM6DS3 or LSM6DS3TR-C", "device": self.chip or "no answer",
-                 "match": bool(self.chip)}
+                 "match": bool(self.chip), "part": self.sensor.name,
+                 "missing": not self.chip}
         return {"bus": self.url, "chip": self.chip, "checks": [check],
                 "summary": f"{self.sensor.name}: {self.chip} at {self.address:#04x}"}
 

@@ -24,7 +24,16 @@ from typing import Any
 from deltoctl import trace
 from deltoctl.core.driver import Block, Driver, HomeProgress, MoveResult, Progress
 from deltoctl.core.loop import CommLoop
-from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Refused, Unreachable
+from deltoctl.errors import (
+    DeltoctlError,
+    DeviceError,
+    DeviceFault,
+    InvalidInput,
+    LinkLost,
+    NoAnswer,
+    Refused,
+    Unreachable,
+)
 
 from deltoctl_canopen import (
     codec,
@@ -147,6 +156,7 @@ class CanopenDriver(Driver):
 
     # -- SDO ---------------------------------------------------------------------------------
     def sdo_read(self, axis: Axis, index: int, sub: int = 0) -> Any:
+        from can import CanError
         from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
         self.stats["packets"] += 1
@@ -154,14 +164,19 @@ class CanopenDriver(Driver):
             return _decode(axis.node, index, sub, axis.node.sdo.upload(index, sub))
         except SdoAbortedError as exc:
             self.stats["errors"] += 1
-            raise DeviceError(f"{axis.joint} (node {axis.id}) refused to read "
-                              f"{index:#06x}:{sub:02x}: {_abort(exc)}") from None
-        except (SdoCommunicationError, OSError) as exc:
+            raise DeviceFault(f"{axis.joint} (node {axis.id}) refused to read "
+                              f"{index:#06x}:{sub:02x}: {_abort(exc)}", exc.code) from None
+        except SdoCommunicationError as exc:
             self.stats["errors"] += 1
-            raise DeviceError(f"{axis.joint} (node {axis.id}) did not answer a read of "
-                              f"{index:#06x}:{sub:02x} ({exc})") from None
+            raise NoAnswer(f"{axis.joint} (node {axis.id}) did not answer a read of "
+                           f"{index:#06x}:{sub:02x} ({exc})") from None
+        except (CanError, OSError) as exc:
+            self.stats["errors"] += 1
+            raise LinkLost(f"{axis.joint} (node {axis.id}) did not answer a read of "
+                           f"{index:#06x}:{sub:02x} ({exc})") from None
 
     def sdo_write(self, axis: Axis, index: int, sub: int, value: Any) -> None:
+        from can import CanError
         from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
         self.stats["packets"] += 1
@@ -172,12 +187,16 @@ class CanopenDriver(Driver):
                 axis.commands[index] = value
         except SdoAbortedError as exc:
             self.stats["errors"] += 1
-            raise DeviceError(f"{axis.joint} (node {axis.id}) refused to write {value!r} to "
-                              f"{index:#06x}:{sub:02x}: {_abort(exc)}") from None
-        except (SdoCommunicationError, OSError) as exc:
+            raise DeviceFault(f"{axis.joint} (node {axis.id}) refused to write {value!r} to "
+                              f"{index:#06x}:{sub:02x}: {_abort(exc)}", exc.code) from None
+        except SdoCommunicationError as exc:
             self.stats["errors"] += 1
-            raise DeviceError(f"{axis.joint} (node {axis.id}) did not answer a write of "
-                              f"{index:#06x}:{sub:02x} ({exc})") from None
+            raise NoAnswer(f"{axis.joint} (node {axis.id}) did not answer a write of "
+                           f"{index:#06x}:{sub:02x} ({exc})") from None
+        except (CanError, OSError) as exc:
+            self.stats["errors"] += 1
+            raise LinkLost(f"{axis.joint} (node {axis.id}) did not answer a write of "
+                           f"{index:#06x}:{sub:02x} ({exc})") from None
         except (KeyError, TypeError, ValueError, OverflowError, struct.error):
             raise InvalidInput(f"{value!r} does not fit {index:#06x}:{sub:02x} of "
                                f"{axis.joint}'s EDS") from None
@@ -376,7 +395,7 @@ class CanopenDriver(Driver):
                 return
             except Exception as exc:
                 self._lose(str(exc))
-                raise DeviceError(f"{self.url} lost ({exc})") from None
+                raise LinkLost(f"{self.url} lost ({exc})") from None
         self.sdo_write(axis, 0x6040, 0, value)
 
     def enable(self, axis: Axis) -> None:
@@ -431,7 +450,7 @@ class CanopenDriver(Driver):
         if axis is None:
             raise InvalidInput(f"{joint!r} is not a CANopen joint of {self.hw.name}")
         if not axis.identity:
-            raise DeviceError(f"{joint} (node {axis.id}) does not answer on {self.url}")
+            raise NoAnswer(f"{joint} (node {axis.id}) does not answer on {self.url}")
         return axis
 
     def check_motion(self, joints: list[str]) -> None:
@@ -448,10 +467,10 @@ class CanopenDriver(Driver):
         """Profile position: mode 1, enabled, the profile velocity and target written, a new
         set-point (controlword bit 4) acknowledged (statusword bit 12); then done when each
         drive says target reached (bit 10), read back by SDO so a word sent before the
-        set-point cannot end it, and its position read then. The move's time is the
-        profile's ``home_timeout``, else its ramp's own (the trapezoid of the profile
-        velocity and the drive's acceleration) and 5 s; when it runs out, or the System halts
-        the move, the joints not there are unsettled."""
+        set-point cannot end it, and its position read then. The move's time is its ramp's
+        own (the trapezoid of the profile velocity and the drive's acceleration) and the
+        profile's ``home_timeout`` (else 5 s); when it runs out, or the System halts the move,
+        the joints not there are unsettled."""
         from deltoctl.core.motion import DEFAULT_VELOCITY
 
         speed = velocity or DEFAULT_VELOCITY
@@ -465,7 +484,7 @@ class CanopenDriver(Driver):
                 here = values.get(f"{joint}/position", target)
                 seconds = max(seconds, self._start_move(self._axis(joint), here, target, speed))
             start = time.monotonic()
-            limit = self.profile.safety.home_timeout or seconds + 5.0
+            limit = seconds + (self.profile.safety.home_timeout or 5.0)
             while pending and time.monotonic() - start < limit and not self.halted.is_set():
                 self.start_read()
                 values = self.read()
@@ -600,6 +619,16 @@ class CanopenDriver(Driver):
                 except DeltoctlError as exc:
                     self.warnings.append(f"{axis.joint}: no quick stop ({exc.message})")
 
+    def make_safe(self) -> None:
+        """Quick stop to every configured axis that answers, whatever this session enabled:
+        a drive a killed process left enabled stops too."""
+        for axis in self.axes.values():
+            if axis.identity and not self.lost:
+                try:
+                    self.quick_stop(axis)
+                except DeltoctlError as exc:
+                    self.warnings.append(f"{axis.joint}: no quick stop ({exc.message})")
+
     def deactivate(self) -> None:
         """Every axis left in Switch On Disabled (a quick stop first where it was enabled)."""
         was = [a for a in self.axes.values() if a.enabled]
@@ -648,7 +677,8 @@ class CanopenDriver(Driver):
                 "ok" if ok else "wrong identity: " + ", ".join(
                     f"{k} {axis.identity.get(k):#x}" for k in ident.get("mismatch", [])))
             checks.append({"what": f"node {node_id} ({axis.joint})", "profile": "CiA 402 drive",
-                           "device": device, "match": ok})
+                           "device": device, "match": ok, "part": axis.joint,
+                           "missing": node_id not in found})
         for node_id in sorted(set(found) - set(expected)):
             checks.append({"what": f"node {node_id}", "profile": "absent",
                            "device": "unexpected node", "match": False})

@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+import pytest
 from conftest import PROFILE
 from deltoctl import open_robot
 
@@ -53,3 +54,32 @@ def test_deltoctl_without_the_plugin_lists_and_runs_everything_else():
     refused = deltoctl_without_plugin("-p", str(PROFILE), "--sim", "identify")
     assert refused.returncode == 2 and "Traceback" not in refused.stderr
     assert "canopen" in refused.stderr
+
+
+def test_an_sdo_abort_is_a_device_fault_with_its_abort_code():
+    from deltoctl import DeviceFault
+
+    refusal = r"axis_1 \(node \d+\) refused to write 1 to 0x1010:01"
+    with open_robot(str(PROFILE), sim=True) as robot, \
+            pytest.raises(DeviceFault, match=refusal) as fault:
+        robot.write_register("axis_1", "0x1010:01", 1)  # without the "save" signature
+    assert fault.value.code == 0x08000020
+    assert fault.value.exit_code == 1
+
+
+def test_a_node_that_never_answers_is_no_answer():
+    from deltoctl import NoAnswer
+
+    with open_robot(str(PROFILE), sim={"missing": ("axis_2",)}) as robot, \
+            pytest.raises(NoAnswer, match=r"axis_2 \(node \d+\) does not answer"):
+        robot.registers("axis_2", ["0x6041"])
+
+
+def test_a_can_bus_gone_while_in_use_is_link_lost():
+    from deltoctl import LinkLost
+
+    with open_robot(str(PROFILE), sim=True) as robot, \
+            pytest.raises(LinkLost, match=r"axis_1 \(node \d+\) did not answer a read of "
+                                          r"0x6041:00 \(local CAN hub lost"):
+        robot.blocks[0].driver.network.bus.shutdown()  # as an adapter that is unplugged
+        robot.registers("axis_1", ["0x6041"])

@@ -28,7 +28,7 @@ def test_identify(cli):
 def test_detect_missing_and_wrong_identity(cli, served):
     url = served("--missing", "axis_2", "--wrong-identity", "0x1234")
     result = cli("-p", PROFILE, "-t", url, "--json", "detect")
-    assert result.exit_code == 3, result.output
+    assert result.exit_code == 1, result.output  # axis_2 does not answer
     checks = json.loads(result.stdout)["blocks"][0]["checks"]
     assert [c["device"] for c in checks] == ["wrong identity: product_code 0x1234", "missing"]
 

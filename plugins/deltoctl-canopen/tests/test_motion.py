@@ -36,18 +36,41 @@ def test_jog_settles_at_the_target_when_the_drive_says_so(cli, variant):
     assert result.exit_code == 0, result.output + result.stderr
     doc = json.loads(result.stdout)
     joint = doc["blocks"][0]["joints"]["axis_1"]
-    assert doc["settled"] and joint["settled"]
+    assert doc["result"]["settled"] and joint["settled"]
     assert abs(joint["position"] - 0.2) <= INCREMENT  # where it stopped, read after
-    assert doc["seconds"] >= 1.2  # the whole ramp (1.4 s), not its tolerance's worth
+    assert doc["result"]["seconds"] >= 1.2  # the whole ramp (1.4 s), not its tolerance's worth
 
 
-def test_a_move_longer_than_its_time_is_unsettled(cli, variant):
-    profile = variant(profile=lambda t: t.replace("home_timeout: 10", "home_timeout: 0.3"),
-                      bus=slow)
-    result = jog_to(cli, profile, "0.1")  # a ramp of 2.2 s; 0.19 rad after 2.1 s
+def short_timeout(text):
+    return text.replace("home_timeout: 10", "home_timeout: 0.3")
+
+
+def test_a_ramp_longer_than_home_timeout_runs_to_its_end(cli, variant):
+    """The move's time is its ramp's and home_timeout more: a 2.2 s ramp is not cut at
+    0.3 s."""
+    result = jog_to(cli, variant(profile=short_timeout, bus=slow), "0.1")
+    assert result.exit_code == 0, result.output + result.stderr
+    doc = json.loads(result.stdout)
+    assert doc["result"]["settled"] and doc["result"]["seconds"] >= 2.0
+
+
+@pytest.fixture
+def sluggish(monkeypatch):
+    """Drives that run at a third of the speed they are asked for."""
+    move = Drive402._move
+
+    def slower(self, target, speed, now, homing=False):
+        move(self, target, speed / 3, now, homing)
+
+    monkeypatch.setattr(Drive402, "_move", slower)
+
+
+def test_a_move_longer_than_its_time_is_unsettled(cli, variant, sluggish):
+    profile = variant(profile=short_timeout, bus=slow)
+    result = jog_to(cli, profile, "0.1")  # a ramp of 2.2 s planned; the drive takes longer
     assert result.exit_code == 1, result.output + result.stderr
     doc = json.loads(result.stdout)
-    assert not doc["settled"] and doc["unsettled"] == ["axis_1"]
+    assert not doc["result"]["settled"] and doc["result"]["unsettled"] == ["axis_1"]
     assert doc["blocks"][0]["joints"]["axis_1"]["position"] < 0.19
     assert "did not settle: axis_1" in result.stderr
 
@@ -90,7 +113,7 @@ def test_without_a_homing_method_home_goes_to_the_home_pose(cli, variant, homing
     result, doc = home(cli, profile)
     assert result.exit_code == 0, result.output + result.stderr
     joints = doc["blocks"][0]["joints"]
-    assert "outcome" not in joints["axis_1"] and doc["settled"]
+    assert "outcome" not in joints["axis_1"] and doc["result"]["settled"]
     assert abs(joints["axis_1"]["position"] - 0.1) <= INCREMENT
     assert homings == []
 

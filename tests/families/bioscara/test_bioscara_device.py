@@ -66,7 +66,7 @@ def test_detect_draws_the_bus_and_names_a_missing_joint(cli, arm):
     target, devices = arm
     del devices[0x13]
     result = cli("-p", "bioscara-arm", "-t", target, "detect")
-    assert result.exit_code == 3  # the bus differs from the profile
+    assert result.exit_code == 1  # a joint the profile declares does not answer
     assert "10: -- 11 12 -- 14 --" in result.stdout
     assert "missing: j3" in result.stdout
     assert "j3 at 0x13  joint    no answer  NO" in result.stdout
@@ -172,7 +172,7 @@ def test_sim_serve_in_its_own_process():
         assert target.startswith("i2c+tcp://127.0.0.1:")
         result = subprocess.run([sys.executable, "-m", "deltoctl", "-p", "bioscara-arm", "-t",
                                  target, "detect", "--json"], capture_output=True, text=True)
-        assert result.returncode == 3
+        assert result.returncode == 1  # j2 does not answer
         assert block_of(json.loads(result.stdout))["details"]["missing"] == ["j2"]
     finally:
         proc.terminate()
@@ -184,6 +184,39 @@ def test_detect_still_draws_a_bus_where_no_joint_answers(cli, arm):
     devices.clear()
     assert cli("-p", "bioscara-arm", "-t", target, "identify").exit_code == 4
     result = cli("-p", "bioscara-arm", "-t", target, "detect", "--json")
-    assert result.exit_code == 3, result.stderr
+    assert result.exit_code == 1, result.stderr  # no joint answers
     report = block_of(json.loads(result.stdout))["details"]
     assert report["found"] == [] and report["missing"] == ["j1", "j2", "j3", "j4"]
+
+
+def test_a_limit_past_a_32_bit_float_is_one_clear_error(cli, tmp_path):
+    """max_velocity: 1e40 is finite (the profile takes it) but no joint register holds it."""
+    from deltoctl.profile.catalog import resolve
+
+    text = resolve("bioscara-arm").read_text()
+    assert "max_velocity: 1.0}" in text
+    path = tmp_path / "wide.yaml"
+    path.write_text(text.replace("max_velocity: 1.0}", "max_velocity: 1e40}", 1))
+    result = cli("-p", str(path), "--sim", "home", "-j", "j1", "--yes")
+    assert result.exit_code == 2, result.output
+    assert "max_velocity 1e+40: the joint takes a 32-bit float" in result.stderr
+    assert "internal error" not in result.stderr
+
+
+def test_set_safe_stops_a_homing_another_process_started(arm):
+    """Setting the blocks safe (what the fleet's agent does after killing a motion verb)
+    sends STOP to every joint, though this session commanded none."""
+    from deltoctl.core.system import System
+
+    target, joints = arm
+    fw = joints[J4]
+    fw.angle = fw.command = sum(fw.stops) / 2  # far from either hard stop: a long homing
+    fw.write(codec.setup(20, 20))
+    fw.read(1)
+    fw.write(codec.home(1.0, 30, 15))  # a homing the killed process left running
+    assert fw.read(1)[0] & codec.BUSY
+    with System(load_profile("bioscara-arm"), [target]) as system:
+        system.stop()  # its own stop: it commanded nothing, so it sends nothing
+        assert fw.flags & codec.BUSY
+        system.make_safe()
+        assert not fw.flags & codec.BUSY

@@ -86,6 +86,8 @@ def test_requests_the_joint_cannot_take_are_refused_before_the_wire():
         Host.encode(Request(codec.SETCURRENT, (300,)))
     with pytest.raises(InvalidInput, match="takes no 0 arguments"):
         Host.encode(Request(0x14))  # MOVEANGLE: not implemented by the firmware
+    with pytest.raises(InvalidInput, match="do not fit"):  # past a 32-bit float
+        Host.encode(Request(codec.SETMAXVELOCITY, (1e40,)))
 
 
 quick = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -27,9 +27,11 @@ def test_identify_detect_stream_with_sim(cli):
 def test_detect_names_a_missing_servo(cli, mh5_buses):
     mh5_buses["lower_body"].bus.faults.missing.add(24)
     result = cli("-p", "mh5", *mh5_targets(mh5_buses), "detect", "--json")
-    assert result.exit_code == 3
+    assert result.exit_code == 1  # a servo the profile declares does not answer
     report = json.loads(result.stdout)
     assert block_of(report, "lower_body")["details"]["missing"] == [24]
+    assert report["result"]["failed"] == ["detect.lower_body.r_kne_p"]
+    assert "detect.lower_body.r_kne_p: r_kne_p (ID 24) does not answer" in result.stderr
     identify = cli("-p", "mh5", *mh5_targets(mh5_buses), "identify")
     assert identify.exit_code == 3 and "r_kne_p" in identify.stderr
 
@@ -185,10 +187,10 @@ def test_detect_finds_a_servo_at_another_baud_rate():
     finally:
         proc.terminate()
         proc.wait(timeout=5)
-    assert result.returncode == 3, result.stderr
+    assert result.returncode == 1, result.stderr
     upper = block_of(json.loads(result.stdout), "upper_body")["details"]
     assert upper["missing"] == [52] and upper["wrong_baud"] == {"52": 57600}
-    assert "head_y (ID 52) baud rate" in result.stderr
+    assert "head_y (ID 52) does not answer (found at 57600 baud, not 2000000)" in result.stderr
 
 
 def test_an_inverse_joint_is_reversed_in_the_servo(cli, mh5_buses):
@@ -235,6 +237,6 @@ def test_detect_finds_a_whole_bus_at_another_baud_rate(cli):
                    "-t", "i2c=i2c:///dev/i2c-99"]
         assert cli("-p", "mh5", *targets, "identify").exit_code == 4  # nothing at 2 Mbps
         result = cli("-p", "mh5", *targets, "detect", "--json")
-    assert result.exit_code == 3, result.stderr
+    assert result.exit_code == 1, result.stderr
     lower = block_of(json.loads(result.stdout), "lower_body")["details"]
     assert lower["wrong_baud"] == {"11": 1_000_000, "12": 1_000_000}

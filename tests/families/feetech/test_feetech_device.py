@@ -170,3 +170,13 @@ def test_a_write_to_a_servo_in_fault_is_a_named_device_fault(so101):
     with pytest.raises(DeviceFault, match="overload error") as raised:
         driver.write_register("elbow_flex", "acceleration", 10)
     assert raised.value.code == OVERLOAD and "power is cycled" in raised.value.hint
+
+
+def test_a_move_settles_once_the_servo_has_stopped_not_when_it_is_near(so101):
+    driver, bus = so101
+    driver.read()
+    result = driver.move({"gripper": 0.3})
+    assert result.settled
+    assert bus.servos[5].read(66, 1) == b"\x00"  # Moving: arrived, not on its way
+    driver.make_safe()  # every servo holds where it is, the torque left on
+    assert bus.servos[5].get("Torque_Enable") == 1

@@ -1,0 +1,56 @@
+"""A Bioscara move raises no flag: it settles once each joint is within tolerance, not BUSY
+and still, no sooner than its profile could end; or is unsettled when its time runs out,
+naming where each joint ended."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import deltoctl
+from deltoctl.profile.catalog import load_profile, resolve
+from deltoctl.sim.i2c_bus import I2CSocketServer
+from tests.conftest import sim_i2c_bus
+
+
+def _profile(tmp_path, **safety: float):
+    """bioscara-arm with these safety settings (home_tolerance, home_timeout)."""
+    text = resolve("bioscara-arm").read_text().replace("  home_timeout: 120\n", "".join(
+        f"  {key}: {value}\n" for key, value in safety.items()))
+    path = tmp_path / "bioscara-arm.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_a_jog_within_a_wide_tolerance_ends_at_its_goal(tmp_path):
+    with deltoctl.open_robot(_profile(tmp_path, home_tolerance=0.1, home_timeout=120),
+                             sim=True) as robot:
+        robot.home(["j4"])
+        start = robot.read()["j4/position"]
+        report = robot.jog({"j4": -0.05})
+    joint = report["blocks"][0]["joints"]["j4"]
+    assert report["settled"] is True and joint["settled"] is True
+    # at the goal, not where it started within the 0.1 rad tolerance
+    assert joint["position"] == pytest.approx(start - 0.05, abs=1e-3)
+
+
+def test_a_move_whose_time_runs_out_is_unsettled_and_says_where_it_ended(cli, tmp_path):
+    profile = _profile(tmp_path, home_timeout=0.3)
+    server = I2CSocketServer(sim_i2c_bus(load_profile("bioscara-arm"))).start()
+    try:
+        homed = cli("-p", "bioscara-arm", "-t", server.url, "home", "--yes", "-j", "j4")
+        assert homed.exit_code == 0, homed.stderr  # the joint keeps its home offset
+        args = ("-p", str(profile), "-t", server.url)
+        # 0.3 rad at 0.1 rad/s takes 3 s at least: 0.3 s is not enough
+        result = cli(*args, "jog", "j4", "-0.3", "--velocity", "0.1", "--yes", "--json")
+        assert result.exit_code == 1, result.stderr
+        envelope = json.loads(result.stdout)
+        joint = envelope["blocks"][0]["joints"]["j4"]
+        assert envelope["result"]["unsettled"] == ["j4"] and joint["settled"] is False
+        assert joint["target"] - 0.001 < joint["position"] < joint["target"] + 0.3
+        said = cli(*args, "jog", "j4", "-0.3", "--velocity", "0.1", "--yes")
+        assert said.exit_code == 1 and "did not settle: j4 at " in said.stderr
+        assert "its target" in said.stderr
+    finally:
+        server.close()
