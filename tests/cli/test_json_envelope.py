@@ -100,7 +100,7 @@ def test_every_schema_allows_the_envelope_keys_only():
 
 
 def test_a_calibration_says_whether_it_passed_in_its_result(cli):
-    result = cli("-p", "dg-4f", "--sim", "calibrate", "ft", "--json")
+    result = cli("-p", "dg-4f", "--sim", "--yes", "calibrate", "ft", "--json")
     assert result.exit_code == 0, result.stderr
     _check(result, "calibrate ft")
     assert json.loads(result.stdout)["result"] == {"pass": True}
