@@ -44,6 +44,7 @@ CAPABILITIES: dict[str, tuple[str, ...]] = {
     "registers": ("read_registers", "write_register"), "torque": ("set_torque",),
     "reboot": ("reboot",), "config": ("config_read", "config_write"),
     "calibrate_imu": ("sample", "self_test"),
+    "calibrate_servos": ("calibrate_servos",),
 }
 
 SIM_KINDS = ("flag", "text", "int", "number", "numbers", "steps", "joints")

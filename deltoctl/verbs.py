@@ -95,6 +95,8 @@ TABLE: dict[str, Verb] = {
                       stage=LIFECYCLE, subs={
         "ft": Verb(ACTUATES, "deltoctl -p dg-5f-right calibrate ft --samples 200"),
         "imu": Verb(ACTUATES, "deltoctl -p mh5 calibrate imu --tumble"),  # its self-test
+        "servos": Verb(READS, "deltoctl -p so101-follower calibrate servos --half-turn",
+                       when={("--half-turn",): ACTUATES}),
     }),
     "gpio": Verb(READS, "deltoctl -p rrbot-gpio gpio set flange_vacuum/vacuum on", "device_cmd",
                  stage=LIFECYCLE, subs={
@@ -126,7 +128,8 @@ TABLE: dict[str, Verb] = {
                 subs={"serve": Verb(READS, "deltoctl sim serve dg-5f-right --firmware 2.7")}),
     "bench": Verb(READS, "deltoctl bench loop --duration 2", "bench_cmd", stage=TOOLS,
                   remote=False, subs={
-        "loop": Verb(READS), "dynamixel": Verb(READS), "i2c": Verb(READS),
+        "loop": Verb(READS), "dynamixel": Verb(READS), "feetech": Verb(READS),
+        "i2c": Verb(READS),
     }),
     "ports": Verb(READS, "deltoctl ports --json", "ports_cmd", stage=TOOLS),
     "doctor": Verb(READS, "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 doctor",

@@ -287,3 +287,37 @@ def fail_ft(result: dict[str, Any]) -> None:
         raise DeviceError(f"F/T checks failed: {', '.join(failed)}",
                           hint="a known mass read wrong is a scale or mounting fault; drift "
                                "wants the sensor warmed up")
+
+
+def servo_calibration_description(system: System, half_turn: bool) -> str:
+    """What ``calibrate servos`` is about to do, for the caller's confirmation."""
+    blocks = [m.name for m in system.able("calibrate_servos")]
+    if not blocks:
+        raise InvalidInput(f"{system.profile.name} has no servos whose calibration deltoctl "
+                           "writes")
+    if not half_turn:
+        return f"read the calibration of the servos of {', '.join(blocks)}"
+    return (f"switch torque off on {', '.join(blocks)} and make each servo's present pose the "
+            "middle of its turn (its Homing_Offset, written into the servo): support the arm "
+            "and put it in the middle of its range")
+
+
+def calibrate_servos(system: System, half_turn: bool, name: str,
+                     output: Path | None = None) -> dict[str, Any]:
+    """Each able block's servo calibration in its family's file format, saved at ``output``
+    or where the format's tools look for it (a block more: ``<name>-<block>``)."""
+    able = system.able("calibrate_servos")
+    blocks = []
+    for m in able:
+        device = name if len(able) == 1 else f"{name}-{m.name}"
+        result = m.driver.calibrate_servos(half_turn, device)
+        path = Path(output) if output is not None and len(able) == 1 else \
+            (Path(output) / f"{device}.json" if output is not None else Path(result["file"]))
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(result["text"])
+        except OSError as exc:
+            raise InvalidInput(f"cannot write {path}: {exc.strerror}") from None
+        blocks.append({"block": m.name, "format": result["format"], "file": str(path),
+                       "parts": result["parts"]})
+    return {"half_turn": half_turn, "blocks": blocks}

@@ -1,4 +1,4 @@
-"""``deltoctl bench loop|dynamixel|i2c``: options, then the figures of deltoctl/benchmarks/
+"""``deltoctl bench loop|dynamixel|feetech|i2c``: options, then the figures of deltoctl/benchmarks/
 for people (or as JSON)."""
 
 from collections.abc import Callable
@@ -9,7 +9,7 @@ import typer
 from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, say
 from deltoctl.errors import InvalidInput
-from deltoctl.render.bench import dynamixel_lines, i2c_lines, loop_lines
+from deltoctl.render.bench import dynamixel_lines, feetech_lines, i2c_lines, loop_lines
 
 app = typer.Typer(help="Benchmarks that ship with deltoctl.", no_args_is_help=True)
 
@@ -63,6 +63,24 @@ def bench_dynamixel(
     if not 1 <= servos <= 252 or duration <= 0:
         raise InvalidInput("--servos must be 1-252 and --duration positive")
     _report(options(ctx).json, measure(servos, duration), dynamixel_lines, servos)
+
+
+@app.command("feetech")
+def bench_feetech(
+    ctx: typer.Context,
+    servos: Annotated[int, typer.Option(help="Servos on the bus.")] = 6,
+    duration: Annotated[float, typer.Option(help="Seconds per measurement.")] = 3.0,
+) -> None:
+    """Feetech sync reads side by side with scservo_sdk, and against the wire's limit.
+
+    Present position/velocity/load (56, 6) of N STS3215 (an SO-101 arm's bus) on an emulated
+    bus in another process: deltoctl's driver and scservo_sdk's GroupSyncRead paced at 1 Mbps
+    against the wire's limit, then unpaced, with the CPU each spends a read."""
+    from deltoctl.benchmarks.feetech import measure
+
+    if not 1 <= servos <= 253 or duration <= 0:
+        raise InvalidInput("--servos must be 1-253 and --duration positive")
+    _report(options(ctx).json, measure(servos, duration), feetech_lines)
 
 
 @app.command("i2c")

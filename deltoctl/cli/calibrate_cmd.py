@@ -1,5 +1,6 @@
 """``deltoctl calibrate ft``: tare the fingertip F/T sensors and check what is left;
-``deltoctl calibrate imu``: the IMU's self-test, gravity check and six-position tumble."""
+``deltoctl calibrate imu``: the IMU's self-test, gravity check and six-position tumble;
+``deltoctl calibrate servos``: the servos' calibration in their family's file format."""
 
 from pathlib import Path
 from typing import Annotated, Any
@@ -127,6 +128,40 @@ def calibrate_imu(
             info(line)
     fail_imu(result)
     finish(robot)
+
+
+@app.command("servos")
+def calibrate_servos(
+    ctx: typer.Context,
+    half_turn: Annotated[bool, typer.Option(
+        "--half-turn", help="First make each servo's present pose the middle of its turn "
+                            "(torque off; written into the servo).")] = False,
+    name: Annotated[str, typer.Option(
+        "--id", help="The device's name in the file's default place.")] = "my_arm",
+    output: Annotated[Path | None, typer.Option(
+        "--output", "-o", help="Where the file goes (default: where the format's tools look "
+                               "for it).")] = None,
+    allow_model_mismatch: AllowMismatch = False,
+) -> None:
+    """Save the servos' calibration in their family's file format: a Feetech SO arm's as
+    LeRobot's calibration JSON (homing offset and position limits per motor), by default at
+    LeRobot's place for it ($HF_LEROBOT_CALIBRATION/robots/so_follower/ID.json, a leader's
+    under teleoperators/so_leader). With --half-turn, LeRobot's half-turn homing first."""
+    from deltoctl.app.calibrate import calibrate_servos as run
+    from deltoctl.app.calibrate import servo_calibration_description
+
+    opts = options(ctx)
+    with open_robot(opts, allow_model_mismatch) as robot:
+        confirm(ctx, servo_calibration_description(robot.system, half_turn))
+        result = run(robot.system, half_turn, name, output)
+    if opts.json:
+        emit_json(result)
+    else:
+        for b in result["blocks"]:
+            table(b["block"], ["part", *next(iter(b["parts"].values()), {})],
+                  [[part, *values.values()] for part, values in b["parts"].items()])
+            info(f"{b['format']}: {b['file']}")
+    finish(robot.system)
 
 
 def register(root: typer.Typer) -> None:

@@ -207,6 +207,13 @@ class Driver:
     def tare_ft(self) -> None:
         raise Unsupported(f"{self.hw.name} has no F/T sensors to tare")
 
+    def calibrate_servos(self, half_turn: bool, name: str) -> dict[str, Any]:
+        """The servos' calibration in their family's file format: ``text`` (the file), its
+        default ``file`` for device ``name``, per part its values (``parts``); with
+        ``half_turn``, each servo's present pose is made the middle of its turn first (its
+        zero written into the servo)."""
+        raise Unsupported(f"{self.hw.name} has no servo calibration")
+
     def register_items(self) -> list[str]:
         raise Unsupported(f"{self.hw.name} has no registers")
 

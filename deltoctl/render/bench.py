@@ -121,3 +121,21 @@ def i2c_lines(results: dict[str, Any], cycles: int, clock: int) -> list[str]:
             f"({results['overhead_pct_of_wire']} % of the wire time; goal ≤ 25 %)",
             f"  smbus2 by hand     {results['smbus2_loop_us']:8.2f} µs",
             f"  emulator (apart)   {results['emulator_us']:8.2f} µs"]
+
+
+def feetech_lines(results: dict[str, Any]) -> list[str]:
+    """Sync reads of an SO arm's bus: deltoctl beside scservo_sdk, paced and unpaced."""
+    lines = [f"sync read {results['item']} of {results['servos']} STS3215, emulator in another "
+             f"process; the wire's limit at {results['baud'] // 1000} kbps: "
+             f"{results['wire_limit_hz']:.1f} reads/s"]
+    for name in ("deltoctl", "scservo_sdk"):
+        if name in results:
+            r = results[name]
+            lines.append(f"  {name:12} paced {r['paced_hz']:8.1f} reads/s "
+                         f"({100 * r['paced_fraction_of_wire']:.1f} % of the wire's limit); "
+                         f"unpaced {r['unpaced_hz']:8.1f} reads/s, "
+                         f"{r['cpu_us_per_read']:.1f} µs CPU a read")
+    if "paced_ratio" in results:
+        lines.append(f"  deltoctl / scservo_sdk: {results['paced_ratio']:.2f} × the reads paced, "
+                     f"{results['cpu_ratio']:.2f} × less CPU a read")
+    return lines

@@ -150,6 +150,8 @@ CASES = {
                                       str(tmp)],
     "calibrate imu": lambda cli, tmp: ["-p", "mh5", "--sim", "--hardware", "i2c", "calibrate",
                                        "imu", "-o", str(tmp)],
+    "calibrate servos": lambda cli, tmp: ["-p", "so101-follower", "--sim", "calibrate",
+                                          "servos", "--half-turn", "-o", str(tmp / "c.json")],
     "gpio set": lambda cli, tmp: ["-p", "rrbot-gpio", "--sim", "gpio", "set",
                                   "flange_vacuum/vacuum", "on"],
     "replay": _replay_case,

@@ -1,0 +1,26 @@
+"""``bench feetech``: its figures are there and hang together (no speed is asserted, only
+what no machine can change: a paced read never beats the wire)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+
+from deltoctl.benchmarks.feetech import wire_limit
+
+
+def test_bench_feetech_reports_both_clients_against_the_wire(cli):
+    result = cli("--json", "bench", "feetech", "--duration", "0.2")
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)["result"]
+    assert report["wire_limit_hz"] == round(wire_limit(6, 1_000_000), 1)
+    # 1 Mbps, 10 bits a byte: a 14-byte request and six 12-byte statuses
+    assert report["wire_limit_hz"] == round(1e6 / (10 * (14 + 6 * 12)), 1)
+    ours = report["deltoctl"]
+    assert 0 < ours["paced_fraction_of_wire"] <= 1.0 and ours["cpu_us_per_read"] > 0
+    if importlib.util.find_spec("scservo_sdk") is not None:
+        theirs = report["scservo_sdk"]
+        assert 0 < theirs["paced_fraction_of_wire"] <= 1.0
+        assert report["cpu_ratio"] == round(theirs["cpu_us_per_read"] / ours["cpu_us_per_read"],
+                                            2)
+    assert cli("bench", "feetech", "--servos", "0").exit_code == 2

@@ -1,0 +1,182 @@
+"""The Feetech instruction table on the kit's session (host and device, no transport), the
+models' tables and encodings, and the emulated servos' behaviour."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from deltoctl.families.feetech import codec
+from deltoctl.families.feetech.emulator import OVERLOAD, FeetechBus, Servo, collide
+from deltoctl.families.feetech.models import (
+    BAUD_RATES,
+    BY_NUMBER,
+    LEROBOT_BAUD_RATES,
+    MODELS,
+    by_bytes,
+    config_rules,
+    item_named,
+)
+from deltoctl.servo.session import NEED_DATA, Done
+
+STS3215, SCS0009 = BY_NUMBER[777], BY_NUMBER[1284]
+
+
+def _exchange(bus: FeetechBus, device_id: int, instruction: int, params: bytes = b""):
+    host = codec.session()
+    replies = b"".join(packet for size, rs in bus.serve(host.send(device_id, instruction, params))
+                       for _, packet in rs)
+    if not host.expecting:
+        return Done([], [])
+    event = host.receive(replies)
+    return host.give_up() if event is NEED_DATA else event
+
+
+def test_host_and_device_sessions_agree_on_who_answers():
+    bus = FeetechBus([Servo(i) for i in (1, 2, 3)])
+    done = _exchange(bus, 2, codec.PING)
+    assert done.replies == [(2, 0, b"")]
+    done = _exchange(bus, codec.BROADCAST_ID, codec.SYNC_READ, codec.sync_read_params(56, 2,
+                                                                                    [3, 1]))
+    assert [(i, e, d) for i, e, d in done.replies] == [(3, 0, b"\x00\x08"), (1, 0, b"\x00\x08")]
+    # a sync write, a broadcast: nobody answers
+    assert _exchange(bus, codec.BROADCAST_ID, codec.SYNC_WRITE,
+                     codec.sync_write_params(41, 1, {1: b"\x05"})).replies == []
+    assert bus.servos[0].get("Acceleration") == 5
+    # Response_Status_Level 0: a write is not answered, a read is
+    bus.servos[1].memory[8] = 0
+    host = codec.session()
+    host.level = 0
+    assert not host.expected(2, codec.WRITE, b"\x29\x01").ids
+    assert bus.serve(codec.write(2, 41, b"\x01")) == [(8, [])]
+    assert _exchange(bus, 2, codec.READ, codec.read_params(41, 1)).replies == [(2, 0, b"\x01")]
+
+
+def test_a_host_waits_for_every_servo_of_a_sync_read():
+    host = codec.session()
+    host.send(codec.BROADCAST_ID, codec.SYNC_READ, codec.sync_read_params(56, 2, [1, 2]))
+    assert host.receive(codec.FRAMES.status(1, 0, b"\x00\x08")) is NEED_DATA
+    assert host.waiting == [2]
+    done = host.receive(codec.FRAMES.status(2, 0x20, b"\x00\x08"))
+    assert done.complete and done.replies[1] == (2, 0x20, b"\x00\x08")  # the error byte kept
+
+
+def test_models_bytes_and_encodings():
+    assert {m.name: m.model_bytes() for m in MODELS} == {
+        "STS3215": b"\x09\x03", "STS3250": b"\x09\x0b", "SM8512BL": b"\x08\x2c",
+        "SCS0009": b"\x05\x04"}
+    assert by_bytes(b"\x05\x04") is SCS0009 and by_bytes(b"\x04\x05") is None
+    goal = item_named("goal_position", STS3215)
+    assert goal.encode(-100) == (0x8064).to_bytes(2, "little")  # sign-magnitude, bit 15
+    assert goal.decode(b"\x64\x80") == -100
+    offset = item_named("Homing_Offset", STS3215)
+    assert offset.span() == (-2047, 2047)
+    with pytest.raises(OverflowError):
+        offset.encode(2114)  # LeRobot's "Magnitude 2114 exceeds 2047"
+    assert item_named("present_load", STS3215).sign_bit == 10
+    assert item_named("Lock", STS3215).address == 55 and item_named("lock", SCS0009).address == 48
+    assert item_named("goal_position", SCS0009).encode(512) == b"\x02\x00"
+    # one baud table: LeRobot's codes 5-7 kept beside Feetech's, which the servos follow
+    assert [BAUD_RATES[c] for c in (5, 6, 7)] == [76_800, 57_600, 38_400]
+    assert [LEROBOT_BAUD_RATES[c] for c in (5, 6, 7)] == [57_600, 38_400, 19_200]
+    assert config_rules()["Homing_Offset"][2] == "homing-offset"  # a safety item: --allow
+
+
+def test_eeprom_is_kept_only_while_unlocked():
+    servo = Servo(1)
+    servo.write(9, b"\x64\x00")  # Min_Position_Limit with Lock 1: applies, not saved
+    assert servo.get("Min_Position_Limit") == 100
+    servo.power_cycle()
+    assert servo.get("Min_Position_Limit") == 0
+    servo.write(55, b"\x00")
+    servo.write(9, b"\x64\x00")
+    servo.write(55, b"\x01")
+    servo.power_cycle()
+    assert servo.get("Min_Position_Limit") == 100
+
+
+def test_phase_bit_4_and_the_homing_offset():
+    servo = Servo(1)
+    servo.actual = 100.0
+    servo.write(55, b"\x00")
+    servo.write(31, item_named("Homing_Offset", STS3215).encode(300))
+    servo.write(18, bytes([servo.get("Phase") | 0x10]))  # full angle: below zero
+    assert servo.read(56, 2) == item_named("Present_Position", STS3215).encode(-200)
+    servo.write(18, bytes([servo.get("Phase") & ~0x10]))  # one turn: wrapped
+    assert servo.read(56, 2) == (4096 - 200).to_bytes(2, "little")
+    servo.write(40, b"\x80")  # Torque_Enable 128: the present pose becomes mid-turn
+    assert servo.read(56, 2) == (2048).to_bytes(2, "little")
+    assert servo.get("Homing_Offset") == 100 - 2048
+
+
+def test_overload_latches_until_the_power_is_cycled_and_a_voltage_error():
+    bus = FeetechBus([Servo(1), Servo(2, volts=16.0)])
+    bus.servos[0].latch_overload()
+    bus.serve(codec.write(1, 42, (3000).to_bytes(2, "little")))
+    time.sleep(0.05)
+    done = _exchange(bus, 1, codec.READ, codec.read_params(40, 1))
+    assert done.replies == [(1, OVERLOAD, b"\x00")]  # still limp, the error in every status
+    assert codec.error_names(OVERLOAD) == ["overload"]
+    assert "power is cycled" in codec.error_advice(OVERLOAD)
+    bus.servos[0].power_cycle()
+    assert _exchange(bus, 1, codec.PING).replies == [(1, 0, b"")]
+    assert _exchange(bus, 2, codec.PING).replies == [(2, 0x01, b"")]  # 16 V > 14.0 V limit
+
+
+def test_servos_sharing_an_id_collide():
+    twin = Servo(1)
+    twin.actual += 300
+    bus = FeetechBus([Servo(1), twin])
+    assert _exchange(bus, 1, codec.PING).replies == [(1, 0, b"")]  # identical: they agree
+    assert _exchange(bus, 1, codec.READ, codec.read_params(56, 2)).replies == []  # garbled
+    assert collide([b"\xff\x0f", b"\xf0\xff\x01"]) == b"\xf0\x0f\x01"
+
+
+@pytest.fixture
+def so101():
+    """The SO-101 follower's driver on its emulated bus, and the bus."""
+    from deltoctl.families.feetech.driver import FeetechDriver
+    from deltoctl.families.feetech.emulator import FeetechPtyServer
+    from deltoctl.profile.catalog import load_profile
+    from tests.conftest import block_for
+
+    profile = load_profile("so101-follower")
+    [hw] = profile.hardware
+    bus = FeetechBus([Servo(i) for i in range(1, 7)], baud=1_000_000)
+    with FeetechPtyServer(bus) as server:
+        driver = FeetechDriver(block_for(profile, hw, f"serial://{server.port}?baud=1000000"))
+        driver.configure()
+        yield driver, bus
+        driver.cleanup()
+
+
+def test_an_eeprom_write_is_unlocked_and_locked_again_so_the_servo_keeps_it(so101):
+    driver, bus = so101
+    assert driver.write_register("gripper", "Max_Torque_Limit", 500) == 500
+    gripper = bus.servos[5]
+    assert gripper.get("Lock") == 1  # locked again
+    gripper.power_cycle()
+    assert gripper.get("Max_Torque_Limit") == 500  # saved: it was written unlocked
+    # a RAM item needs no unlock
+    assert driver.write_register("gripper", "acceleration", 254) == 254
+
+
+def test_a_write_to_a_servo_in_fault_is_a_named_device_fault(so101):
+    from deltoctl.errors import DeviceFault
+
+    driver, bus = so101
+    bus.servos[2].latch_overload()
+    with pytest.raises(DeviceFault, match="overload error") as raised:
+        driver.write_register("elbow_flex", "acceleration", 10)
+    assert raised.value.code == OVERLOAD and "power is cycled" in raised.value.hint
+
+
+def test_a_move_settles_once_the_servo_has_stopped_not_when_it_is_near(so101):
+    driver, bus = so101
+    driver.read()
+    result = driver.move({"gripper": 0.3})
+    assert result.settled
+    assert bus.servos[5].read(66, 1) == b"\x00"  # Moving: arrived, not on its way
+    driver.make_safe()  # every servo holds where it is, the torque left on
+    assert bus.servos[5].get("Torque_Enable") == 1
