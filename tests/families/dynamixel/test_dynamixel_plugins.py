@@ -191,8 +191,10 @@ def test_export_and_import_keep_the_servo_gpios(cli, tmp_path, fmt):
 def test_the_emulated_arm_detects_jogs_and_streams_its_servo_gpios(cli):
     detect = cli("--sim", "-p", str(ARM), "detect", "--json")
     assert detect.exit_code == 0, detect.stderr
-    [check] = block_of(json.loads(detect.stdout))["checks"]
-    assert check["profile"] == check["device"] == [11, 12, 13, 14, 15]
+    checks = block_of(json.loads(detect.stdout))["checks"]
+    assert [c["what"] for c in checks] == [f"joint{i} (ID {10 + i})" for i in range(1, 5)] + [
+        "gripper_joint (ID 15)"]
+    assert all(c["match"] and not c["missing"] for c in checks)
     jog = cli("--sim", "-p", str(ARM), "jog", "joint2", "5deg", "--yes", "--json")
     assert jog.exit_code == 0, jog.stderr
     with deltoctl.open_robot(ARM, sim=True) as robot:
