@@ -82,6 +82,9 @@ class Joint:
             named = ", ".join(f"{k} {v:g}" for k, v in wide.items())
             raise InvalidInput(f"joint {comp.name}: {named}: the joint takes a 32-bit float, "
                                f"up to {FLOAT32_MAX:.3g}")
+        if not 0 < self.max_velocity < math.inf:  # every move's speed and time divide by it
+            raise InvalidInput(f"joint {comp.name}: max_velocity {self.max_velocity:g} must be a "
+                               "speed above 0")
         self.bus, self.name = bus, comp.name
         self.offset = 0.0
         self.flags = codec.INITIAL_FLAGS

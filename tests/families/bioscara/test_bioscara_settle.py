@@ -54,3 +54,18 @@ def test_a_move_whose_time_runs_out_is_unsettled_and_says_where_it_ended(cli, tm
         assert "its target" in said.stderr
     finally:
         server.close()
+
+
+@pytest.mark.parametrize("speed", ["0", "0.0", "-1.0", ".nan"])
+def test_a_max_velocity_that_is_not_a_speed_is_refused_naming_the_joint(cli, tmp_path, speed):
+    joint = next(c for hw in load_profile("bioscara-arm").hardware for c in hw.components()
+                 if float(c.params.get("max_velocity", 0)) == 1.0)
+    text = resolve("bioscara-arm").read_text()
+    assert text.count("max_velocity: 1.0}") == 1
+    path = tmp_path / "bioscara-arm.yaml"
+    path.write_text(text.replace("max_velocity: 1.0}", f"max_velocity: {speed}}}"))
+    result = cli("-p", str(path), "--sim", "jog", joint.name, "0.01", "--yes")
+    assert result.exit_code == 2, result.stderr
+    assert "max_velocity" in result.stderr and f"joint {joint.name}" in result.stderr.replace(
+        f"joint '{joint.name}'", f"joint {joint.name}")
+    assert "Traceback" not in result.stderr
