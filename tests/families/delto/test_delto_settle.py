@@ -23,6 +23,16 @@ def test_a_slow_jog_within_the_tolerance_moves_before_it_settles():
     assert report["seconds"] >= 0.4  # the ramp alone takes 0.5 s
 
 
+def test_a_jog_at_the_default_speed_smaller_than_the_tolerance_goes_all_the_way():
+    with deltoctl.open_robot("dg-5f-right", sim=True) as robot:
+        start = robot.read()["rj_dg_1_2/position"]
+        report = robot.jog({"rj_dg_1_2": "-0.5deg"})
+    joint = report["blocks"][0]["joints"]["rj_dg_1_2"]
+    assert report["settled"] is True and joint["settled"] is True
+    # most of the 0.5° (the ramp ends at once; the 2° tolerance held it near the start before)
+    assert joint["position"] - start < math.radians(-0.3)
+
+
 def test_a_stalled_joint_runs_out_of_time_and_says_where_it_ended(cli, tmp_path):
     text = resolve("dg-5f-right").read_text().replace("home_timeout: 10", "home_timeout: 0.5")
     profile = tmp_path / "dg-5f-right.yaml"
