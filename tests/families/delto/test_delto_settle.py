@@ -30,7 +30,7 @@ def test_a_jog_at_the_default_speed_smaller_than_the_tolerance_goes_all_the_way(
     joint = report["blocks"][0]["joints"]["rj_dg_1_2"]
     assert report["settled"] is True and joint["settled"] is True
     # most of the 0.5° (the ramp ends at once; the 2° tolerance held it near the start before)
-    assert joint["position"] - start < math.radians(-0.3)
+    assert joint["position"] - start < math.radians(-0.25)  # it reads in steps of 0.1°
 
 
 def test_a_stalled_joint_runs_out_of_time_and_says_where_it_ended(cli, tmp_path):
