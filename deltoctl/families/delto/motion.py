@@ -19,7 +19,7 @@ from typing import Any, Protocol
 from deltoctl.core.driver import CycleHook, MoveResult, Progress
 from deltoctl.core.loop import CycleLoop
 from deltoctl.core.motion import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
-from deltoctl.errors import DeviceError
+from deltoctl.errors import LinkLost, NoAnswer
 from deltoctl.families.delto.models import KT
 
 DEFAULT_CURRENT_CAP = 150.0  # mA
@@ -62,7 +62,7 @@ def move_to(driver: EffortDriver, targets: dict[str, float], velocity: float | N
     kd = kp * 0.02
     values = driver.read()
     if not driver.connected:
-        raise DeviceError(f"{driver.hw.name} is not answering")
+        raise NoAnswer(f"{driver.hw.name} is not answering")
     reconnects = driver.stats["reconnects"]
     setpoints = {j: values[f"{j}/position"] for j in targets}
     first_error = max((abs(targets[j] - setpoints[j]) for j in targets), default=0.0) or 1.0
@@ -73,6 +73,7 @@ def move_to(driver: EffortDriver, targets: dict[str, float], velocity: float | N
     if timeout is None:
         timeout = driver.profile.safety.home_timeout or (first_error / speed + 5.0)
     settled_for = 0
+    elapsed = 0.0  # a move halted before its first cycle took none
     errors: dict[str, float] = {}
     loop = CycleLoop(RATE)
     step = speed / RATE
@@ -81,9 +82,9 @@ def move_to(driver: EffortDriver, targets: dict[str, float], velocity: float | N
         if not driver.connected or driver.stats["reconnects"] != reconnects:
             # a move never resumes by itself after a lost link: a person decides
             driver.stop()
-            raise DeviceError(f"the link to {driver.hw.name} was lost during the move; the "
-                              "motion was stopped and does not resume by itself",
-                              hint="check the link, then move again")
+            raise LinkLost(f"the link to {driver.hw.name} was lost during the move; the "
+                           "motion was stopped and does not resume by itself",
+                           hint="check the link, then move again")
         if driver.halted.is_set():
             break
         efforts = {}
