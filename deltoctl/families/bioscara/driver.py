@@ -411,7 +411,8 @@ class BioscaraDriver(Driver):
         if hook is not None:  # the state the goals were sent from
             hook(time.time_ns(), start, setpoints)
         began = time.monotonic()
-        timeout = profile.safety.home_timeout or 30.0
+        # the move's own time and home_timeout more (else 5 s), as every family's
+        timeout = max(soonest.values(), default=0.0) + (profile.safety.home_timeout or 5.0)
         errors: dict[str, float] = {}
         still = dict.fromkeys(targets, 0)  # reads in a row each joint has been still
         while True:

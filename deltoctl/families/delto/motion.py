@@ -71,7 +71,8 @@ def move_to(driver: EffortDriver, targets: dict[str, float], velocity: float | N
     arrive = {j: min(tolerance, max(POSITION_NOISE, abs(targets[j] - setpoints[j]) / 4))
               for j in targets}
     if timeout is None:
-        timeout = driver.profile.safety.home_timeout or (first_error / speed + 5.0)
+        # the ramp's own time and home_timeout more (else 5 s), as every family's
+        timeout = first_error / speed + (driver.profile.safety.home_timeout or 5.0)
     settled_for = 0
     elapsed = 0.0  # a move halted before its first cycle took none
     errors: dict[str, float] = {}

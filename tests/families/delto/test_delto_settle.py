@@ -48,3 +48,13 @@ def test_a_stalled_joint_runs_out_of_time_and_says_where_it_ended(cli, tmp_path)
     said = cli(*args)
     assert said.exit_code == 1
     assert "did not settle: rj_dg_1_2 at 0.00°, its target -10.00°" in said.stderr
+
+
+def test_a_ramp_longer_than_home_timeout_runs_to_its_end(tmp_path):
+    text = resolve("dg-5f-right").read_text().replace("home_timeout: 10", "home_timeout: 0.2")
+    profile = tmp_path / "dg-5f-right.yaml"
+    profile.write_text(text)
+    with deltoctl.open_robot(profile, sim=True) as robot:
+        # a 0.5 s ramp (1° at 2°/s), and 0.2 s more allowed
+        report = robot.jog({"rj_dg_1_2": "-1deg"}, velocity="2deg/s")
+    assert report["settled"] is True, report
