@@ -151,4 +151,5 @@ def test_a_protocol_2_header_with_a_length_beyond_any_packet_is_passed_by():
     data = b"\xff\xff\xfd" * 3 + b"\xff"
     longest = dxl2.fast_sync_status([(0, i, data) for i in range(dxl2.MAX_ID + 1)])
     [(device_id, instruction, body)] = dxl2.PacketReader().feed(longest)
-    assert device_id == dxl2.BROADCAST_ID and len(body) == (dxl2.MAX_ID + 1) * 14 - 2
+    assert (device_id, instruction) == (dxl2.BROADCAST_ID, dxl2.STATUS)
+    assert len(body) == (dxl2.MAX_ID + 1) * 14 - 2
