@@ -11,7 +11,7 @@ from collections.abc import MutableMapping
 from typing import Any
 
 from deltoctl.core.exchange import ExchangePolicy, Reopener
-from deltoctl.errors import DeltoctlError, NoAnswer
+from deltoctl.errors import DeltoctlError, LinkLost, NoAnswer
 from deltoctl.servo.frames import Reply
 from deltoctl.servo.session import Done, Session
 
@@ -73,31 +73,54 @@ class SerialLink:
         return True
 
     # -- bytes -----------------------------------------------------------------------------------
+    def _port(self) -> Any:
+        """The open port; LinkLost while it is away (lost, not yet reopened)."""
+        if self.port is None:
+            raise LinkLost(f"{self.url} is not open (lost, or closed)",
+                           hint="check the adapter and its cable")
+        return self.port
+
+    def _gone(self, exc: OSError) -> LinkLost:
+        return LinkLost(f"{self.url} went away: {exc}", hint="check the adapter and its cable")
+
     def write(self, packet: bytes) -> None:
         """Write a request; bytes left over from an exchange that went wrong are dropped
-        first."""
-        port = self.port
-        if self._stale:
-            port.reset_input_buffer()
-            self._stale = False
-        if self._poll is None:  # no file descriptor (not POSIX), or traced: pyserial's calls
-            port.write(packet)
-            return
-        view = memoryview(packet)
-        while view:
-            view = view[os.write(port.fd, view):]
+        first. LinkLost when the port is away or fails."""
+        port = self._port()
+        try:
+            if self._stale:
+                port.reset_input_buffer()
+                self._stale = False
+            if self._poll is None:  # no file descriptor (not POSIX), or traced: pyserial's calls
+                port.write(packet)
+                return
+            view = memoryview(packet)
+            while view:
+                view = view[os.write(port.fd, view):]
+        except OSError as exc:  # pyserial's errors are OSErrors too
+            raise self._gone(exc) from None
 
     def flush(self) -> None:
         """Until every byte written has left (a request without replies, before a return)."""
-        self.port.flush()
+        try:
+            self._port().flush()
+        except OSError as exc:
+            raise self._gone(exc) from None
 
     def collect(self, session: Session, timeout: float) -> Done:
         """The replies the session expects, taken as their bytes come (the hot path of the
         sync loops: each read is checked while later replies are still on the wire), until
-        all are in or ``timeout`` passes."""
+        all are in or ``timeout`` passes. LinkLost when the port is away or fails."""
+        port = self._port()
+        try:
+            return self._collect(port, session, timeout)
+        except OSError as exc:
+            raise self._gone(exc) from None
+
+    def _collect(self, port: Any, session: Session, timeout: float) -> Done:
         receive = session.receive
         if self._poll is not None:
-            fd, poll, read, clock = self.port.fd, self._poll.poll, os.read, time.perf_counter
+            fd, poll, read, clock = port.fd, self._poll.poll, os.read, time.perf_counter
             deadline = clock() + timeout
             while True:
                 left = deadline - clock()
@@ -108,7 +131,6 @@ class SerialLink:
                     self._stale = session.received != session.expected_bytes
                     return event
         else:
-            port = self.port
             deadline = time.monotonic() + timeout
             while time.monotonic() < deadline:
                 data = port.read(port.in_waiting or 1)

@@ -9,6 +9,7 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 from deltoctl.core.loop import CommLoop
+from deltoctl.errors import LinkLost
 from deltoctl.servo.frames import Reply
 from deltoctl.servo.serial_io import SerialLink
 from deltoctl.servo.session import Session
@@ -81,7 +82,7 @@ class SyncLoops:
             if fast.loop.due():
                 self._inflight = (fast, ids)
                 self.send(fast.address, fast.length, ids)
-        except OSError as exc:  # pyserial's errors are OSErrors too
+        except (OSError, LinkLost) as exc:  # pyserial's errors are OSErrors too
             self._inflight = None
             self.lost(exc)
 
@@ -93,7 +94,7 @@ class SyncLoops:
         self._inflight = None
         try:
             replies = self.replies(ids, fast.loop)
-        except OSError as exc:
+        except (OSError, LinkLost) as exc:
             self.lost(exc)
             return
         fast.take(replies)

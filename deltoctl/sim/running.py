@@ -107,16 +107,24 @@ def registered(profile: Any, faults: Mapping[str, Any], blocks: Sequence[str],
     entry = {"pid": os.getpid(), "profile": profile.name, "hash": profile_hash(profile),
              "faults": normal_faults(faults), "blocks": list(blocks), "buses": dict(buses)}
     path = folder / f"{os.getpid()}.json"
-    fd, temp = tempfile.mkstemp(dir=folder, prefix=".", suffix=".tmp")
-    try:
+    temp = None
+    try:  # a full or read-only directory: warned about, the server goes on unregistered
+        fd, temp = tempfile.mkstemp(dir=folder, prefix=".", suffix=".tmp")
         with os.fdopen(fd, "w") as f:
             json.dump(entry, f)
         os.replace(temp, path)
+    except OSError as exc:
+        if temp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(temp)
+        warn(f"--sim will not find this simulator: {exc}")
+        yield None
+        return
+    try:
         yield path
     finally:
-        for leftover in (temp, path):
-            with contextlib.suppress(OSError):
-                os.unlink(leftover)
+        with contextlib.suppress(OSError):
+            os.unlink(path)
 
 
 def find(profile: Any, faults: Mapping[str, Any], hardware: Sequence[str],

@@ -198,3 +198,26 @@ def test_a_sim_option_the_profiles_simulator_does_not_declare_is_refused(cli, it
     name = item.split("=")[0]
     assert f"--sim-option {name!r}: not for dg-5f-right" in result.stderr
     assert "firmware" in result.stderr and "stall" in result.stderr  # what it takes
+
+
+def test_a_read_only_sims_dir_is_a_warning_and_the_server_goes_on_unregistered(monkeypatch):
+    import errno
+
+    from deltoctl.profile.catalog import load_profile
+    from deltoctl.sim import running
+
+    folder = sims_dir()
+    folder.parent.mkdir(mode=0o700)
+    folder.mkdir(mode=0o500)
+
+    def read_only(*args, **kwargs):  # as the file system says it, whoever runs the test
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    if os.geteuid() == 0:  # root writes into a 0500 directory
+        monkeypatch.setattr(running.tempfile, "mkstemp", read_only)
+    warnings: list[str] = []
+    with running.registered(load_profile("bioscara-arm"), {}, ["bioscara_arm"],
+                            {"i2c": "i2c+tcp://127.0.0.1:7"}, warnings.append) as path:
+        assert path is None
+    assert len(warnings) == 1 and "--sim will not find this simulator" in warnings[0]
+    assert list(folder.iterdir()) == []

@@ -139,3 +139,17 @@ def test_protocol_2_packets_round_trip_however_split(device_id, instruction, bod
     reader = dxl2.PacketReader()
     assert [f for piece in chunks(packet, cuts) for f in reader.feed(piece)] == \
         [(device_id, instruction, body)]
+
+
+def test_a_protocol_2_header_with_a_length_beyond_any_packet_is_passed_by():
+    reader = dxl2.PacketReader()
+    ping = dxl2.packet(1, 0x01)
+    with pytest.raises(ProtocolError, match="length 65535"):
+        reader.feed(dxl2.HEADER + b"\x07\xff\xff" + ping)  # a garbled length, then a request
+    assert reader.feed(b"") == [(1, 0x01, b"")]
+    # the longest of ours, stuffed at every chance, still comes through
+    data = b"\xff\xff\xfd" * 3 + b"\xff"
+    longest = dxl2.fast_sync_status([(0, i, data) for i in range(dxl2.MAX_ID + 1)])
+    [(device_id, instruction, body)] = dxl2.PacketReader().feed(longest)
+    assert (device_id, instruction) == (dxl2.BROADCAST_ID, dxl2.STATUS)
+    assert len(body) == (dxl2.MAX_ID + 1) * 14 - 2

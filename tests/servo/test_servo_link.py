@@ -134,3 +134,21 @@ def test_the_sync_loops_read_slow_in_full_and_leave_the_fast_one_on_the_wire(bus
         assert lost and not loops.pending
     finally:
         link.close()
+
+
+def test_a_lost_port_raises_link_lost_not_attribute_errors(bus):
+    from deltoctl.errors import LinkLost
+
+    link, session = link_to(bus)
+    try:
+        os.close(link.port.fd)  # the adapter goes away under an open port
+        with pytest.raises(LinkLost):
+            link.exchange(session, 1, PING)
+        link.lost()
+        for call in (lambda: link.write(b"\x00"), link.flush,
+                     lambda: link.collect(session, 0.01),
+                     lambda: link.request(session, 1, READ, bytes([0, 1]), "read 1")):
+            with pytest.raises(LinkLost, match="not open"):
+                call()
+    finally:
+        link.close()

@@ -82,6 +82,9 @@ class Joint:
             named = ", ".join(f"{k} {v:g}" for k, v in wide.items())
             raise InvalidInput(f"joint {comp.name}: {named}: the joint takes a 32-bit float, "
                                f"up to {FLOAT32_MAX:.3g}")
+        if not 0 < self.max_velocity < math.inf:  # every move's speed and time divide by it
+            raise InvalidInput(f"joint {comp.name}: max_velocity {self.max_velocity:g} must be a "
+                               "speed above 0")
         self.bus, self.name = bus, comp.name
         self.offset = 0.0
         self.flags = codec.INITIAL_FLAGS
@@ -408,7 +411,8 @@ class BioscaraDriver(Driver):
         if hook is not None:  # the state the goals were sent from
             hook(time.time_ns(), start, setpoints)
         began = time.monotonic()
-        timeout = profile.safety.home_timeout or 30.0
+        # the move's own time and home_timeout more (else 5 s), as every family's
+        timeout = max(soonest.values(), default=0.0) + (profile.safety.home_timeout or 5.0)
         errors: dict[str, float] = {}
         still = dict.fromkeys(targets, 0)  # reads in a row each joint has been still
         while True:

@@ -448,7 +448,9 @@ class DynamixelDriver(Driver):
 
     def _stopped(self, joints: list[str]) -> set[str]:
         """The joints whose servo says its profile is done (Moving, 122, reads 0); a servo
-        that does not answer is not known to have stopped."""
+        that does not answer, or a bus whose port is lost, is not known to have stopped."""
+        if self.port is None:
+            return set()
         ids = {i: c.name for i, c in self.joints.items() if c.name in joints and i in self.present}
         replies = self._sync_read(MOVING.address, 1, list(ids)) if ids else []
         return {ids[i] for i, error, data in replies if i in ids and data and data[0] == 0}

@@ -21,6 +21,10 @@ HEADER = b"\xff\xff\xfd\x00"
 BROADCAST_ID = 0xFE
 MAX_ID = 0xFC
 STATUS = 0x55  # the instruction of a status packet
+# The longest LEN of a packet of ours: a Fast Sync Read reply of the 10-byte PVL from every ID
+# (INST, [ERR, ID, data, CRC] a servo), stuffed at every chance (a byte more in three). A
+# header with a longer one is noise: the reader passes it by instead of waiting for 64 KiB.
+MAX_LENGTH = (1 + (MAX_ID + 1) * (2 + 10 + 2)) * 4 // 3 + 2
 
 STATUS_ERRORS = {1: "result fail", 2: "instruction error", 3: "CRC error",
                  4: "data range error", 5: "data length error", 6: "data limit error",
@@ -167,6 +171,12 @@ class PacketReader:
             if length < 3:
                 del self._buf[:4]
                 raise ProtocolError(f"packet length {length} is too short")
+            if length > MAX_LENGTH:
+                if out:
+                    return out  # the packets before it first; the next feed raises
+                del self._buf[:4]
+                raise ProtocolError(f"packet length {length} is beyond any packet "
+                                    f"({MAX_LENGTH} at most)")
             if len(self._buf) < total:
                 return out
             raw = bytes(self._buf[:total])

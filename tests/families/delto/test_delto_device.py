@@ -309,3 +309,41 @@ def test_truncated_and_late_replies_are_counted_and_recovered(gripper):
 def test_sim_serve_faults_from_the_command_line(cli):
     result = cli("sim", "serve", "dg-4f", "--stall", "j_dg_9_9")
     assert result.exit_code == 2 and "no joint 'j_dg_9_9'" in result.stderr
+
+
+def _a_joint(system: System) -> str:
+    return next(k.split("/")[0] for k in system.read() if k.endswith("/position"))
+
+
+def test_a_link_lost_during_a_move_raises_link_lost(gripper):
+    from deltoctl.errors import LinkLost
+
+    server = gripper("dg-4f")
+    with System(load_profile("dg-4f"), [server.endpoint]) as system:
+        driver, joint = system.members[0].driver, _a_joint(system)
+        with pytest.raises(LinkLost, match="lost during the move"):
+            driver.move({joint: 0.2}, progress=lambda _: driver._lost(OSError("unplugged")))
+
+
+def test_a_gripper_that_does_not_answer_a_move_raises_no_answer(gripper):
+    from deltoctl.errors import NoAnswer
+
+    server = gripper("dg-4f")
+    with System(load_profile("dg-4f"), [server.endpoint]) as system:
+        driver, joint = system.members[0].driver, _a_joint(system)
+        server.firmware.faults.delay = 0.7  # beyond the 0.5 s data timeout
+        with pytest.raises(NoAnswer, match="not answering"):
+            driver.move({joint: 0.2})
+        server.firmware.faults.delay = 0.0
+
+
+def test_a_move_halted_before_its_first_cycle_ends_unsettled(gripper):
+    server = gripper("dg-4f")
+    with System(load_profile("dg-4f"), [server.endpoint]) as system:
+        driver, joint = system.members[0].driver, _a_joint(system)
+        driver.halted.set()
+        try:
+            result = driver.move({joint: 0.2})
+        finally:
+            driver.halted.clear()
+    assert result.settled is False and result.unsettled == [joint]

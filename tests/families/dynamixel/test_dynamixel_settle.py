@@ -65,3 +65,19 @@ def test_a_goal_sets_moving_when_it_is_written_however_close():
     servo.write(116, (2047 + 100).to_bytes(4, "little"))
     servo.read(132, 4)
     assert servo.memory[122] == 1 and servo.get("Present Position") < 2047 + 100
+
+
+def test_a_port_lost_during_a_move_ends_it_unsettled_and_reads_raise_link_lost(tmp_path):
+    from deltoctl.errors import LinkLost
+
+    with deltoctl.open_robot(_quick_timeout(tmp_path), sim=True) as robot:
+        robot.home()
+        driver = robot.system.members[0].driver
+        result = driver.move({"elbow_flex": math.radians(10)},
+                             progress=lambda _: driver._lost(OSError("unplugged")))
+        assert result.settled is False and "elbow_flex" in result.unsettled
+        assert driver.connected is False and driver.port is None
+        with pytest.raises(LinkLost):
+            driver.read_registers("elbow_flex", ["Moving"])
+        with pytest.raises(LinkLost):
+            driver.set_torque(["elbow_flex"], True)
