@@ -128,6 +128,9 @@ READINGS = frozenset({
     "Present PWM", "Present Load", "Present Velocity", "Present Position",
     "Velocity Trajectory", "Position Trajectory", "Present Input Voltage",
     "Present Temperature", "Backup Ready",
+    # Protocol 1.0's
+    "Moving Speed", "Present Speed", "Present Voltage", "Registered", "Goal Torque",
+    "Current",
 })
 # how the servo is addressed and answers on its bus: a restore that changed one would lose the
 # servo (the profile addresses it by ID at the bus's rate); `register set` changes them
@@ -139,10 +142,10 @@ def config_rules() -> dict[str, tuple[int | None, int | None, str | None]]:
     """For `config restore`: each item's documented range over every model (the driver
     checks each servo's own model's before writing), and the --allow that a safety setting
     needs to be written (None for the others)."""
-    from deltoctl.families.dynamixel.models import MODELS
+    from deltoctl.families.dynamixel.models import ALL_MODELS
 
     rules: dict[str, tuple[int | None, int | None, str | None]] = {}
-    for model in MODELS:
+    for model in ALL_MODELS:
         for i in model.table:
             low, high, _ = rules.get(i.name, (i.low, i.high, None))
             rules[i.name] = (_widest(low, i.low, min), _widest(high, i.high, max),
@@ -156,7 +159,7 @@ def _widest(a: int | None, b: int | None, pick: Any) -> int | None:
 
 def item_names() -> list[str]:
     """Item names as the register verbs take them (return_delay_time), of every model."""
-    from deltoctl.families.dynamixel.models import MODELS
+    from deltoctl.families.dynamixel.models import ALL_MODELS
 
-    names = dict.fromkeys(i.name.lower().replace(" ", "_") for m in MODELS for i in m.table)
+    names = dict.fromkeys(i.name.lower().replace(" ", "_") for m in ALL_MODELS for i in m.table)
     return list(names)
