@@ -18,7 +18,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-
 from typing import TYPE_CHECKING
 
 from deltoctl.families.dynamixel.control_table import XL430, Item
