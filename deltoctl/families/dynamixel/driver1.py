@@ -131,21 +131,27 @@ class Protocol1Driver(DynamixelDriver):
             return self.values
         ids = list(self.present)
         try:
-            if all(self._model_or_ax(i).bulk_read for i in ids):
-                replies = self.bulk_read([(i, *PRESENT) for i in ids])
-            else:
-                replies = []
-                for i in ids:
-                    self.stats["packets"] += 1
-                    done = self.link.exchange(self.session, i, p1.READ, p1.read_params(*PRESENT))
-                    self.stats["errors"] += not done.complete
-                    replies += done.replies
+            replies = self.read_present(ids)
         except OSError as exc:
             self._lost(exc)
             return self.values
         loop.count(len(replies) == len(ids))
         self._take_present(replies)
         return self.values
+
+    def read_present(self, ids: list[int]) -> list[Reply]:
+        """Present Position to Temperature (36, 8 bytes) of each servo: one BULK_READ when
+        every one is an MX, else a READ of each in turn."""
+        if all(self._model_or_ax(i).bulk_read for i in ids):
+            return self.bulk_read([(i, *PRESENT) for i in ids])
+        replies = []
+        params = p1.read_params(*PRESENT)
+        for i in ids:
+            self.stats["packets"] += 1
+            done = self.link.exchange(self.session, i, p1.READ, params)
+            self.stats["errors"] += not done.complete
+            replies += done.replies
+        return replies
 
     def bulk_read(self, reads: list[tuple[int, int, int]]) -> list[Reply]:
         self.stats["packets"] += 1
