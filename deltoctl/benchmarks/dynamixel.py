@@ -12,6 +12,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import time
+from functools import partial
 from typing import Any
 
 _SERVE_BUS = """
@@ -495,6 +496,10 @@ def _sdk_p1_reads(pty: str, servos: int) -> Any:
     return read, port.closePort
 
 
+def _count(read: Any, ids: list[int]) -> int:
+    return len(read(ids))
+
+
 def measure_protocol1(duration: float, servos: int = 5) -> dict:
     """Five AX-12A on a Protocol 1.0 bus at 1 Mbps, each read in turn (36, 8 bytes: position
     to temperature; Protocol 1.0 has no Sync Read): deltoctl's cycle paced against the wire's
@@ -514,7 +519,7 @@ def measure_protocol1(duration: float, servos: int = 5) -> dict:
         try:
             driver = _p1_driver(pty, servos)
             ids = list(range(1, servos + 1))
-            ours = _flat_out(lambda: len(driver.read_present(ids)), duration, proc.pid)
+            ours = _flat_out(partial(_count, driver.read_present, ids), duration, proc.pid)
             driver.cleanup()
             sdk_read, close = _sdk_p1_reads(pty, servos)
             theirs = _flat_out(sdk_read, duration, proc.pid) if sdk_read else None
