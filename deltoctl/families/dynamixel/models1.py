@@ -5,12 +5,12 @@ model's page in ``MODELS_1``).
 
 EEPROM items lie below address 24 and take writes only with torque off. Present Speed, Present
 Load and Moving Speed are sign-magnitude with the sign in bit 10 (a set bit: clockwise).
-Facts not checked against the model's own page are in ``UNVERIFIED_1``.
+What a page leaves open is in ``UNVERIFIED_1``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 from deltoctl.servo import items
@@ -37,8 +37,8 @@ _COMMON = (
     Item1(6, 2, "CW Angle Limit", low=0, high=1023, safety=True),
     Item1(8, 2, "CCW Angle Limit", default=1023, low=0, high=1023, safety=True),
     Item1(11, 1, "Temperature Limit", default=70, low=0, high=99, safety=True),
-    Item1(12, 1, "Min Voltage Limit", default=60, low=50, high=160, safety=True),
-    Item1(13, 1, "Max Voltage Limit", default=140, low=50, high=160, safety=True),
+    Item1(12, 1, "Min Voltage Limit", default=60, low=50, high=250, safety=True),
+    Item1(13, 1, "Max Voltage Limit", default=140, low=50, high=250, safety=True),
     Item1(14, 2, "Max Torque", default=1023, low=0, high=1023, safety=True),
     Item1(16, 1, "Status Return Level", default=2, low=0, high=2),
     Item1(17, 1, "Alarm LED", default=36, low=0, high=127),
@@ -64,23 +64,27 @@ _COMPLIANCE = (  # AX and RX: compliance instead of a PID
     Item1(28, 1, "CW Compliance Slope", default=32, low=0, high=254),
     Item1(29, 1, "CCW Compliance Slope", default=32, low=0, high=254),
 )
-_MX = (  # MX: multi-turn, resolution, a PID, acceleration
+_MX = (  # MX: multi-turn, resolution, a PID, a clock, acceleration
     Item1(20, 2, "Multi Turn Offset", signed=True, low=-24576, high=24576, safety=True),
     Item1(22, 1, "Resolution Divider", default=1, low=1, high=4),
     Item1(26, 1, "D Gain", low=0, high=254),
     Item1(27, 1, "I Gain", low=0, high=254),
     Item1(28, 1, "P Gain", default=32, low=0, high=254),
+    Item1(50, 2, "Realtime Tick", "R"),
     Item1(73, 1, "Goal Acceleration", low=0, high=254),
 )
-_MX_TORQUE = (  # MX-64 and MX-106: current sensing and torque control
-    Item1(68, 2, "Current", "RW", default=2048, low=0, high=4095),
+_MX_TORQUE = (  # MX-64 and MX-106: current sensing (4.5 mA a step from 2048) and torque control
+    Item1(68, 2, "Current", "RW", low=0, high=4095),
     Item1(70, 1, "Torque Control Mode Enable", low=0, high=1),
     Item1(71, 2, "Goal Torque", low=-1023, high=1023, sign_bit=10),
 )
 _MX_RANGES = {"CW Angle Limit": 4095, "CCW Angle Limit": 4095, "Goal Position": 4095}
 
 
-def _layout(*parts: tuple[Item1, ...], wide: bool = False, **defaults: int) -> tuple[Item1, ...]:
+def _layout(*parts: tuple[Item1, ...], wide: bool = False,
+            **defaults: int) -> tuple[Item1, ...]:
+    """The items of ``parts``; ``wide``: positions of 0-4095; ``defaults`` by item key
+    (max_voltage_limit=160)."""
     table = [i for part in parts for i in part]
     if wide:
         table = [replace(i, high=_MX_RANGES[i.name],
@@ -99,7 +103,7 @@ class Model1:
     number: int
     name: str
     page: str  # its e-manual page
-    layout: tuple[Item1, ...]
+    layout: tuple[Item1, ...] = field(repr=False)
     resolution: int  # position steps over ``degrees``
     degrees: float
     rpm_per_unit: float  # Moving / Present Speed
@@ -152,37 +156,47 @@ class Model1:
         return 0.0
 
 
-AX = _layout(_COMMON, _COMPLIANCE)
-RX = _layout(_COMMON, _COMPLIANCE, temperature_limit=80)
-MX_28 = _layout(_COMMON, _MX, wide=True, temperature_limit=80)
-MX_64 = _layout(_COMMON, _MX, _MX_TORQUE, wide=True, temperature_limit=80)
+# the defaults that differ, as each page's table gives them (the Baud Rate's: 1 Mbps on the
+# AX, 57600 bps on the RX and MX; the MX's Punch: 0)
+_MX_DEFAULTS = dict(baud_rate=34, temperature_limit=80, punch=0)
+AX_12 = _layout(_COMMON, _COMPLIANCE)
+AX_18 = _layout(_COMMON, _COMPLIANCE, temperature_limit=75, max_torque=983, torque_limit=983)
+RX = _layout(_COMMON, _COMPLIANCE, baud_rate=34, temperature_limit=80, max_voltage_limit=190)
+MX_28 = _layout(_COMMON, _MX, wide=True, max_voltage_limit=160, **_MX_DEFAULTS)
+MX_64 = _layout(_COMMON, _MX, _MX_TORQUE, wide=True, max_voltage_limit=240, **_MX_DEFAULTS)
+MX_106 = _layout(_COMMON, _MX, _MX_TORQUE, (
+    Item1(10, 1, "Drive Mode", low=0, high=3, safety=True),), wide=True,  # dual joint
+    max_voltage_limit=160, **_MX_DEFAULTS)
 
+# Each row's page is emanual.robotis.com/docs/en/dxl/<series>/<model>/ (its source in
+# ROBOTIS-GIT/emanual: docs/en/dxl/<series>/<model>.md), whose control table the row follows.
 _E = "emanual.robotis.com/docs/en/dxl"
 MODELS_1: tuple[Model1, ...] = (
-    Model1(12, "AX-12A", f"{_E}/ax/ax-12a/", AX, 1024, 300.0, 0.111),
-    Model1(18, "AX-18A", f"{_E}/ax/ax-18a/", AX, 1024, 300.0, 0.111),
+    Model1(12, "AX-12A", f"{_E}/ax/ax-12a/", AX_12, 1024, 300.0, 0.111),
+    Model1(18, "AX-18A", f"{_E}/ax/ax-18a/", AX_18, 1024, 300.0, 0.111),
     Model1(28, "RX-28", f"{_E}/rx/rx-28/", RX, 1024, 300.0, 0.111),
     Model1(64, "RX-64", f"{_E}/rx/rx-64/", RX, 1024, 300.0, 0.111),
     Model1(29, "MX-28", f"{_E}/mx/mx-28/", MX_28, 4096, 360.0, 0.114, bulk_read=True),
     Model1(310, "MX-64", f"{_E}/mx/mx-64/", MX_64, 4096, 360.0, 0.114, bulk_read=True),
-    Model1(320, "MX-106", f"{_E}/mx/mx-106/", MX_64, 4096, 360.0, 0.114, bulk_read=True),
+    Model1(320, "MX-106", f"{_E}/mx/mx-106/", MX_106, 4096, 360.0, 0.114, bulk_read=True),
 )
 
-# What was not checked against the model's own e-manual page (the AX-12A's, AX-18A's and
-# MX-28's pages were found, their specifications read: 0-300° at 0.29°, 0-360° at 4096 steps;
-# the control tables follow the layout every page of a series shares). Correct a value, then
-# remove it from here.
+# What the pages do not say, or say otherwise than the table keeps. Every page's table was
+# read (addresses, sizes, access, initial values, the Baud Rate codes, the error bits, "no
+# status to a broadcast ID whatever the Status Return Level", Goal Acceleration's 8.583°/s²).
+# Correct a value, then remove it from here.
 UNVERIFIED_1: dict[str, tuple[str, ...]] = {
-    "AX-12A": ("table defaults", "Moving Speed unit 0.111 rpm"),
-    "AX-18A": ("table defaults", "Moving Speed unit 0.111 rpm"),
-    "RX-28": ("page not found", "table defaults", "Temperature Limit 80"),
-    "RX-64": ("page not found", "table defaults", "Temperature Limit 80"),
-    "MX-28": ("table defaults", "Goal Acceleration 73"),
-    "MX-64": ("Current 68", "Torque Control Mode Enable 70", "Goal Torque 71"),
-    "MX-106": ("Drive Mode 10 (dual joint) not in the table", "Current 68",
-               "Torque Control Mode Enable 70", "Goal Torque 71"),
-    "protocol": ("no status to a broadcast PING (dynamixel-sdk's Protocol 1.0 handler has "
-                 "none)",),
+    # the pages give no initial Goal Position or Moving Speed ("-"): the emulator starts at
+    # the middle step at speed 0 (as fast as it can)
+    "AX-12A": ("Goal Position default 512",),
+    "AX-18A": ("Goal Position default 512",),
+    "RX-28": ("Goal Position default 512", "Moving Speed unit 0.111 rpm (an include)"),
+    "RX-64": ("Goal Position default 512", "Moving Speed unit 0.111 rpm (an include)"),
+    # the MX pages' Current row says 0 initially and its text 2048 at idle: the table keeps 0
+    "MX-28": ("Goal Position default 2048", "Multi Turn Offset range ±24576 (an include)"),
+    "MX-64": ("Goal Position default 2048", "Current initial value (0 or 2048)"),
+    "MX-106": ("Goal Position default 2048", "Current initial value (0 or 2048)",
+               "Drive Mode range 0-3 (an include)"),
 }
 
 BY_NUMBER_1 = {m.number: m for m in MODELS_1}

@@ -106,7 +106,35 @@ def test_models_by_number_and_name():
     assert AX_12A.by_name["Goal Position"].high == 1023
     assert BY_NUMBER_1[29].by_name["Goal Position"].high == 4095
     assert all(m.page.startswith("emanual.robotis.com/docs/en/dxl/") for m in MODELS_1)
-    assert set(UNVERIFIED_1) - {m.name for m in MODELS_1} == {"protocol"}
+    assert set(UNVERIFIED_1) <= {m.name for m in MODELS_1}
+
+
+@pytest.mark.parametrize(("model", "facts"), [
+    ("AX-12A", {"Baud Rate": 1, "Temperature Limit": 70, "Max Voltage Limit": 140,
+                "Max Torque": 1023, "Punch": 32, "CCW Angle Limit": 1023}),
+    ("AX-18A", {"Baud Rate": 1, "Temperature Limit": 75, "Max Torque": 983}),
+    ("RX-28", {"Baud Rate": 34, "Temperature Limit": 80, "Max Voltage Limit": 190}),
+    ("RX-64", {"Baud Rate": 34, "Max Voltage Limit": 190, "CW Compliance Slope": 32}),
+    ("MX-28", {"Baud Rate": 34, "Max Voltage Limit": 160, "CCW Angle Limit": 4095,
+               "Punch": 0, "P Gain": 32, "Goal Acceleration": 0}),
+    ("MX-64", {"Max Voltage Limit": 240, "Goal Torque": 0, "Torque Control Mode Enable": 0}),
+    ("MX-106", {"Drive Mode": 0, "Max Voltage Limit": 160, "Resolution Divider": 1}),
+])
+def test_each_model_s_defaults_are_its_page_s(model, facts):
+    """The initial values of each e-manual page's control table (docs/en/dxl/<series>/)."""
+    table = by_name(model).by_name
+    assert {name: table[name].default for name in facts} == facts
+
+
+def test_the_layouts_addresses_are_the_pages():
+    ax, mx = AX_12A.by_name, by_name("MX-106").by_name
+    assert [(ax[n].address, ax[n].size) for n in ("Torque Enable", "Goal Position",
+            "Moving Speed", "Present Position", "Present Load", "Lock", "Punch")] == [
+        (24, 1), (30, 2), (32, 2), (36, 2), (40, 2), (47, 1), (48, 2)]
+    assert [(mx[n].address, mx[n].size) for n in ("Drive Mode", "Multi Turn Offset",
+            "D Gain", "Realtime Tick", "Current", "Goal Torque", "Goal Acceleration")] == [
+        (10, 1), (20, 2), (26, 1), (50, 2), (68, 2), (71, 2), (73, 1)]
+    assert not ax["Torque Enable"].eeprom and ax["Shutdown"].eeprom
 
 
 # -- dynamixel-sdk's Protocol 1.0 handler drives the emulated bus --------------------------------
