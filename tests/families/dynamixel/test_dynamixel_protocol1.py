@@ -177,15 +177,30 @@ def test_sdk_group_sync_write(sdk_bus):
 
 
 def test_sdk_bulk_read_of_mx(sdk_bus):
-    """dynamixel-sdk's GroupBulkRead calls the Protocol 1.0 bulkReadTx with one argument too
-    many (a TypeError), so the handler's own bulkReadTx and readRx are driven here, with the
-    params GroupBulkRead builds (length, ID, address per servo)."""
+    """GroupBulkRead on MX servos. dynamixel-sdk 4.1.0's GroupBulkRead passes the Protocol 1.0
+    bulkReadTx one argument too many (a TypeError); there, the handler's own bulkReadTx and
+    readRx are driven with the params GroupBulkRead builds (length, ID, address per servo)."""
     _, port, ph = sdk_bus
-    assert ph.bulkReadTx(port, [8, 7, 36, 2, 8, 0], 6) == sdk.COMM_SUCCESS
-    first, result, _ = ph.readRx(port, 7, 8)
-    assert result == sdk.COMM_SUCCESS and first[0] | first[1] << 8 == 2048
-    second, result, _ = ph.readRx(port, 8, 2)
-    assert result == sdk.COMM_SUCCESS and second[0] | second[1] << 8 == 29
+    group = sdk.GroupBulkRead(port, ph)
+    assert group.addParam(7, 36, 8) and group.addParam(8, 0, 2)
+    try:
+        assert group.txRxPacket() == sdk.COMM_SUCCESS
+        position, model = group.getData(7, 36, 2), group.getData(8, 0, 2)
+    except TypeError:
+        assert ph.bulkReadTx(port, [8, 7, 36, 2, 8, 0], 6) == sdk.COMM_SUCCESS
+        first, result, _ = ph.readRx(port, 7, 8)
+        assert result == sdk.COMM_SUCCESS
+        second, result, _ = ph.readRx(port, 8, 2)
+        assert result == sdk.COMM_SUCCESS
+        position, model = first[0] | first[1] << 8, second[0] | second[1] << 8
+    assert (position, model) == (2048, 29)
+
+
+def test_sdk_reads_of_an_ax_bus_at_another_rate_time_out(sdk_bus):
+    """A servo answers only at its Baud Rate: at 57600 bps the 1 Mbps bus is silent."""
+    _, port, ph = sdk_bus
+    assert port.setBaudRate(57600)
+    assert ph.read2ByteTxRx(port, 1, 36)[1] == sdk.COMM_RX_TIMEOUT
 
 
 # -- every verb on the PhantomX-class arm ---------------------------------------------------------
@@ -254,3 +269,16 @@ def test_a_bad_protocol_version_is_a_usage_error(cli, tmp_path):
     run = cli("--sim", "-p", str(bad), "identify")
     assert run.exit_code == 2, run.stderr
     assert "protocol_version '3' is not a Dynamixel protocol" in run.stderr
+
+
+def test_a_goal_outside_the_joint_is_refused_and_a_status_error_says_what_to_do(cli):
+    sim = ("--sim", "-p", "phantomx-arm")
+    run = cli(*sim, "register", "set", "elbow", "goal_position", "1023", "--yes")
+    assert run.exit_code == 5  # 149.7° past the elbow's 1.8 rad: nothing written
+    assert "outside its limits" in run.stderr
+    run = cli(*sim, "register", "set", "elbow", "cw_compliance_slope", "255", "--yes")
+    assert run.exit_code == 1
+    assert "refused to write CW Compliance Slope: range error" in run.stderr
+    assert "check the value written" in run.stderr and "Traceback" not in run.stderr
+    run = cli(*sim, "reboot", "elbow", "--yes")
+    assert run.exit_code == 1 and "no REBOOT instruction" in run.stderr
