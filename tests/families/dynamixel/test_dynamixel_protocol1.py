@@ -282,3 +282,17 @@ def test_a_goal_outside_the_joint_is_refused_and_a_status_error_says_what_to_do(
     assert "check the value written" in run.stderr and "Traceback" not in run.stderr
     run = cli(*sim, "reboot", "elbow", "--yes")
     assert run.exit_code == 1 and "no REBOOT instruction" in run.stderr
+
+
+def test_the_trace_names_protocol_1_frames(cli, tmp_path):
+    assert p1.frame_name(p1.read(3, 36, 8)) == "READ"
+    assert p1.frame_name(p1.FRAMES.status(3, 0, bytes(8))) == "STATUS"
+    assert p1.frame_name(p1.sync_write(24, 1, {1: b"\x01"})) == "SYNC_WRITE"
+    assert p1.frame_name(b"\x00\x01") is None
+    log = tmp_path / "wire.ndjson"
+    run = cli("--sim", "-p", "phantomx-arm", "--log-file", str(log), "jog", "elbow", "5deg",
+              "--yes")
+    assert run.exit_code == 0, run.stderr
+    names = {record["frame"] for record in map(json.loads, log.read_text().splitlines())
+             if record["logger"] == "deltoctl.wire" and "frame" in record}
+    assert {"PING", "READ", "SYNC_WRITE"} <= names  # (a reply read in pieces has no name)
