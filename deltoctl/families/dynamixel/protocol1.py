@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from deltoctl.servo.frames.checksum import BROADCAST_ID, FRAMES, HEADER, frame
+from deltoctl.servo.frames.checksum import BROADCAST_ID, FRAMES, HEADER, checksum, frame
 from deltoctl.servo.session import DEVICE, HOST, Instructions, Session
 
 __all__ = ["BROADCAST_ID", "DEVICE", "HOST"]
@@ -59,13 +59,19 @@ def error_hint(error: int) -> str:
 
 
 def frame_name(data: bytes) -> str | None:
-    """The instructions of the frames that start in ``data`` (STATUS for a status: its error
-    byte is 0 when all is well), for the -vv trace."""
+    """The instructions of the whole frames that start in ``data`` (STATUS for a status),
+    for the -vv trace; bytes that only look like a header (the tail of a Protocol 2.0 reply
+    holding FF FF) are no frame: their checksum does not check."""
     names = []
     at = data.find(HEADER)
-    while at >= 0 and at + 4 < len(data):
-        names.append(INSTRUCTIONS.get(data[at + 4], "STATUS"))
-        at = data.find(HEADER, at + 4 + max(1, data[at + 3]))
+    while at >= 0 and at + 5 < len(data):
+        end = at + 4 + data[at + 3]
+        if data[at + 3] >= 2 and end <= len(data) and checksum(data, at + 2, end - 1) == \
+                data[end - 1]:
+            names.append(INSTRUCTIONS.get(data[at + 4], "STATUS"))
+            at = data.find(HEADER, end)
+        else:
+            at = data.find(HEADER, at + 1)
     if not names:
         return None
     return names[0] if len(names) == 1 else " + ".join(dict.fromkeys(names))

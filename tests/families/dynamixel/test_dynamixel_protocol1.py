@@ -289,6 +289,7 @@ def test_the_trace_names_protocol_1_frames(cli, tmp_path):
     assert p1.frame_name(p1.FRAMES.status(3, 0, bytes(8))) == "STATUS"
     assert p1.frame_name(p1.sync_write(24, 1, {1: b"\x01"})) == "SYNC_WRITE"
     assert p1.frame_name(b"\x00\x01") is None
+    assert p1.frame_name(b"\x02\xff\xff\xff\xff\x00\x10") is None  # a 2.0 reply's tail
     log = tmp_path / "wire.ndjson"
     run = cli("--sim", "-p", "phantomx-arm", "--log-file", str(log), "jog", "elbow", "5deg",
               "--yes")
