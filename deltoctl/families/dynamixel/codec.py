@@ -81,12 +81,7 @@ HARDWARE_ERRORS = {0: "input voltage", 2: "overheating", 3: "motor encoder",
 def frame_name(data: bytes) -> str | None:
     """The instructions of the packets that start in ``data``, for the -vv trace:
     ``SYNC_READ``, ``STATUS``, ``22 × STATUS`` (the replies to a sync read read at once);
-    None when no packet starts in it (the rest of a reply). A Protocol 1.0 bus's frames are
-    named by its own codec."""
-    if HEADER not in data:
-        from deltoctl.families.dynamixel.protocol1 import frame_name as protocol1_name
-
-        return protocol1_name(data)
+    None when no packet starts in it (the rest of a reply)."""
     names = []
     at = data.find(HEADER)
     while at >= 0 and at + 7 < len(data):

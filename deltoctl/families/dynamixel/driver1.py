@@ -68,6 +68,13 @@ class Protocol1Driver(DynamixelDriver):
             self.loops[name] = CommLoop(f"{hw.name}_{name}", rate if "reader" in name else 0.0)
         self._pending = False
 
+    def configure(self) -> None:
+        from deltoctl import trace
+
+        if trace.PACKETS:  # -vv: this link's frames are Protocol 1.0's, not the family's 2.0
+            trace.name_frames(self.url, p1.frame_name)
+        super().configure()
+
     # -- wire ------------------------------------------------------------------------------------
     def ping(self, device_id: int) -> tuple[int, int] | None:
         """(model number, firmware): a PING, then the two read at address 0 (a Protocol 1.0

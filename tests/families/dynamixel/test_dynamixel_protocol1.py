@@ -284,6 +284,15 @@ def test_a_goal_outside_the_joint_is_refused_and_a_status_error_says_what_to_do(
     assert run.exit_code == 1 and "no REBOOT instruction" in run.stderr
 
 
+@pytest.fixture
+def _trace_off():
+    from deltoctl import trace
+
+    yield
+    trace.configure(0, None)
+
+
+@pytest.mark.usefixtures("_trace_off")
 def test_the_trace_names_protocol_1_frames(cli, tmp_path):
     assert p1.frame_name(p1.read(3, 36, 8)) == "READ"
     assert p1.frame_name(p1.FRAMES.status(3, 0, bytes(8))) == "STATUS"
