@@ -4,13 +4,15 @@ MH5's two buses in one System cycle against the slower bus's wire time; then a b
 models (five XM430, two XL330) at 1 kHz and 4 Mbps against its wire time, read as one Sync
 Read, one Bulk Read or a Sync Read per model; flat out against dynamixel-sdk's GroupBulkRead
 on that paced bus (where the wire caps both), and on an unpaced one (what the software
-costs)."""
+costs); then five AX-12A on a Protocol 1.0 bus, read in turn, against the wire and against
+dynamixel-sdk's Protocol 1.0 handler."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
 import time
+from functools import partial
 from typing import Any
 
 _SERVE_BUS = """
@@ -131,6 +133,7 @@ def measure(servos: int, duration: float) -> dict:
     results["paced"] = paced
     results["two_buses"] = measure_two_buses(duration)
     results["mixed_bus"] = measure_mixed_bus(duration)
+    results["protocol1"] = measure_protocol1(duration)
     return results
 
 
@@ -440,4 +443,96 @@ def measure_mixed_bus(duration: float, baud: int = 4_000_000) -> dict:
                     "ratio_to_sdk": round(flat / theirs, 2),
                     "goal_ratio_ge_2": flat >= 2 * theirs})
     out["unpaced"] = measure_mixed_unpaced(duration, baud)
+    return out
+
+
+# -- Protocol 1.0: five AX-12A read in turn -------------------------------------------------------
+
+_SERVE_P1 = """
+import sys
+from deltoctl.families.dynamixel.emulator import DynamixelPtyServer
+from deltoctl.families.dynamixel.emulator1 import Protocol1Bus, Servo1
+servos = [Servo1(i) for i in range(1, {n} + 1)]
+for servo in servos:
+    servo.memory[5] = 0  # Return Delay Time 0, as the MH5 sets its X servos'
+server = DynamixelPtyServer(Protocol1Bus(servos, baud=1000000), pace={pace}).start()
+print(server.port, flush=True)
+sys.stdin.read()
+"""
+
+
+def _p1_driver(pty: str, servos: int) -> Any:
+    from deltoctl import registry
+    from deltoctl.core.driver import Block
+    from deltoctl.families.dynamixel.protocols import BusDriver
+    from deltoctl.profile.model import Component, Hardware, Profile
+
+    family = registry.get("dynamixel")
+    assert family is not None
+    hw = Hardware("bus", family=family.name, params={"protocol_version": "1.0"}, joints=[
+        Component("joint", f"j{i}", address=i) for i in range(1, servos + 1)])
+    driver = BusDriver(Block(Profile("bench", hardware=[hw]), hw, family,
+                                   f"serial://{pty}?baud=1000000"))
+    driver.configure()
+    return driver
+
+
+def _sdk_p1_reads(pty: str, servos: int) -> Any:
+    """dynamixel-sdk's Protocol 1.0 handler reading each servo in turn (None when it is not
+    installed), and what closes its port."""
+    try:
+        import dynamixel_sdk as sdk
+    except ImportError:
+        return None, lambda: None
+    port = sdk.PortHandler(pty)
+    port.openPort()
+    port.setBaudRate(1_000_000)
+    handler = sdk.PacketHandler(1.0)
+
+    def read() -> int:
+        return sum(handler.readTxRx(port, i, 36, 8)[1] == sdk.COMM_SUCCESS
+                   for i in range(1, servos + 1))
+
+    return read, port.closePort
+
+
+def _count(read: Any, ids: list[int]) -> int:
+    return len(read(ids))
+
+
+def measure_protocol1(duration: float, servos: int = 5) -> dict:
+    """Five AX-12A on a Protocol 1.0 bus at 1 Mbps, each read in turn (36, 8 bytes: position
+    to temperature; Protocol 1.0 has no Sync Read): deltoctl's cycle paced against the wire's
+    time and against dynamixel-sdk's Protocol 1.0 reads on the same bus; then both flat out on
+    an unpaced bus (what the software costs)."""
+    from deltoctl.families.dynamixel import protocol1 as p1
+
+    per_servo = len(p1.read(1, 36, 8)) + len(p1.FRAMES.status(1, 0, bytes(8)))
+    wire_ms = servos * per_servo * 10 / 1_000_000 * 1e3
+    out: dict = {"servos": servos, "model": "AX-12A", "baud": 1_000_000,
+                 "wire_ms": round(wire_ms, 4), "wire_limit_hz": round(1e3 / wire_ms, 1)}
+    for pace in (True, False):
+        code = _SERVE_P1.format(n=servos, pace=pace)
+        proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, text=True)
+        pty = proc.stdout.readline().strip() if proc.stdout else ""
+        try:
+            driver = _p1_driver(pty, servos)
+            ids = list(range(1, servos + 1))
+            ours = _flat_out(partial(_count, driver.read_present, ids), duration, proc.pid)
+            driver.cleanup()
+            sdk_read, close = _sdk_p1_reads(pty, servos)
+            theirs = _flat_out(sdk_read, duration, proc.pid) if sdk_read else None
+            close()
+        finally:
+            _stop(proc)
+        key = "paced" if pace else "unpaced"
+        run: dict = {"deltoctl_hz": round(ours[0], 1), "deltoctl_cpu_us": round(ours[1], 1)}
+        if pace:
+            run["fraction_of_wire"] = round(ours[0] * wire_ms / 1e3, 3)
+        if theirs is not None:
+            run.update({"dynamixel_sdk_hz": round(theirs[0], 1),
+                        "dynamixel_sdk_cpu_us": round(theirs[1], 1),
+                        "ratio_to_sdk": round(ours[0] / theirs[0], 2)})
+        out[key] = run
     return out

@@ -107,6 +107,26 @@ def dynamixel_lines(results: dict[str, Any], servos: int) -> list[str]:
                      f"GroupBulkRead {unpaced['dynamixel_sdk_bulk_read_hz']:.1f} "
                      f"({cpu['dynamixel_sdk_bulk_read']:.0f} µs CPU each): ratio "
                      f"{unpaced['ratio_to_sdk']:.2f}")
+    if "protocol1" in results:
+        lines += protocol1_lines(results["protocol1"])
+    return lines
+
+
+def protocol1_lines(p1: dict[str, Any]) -> list[str]:
+    """A Protocol 1.0 bus read servo by servo: paced against its wire time, and against
+    dynamixel-sdk's Protocol 1.0 reads."""
+    lines = [f"Protocol 1.0: {p1['servos']} × {p1['model']} read in turn (36, 8 bytes) at "
+             f"{p1['baud'] // 1000} kbps, wire limit {p1['wire_limit_hz']:.1f} cycles/s "
+             f"({p1['wire_ms']:.3f} ms a cycle):"]
+    for key in ("paced", "unpaced"):
+        run = p1[key]
+        line = f"  {key}: deltoctl {run['deltoctl_hz']:.1f} cycles/s"
+        if "fraction_of_wire" in run:
+            line += f" = {100 * run['fraction_of_wire']:.1f} % of the wire's limit"
+        if "ratio_to_sdk" in run:
+            line += (f", dynamixel-sdk {run['dynamixel_sdk_hz']:.1f}: ratio "
+                     f"{run['ratio_to_sdk']:.2f}")
+        lines.append(line)
     return lines
 
 

@@ -127,6 +127,9 @@ READINGS = frozenset({
     "Present PWM", "Present Load", "Present Velocity", "Present Position",
     "Velocity Trajectory", "Position Trajectory", "Present Input Voltage",
     "Present Temperature", "Backup Ready",
+    # Protocol 1.0's
+    "Moving Speed", "Present Speed", "Present Voltage", "Registered", "Goal Torque",
+    "Current",
 })
 # how the servo is addressed and answers on its bus: a restore that changed one would lose the
 # servo (the profile addresses it by ID at the bus's rate); `register set` changes them

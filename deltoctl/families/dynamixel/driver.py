@@ -58,7 +58,24 @@ def _amps_per_step(number: int) -> float | None:
     return None if model is None or model.current_unit is None else model.current_unit / 1000
 
 
+def other_protocol(driver: DynamixelDriver, ids: list[int], own: float) -> list[int]:
+    """Which of ``ids`` answer in the other protocol than the bus's ``own``, at its rate: a
+    Protocol 1.0 PING of each, or one Protocol 2.0 broadcast PING."""
+    if not ids or driver.port is None:
+        return []
+    if own == 2.0:
+        from deltoctl.families.dynamixel import protocol1
+
+        session = protocol1.session()
+        return [i for i in ids if driver.link.exchange(session, i, protocol1.PING, b"",
+                                                       0.05).replies]
+    done = driver.link.exchange(codec.session(), codec.BROADCAST_ID, codec.PING, b"", 0.1)
+    return sorted({r[0] for r in done.replies} & set(ids))
+
+
 class DynamixelDriver(Driver):
+    protocol = 2.0
+
     def __init__(self, block: Block) -> None:
         super().__init__(block)
         parse_bus_url(self.url)  # a rate its servos cannot run: exit 2 before a port opens
@@ -302,6 +319,17 @@ class DynamixelDriver(Driver):
                                 elsewhere.setdefault(i, baud)
             finally:
                 self.port.baudrate = own
+        speaks_1 = other_protocol(self, [i for i in missing if i not in elsewhere], 2.0)
+        return self._detect_report(found, missing, elsewhere, speaks_1, unscanned)
+
+    def _detect_report(self, found: dict[int, int], missing: list[int],
+                       elsewhere: dict[int, int], other: list[int],
+                       unscanned: dict[int, str] | None = None) -> dict:
+        """What detect found, as the verb reports it: the servos, those at another baud rate
+        and those that answer in the bus's other protocol."""
+        unscanned = unscanned or {}
+        expected = self.expected
+        protocol = "2.0" if self.protocol == 1.0 else "1.0"  # the other one
         unexpected = sorted(set(found) - set(expected))
         wrong = sorted(i for i in set(found) & set(expected)
                        if expected[i] is not None and found[i] != expected[i])
@@ -315,10 +343,17 @@ class DynamixelDriver(Driver):
         if elsewhere:
             summary += "; at another baud rate: " + ", ".join(
                 f"{name.get(i, i)} ({baud})" for i, baud in sorted(elsewhere.items()))
+        if other:
+            summary += f"; answering in Protocol {protocol}: " + ", ".join(
+                f"{name.get(i, i)} (ID {i})" for i in other)
+        checks += [{"what": f"{name.get(i, i)} (ID {i}) protocol",
+                    "profile": "2.0" if protocol == "1.0" else "1.0", "device": protocol,
+                    "match": False} for i in other]
         if unscanned:
             summary += "; not scanned: " + "; ".join(unscanned.values())
         return {"bus": self.url, "found": found, "missing": missing, "unexpected": unexpected,
                 "wrong_model": wrong, "wrong_baud": {str(i): b for i, b in elsewhere.items()},
+                "other_protocol": {str(i): protocol for i in other},
                 "unscanned": {str(b): why for b, why in unscanned.items()},
                 "checks": checks, "summary": summary}
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 import struct
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from deltoctl.core.serving import ServeContext
 from deltoctl.families.dynamixel import codec
@@ -34,7 +34,7 @@ from deltoctl.families.dynamixel.models import (
     by_number,
     expected_model,
 )
-from deltoctl.servo.pty_server import PtyServer, Replies
+from deltoctl.servo.pty_server import Bus, PtyServer, Replies
 from deltoctl.servo.session import Request
 
 if TYPE_CHECKING:
@@ -338,7 +338,7 @@ class DynamixelPtyServer(PtyServer):
     client opens; with ``pace``, the bus takes the wire time of every byte; ``latency`` holds
     each reply as a USB adapter's latency timer does."""
 
-    def __init__(self, bus: DynamixelBus, pace: bool = False, latency: float = 0.0) -> None:
+    def __init__(self, bus: Bus, pace: bool = False, latency: float = 0.0) -> None:
         super().__init__(bus, pace, name="dxl-sim", latency=latency)
 
 
@@ -346,31 +346,73 @@ def _model_of(hw: Hardware, joint: Component) -> Model:
     """The model the profile names for a joint's servo (the XL430-W250 when it names none,
     or one deltoctl has no table for)."""
     number = expected_model(hw.params, joint.params, joint.name)
-    return (by_number(number) if number is not None else None) or XL430_W250
+    model = by_number(number) if number is not None else None
+    return model if isinstance(model, Model) else XL430_W250
 
 
 def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
     """One pseudo-terminal per bus block, its servos at the joints' IDs, listening at the bus
-    URL's baud rate."""
-    from deltoctl.families.dynamixel import parse_bus_url
+    URL's baud rate in the block's protocol (a servo named by ``other_protocol`` in the other
+    one, on the same wire)."""
+    from deltoctl.families.dynamixel import parse_bus_url, protocol_of
     from deltoctl.families.dynamixel.plugins import servo_ids
 
     o = ctx.options
     buses = {}
     for hw in blocks:
         url = ctx.profile.buses.get(hw.bus or "", "serial:///dev/ttyUSB0?baud=1000000")
-        _, baud, _ = parse_bus_url(url)
-        ids = {j.name: i for i, j in servo_ids(ctx.profile, hw).items()}
-        bus = DynamixelBus([Servo(i, model=_model_of(hw, j))
-                            for i, j in servo_ids(ctx.profile, hw).items()], baud=baud)
-        bus.faults.missing |= {ids[j.name] for j in ctx.named("missing", hw) if j.name in ids}
-        for joint in ctx.named("stall", hw):
-            if joint.name in ids:
-                bus.servos[ids[joint.name]].stalled = True
-        for joint in ctx.named("wrong_baud", hw):
-            if joint.name in ids:  # 57600 (or 115200 on a 57600 bus)
-                bus.servos[ids[joint.name]].memory[8] = 1 if baud != 57600 else 2
+        protocol = protocol_of(hw.params, hw.name)
+        _, baud, _ = parse_bus_url(url, protocol)
+        joints = servo_ids(ctx.profile, hw)
+        ids = {j.name: i for i, j in joints.items()}
+        other = {ids[j.name] for j in ctx.named("other_protocol", hw) if j.name in ids}
+        mine = {i: j for i, j in joints.items() if i not in other}
+        theirs = {i: j for i, j in joints.items() if i in other}
+        bus = _bus(hw, mine, baud, protocol)
+        if theirs:
+            from deltoctl.families.dynamixel.emulator1 import MixedBus
+
+            bus = MixedBus(bus, _bus(hw, theirs, baud, 3.0 - protocol))
+        for part in getattr(bus, "buses", (bus,)):
+            part_missing = {ids[j.name] for j in ctx.named("missing", hw) if j.name in ids}
+            if isinstance(part, DynamixelBus):
+                part.faults.missing |= part_missing
+            else:
+                part.missing |= part_missing
+            for joint in ctx.named("wrong_baud", hw):
+                servo = part.servos.get(ids.get(joint.name, -1))
+                if servo is not None and isinstance(part, DynamixelBus):
+                    servo.memory[8] = 1 if baud != 57600 else 2  # 57600 (or 115200)
+                elif servo is not None:
+                    servo.memory[4] = 34 if baud != 57600 else 16
+            for joint in ctx.named("stall", hw):
+                servo = part.servos.get(ids.get(joint.name, -1))
+                if servo is not None and isinstance(part, DynamixelBus):
+                    servo.stalled = True
         server = ctx.stack.enter_context(DynamixelPtyServer(bus, pace=o.pace))
         query = url.split("?", 1)[1] if "?" in url else f"baud={baud}"
         buses[hw.bus or hw.name] = f"serial://{server.port}?{query}"
     return buses
+
+
+def _bus(hw: Hardware, joints: dict[int, Component], baud: int, protocol: float) -> Any:
+    """The emulated servos of ``joints`` speaking ``protocol``."""
+    if protocol == 1.0:
+        from deltoctl.families.dynamixel.emulator1 import Protocol1Bus, Servo1
+        from deltoctl.families.dynamixel.models1 import AX_12A, Model1
+
+        def model1(joint: Component) -> Model1:
+            number = expected_model(hw.params, joint.params, joint.name)
+            found = by_number(number) if number is not None else None
+            return found if isinstance(found, Model1) else AX_12A
+
+        return Protocol1Bus([Servo1(i, model1(j)) for i, j in joints.items()],
+                            baud=baud if baud in _protocol1_bauds() else None)
+    return DynamixelBus([Servo(i, model=_model_of(hw, j)) for i, j in joints.items()],
+                        baud=baud if baud in BAUD_RATES.values() else None)
+
+
+def _protocol1_bauds() -> dict[int, int]:
+    from deltoctl.families.dynamixel.models1 import BAUD_CODES
+
+    return BAUD_CODES

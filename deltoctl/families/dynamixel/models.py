@@ -18,9 +18,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from deltoctl.families.dynamixel.control_table import XL430, Item
+
+if TYPE_CHECKING:
+    from deltoctl.families.dynamixel.models1 import Model1
 
 # -- the layouts ----------------------------------------------------------------------------------
 
@@ -226,16 +229,23 @@ UNVERIFIED: dict[str, tuple[str, ...]] = {
     "XH430-V210": ("velocity_limit",),
 }
 
-BY_NUMBER = {m.number: m for m in MODELS}
-BY_KEY = {m.name.lower(): m for m in MODELS}
-XL430_W250 = BY_NUMBER[1060]
+def _protocol_1() -> tuple[Model1, ...]:
+    from deltoctl.families.dynamixel.models1 import MODELS_1
+
+    return MODELS_1
 
 
-def by_number(number: int) -> Model | None:
+ALL_MODELS: tuple[Model | Model1, ...] = MODELS + _protocol_1()  # both protocols'
+BY_NUMBER: dict[int, Model | Model1] = {m.number: m for m in ALL_MODELS}
+BY_KEY = {m.name.lower(): m for m in ALL_MODELS}
+XL430_W250 = next(m for m in MODELS if m.number == 1060)
+
+
+def by_number(number: int) -> Model | Model1 | None:
     return BY_NUMBER.get(number)
 
 
-def by_name(text: str) -> Model | None:
+def by_name(text: str) -> Model | Model1 | None:
     """A model by name as profiles write it: XM430-W350, xm430_w350, XM430-W350-R (the
     interface suffix -T/-R is ignored), or its number."""
     key = text.strip().lower().replace("_", "-")
@@ -268,8 +278,8 @@ def expected_model(block: Mapping[str, str], joint: Mapping[str, str], name: str
                 return model.number
             if text.isdigit() and int(text) < 1 << 16:
                 return int(text)  # a model deltoctl has no table for: compared as it is
-            raise InvalidInput(f"{name}: {key} {text!r} is not a Dynamixel X-series model "
-                               "deltoctl knows (e.g. XM430-W350 or 1020)")
+            raise InvalidInput(f"{name}: {key} {text!r} is not a Dynamixel model deltoctl "
+                               "knows (e.g. XM430-W350, AX-12A or 1020)")
     return None
 
 
@@ -278,7 +288,7 @@ def config_rules() -> dict[str, tuple[int | None, int | None, str | None]]:
     checks each servo's own model's before writing), and the --allow that a safety setting
     needs to be written (None for the others)."""
     rules: dict[str, tuple[int | None, int | None, str | None]] = {}
-    for model in MODELS:
+    for model in ALL_MODELS:
         for i in model.table:
             low, high, _ = rules.get(i.name, (i.low, i.high, None))
             rules[i.name] = (_widest(low, i.low, min), _widest(high, i.high, max),
@@ -292,5 +302,5 @@ def _widest(a: int | None, b: int | None, pick: Any) -> int | None:
 
 def item_names() -> list[str]:
     """Item names as the register verbs take them (return_delay_time), of every model."""
-    names = dict.fromkeys(i.name.lower().replace(" ", "_") for m in MODELS for i in m.table)
+    names = dict.fromkeys(i.name.lower().replace(" ", "_") for m in ALL_MODELS for i in m.table)
     return list(names)

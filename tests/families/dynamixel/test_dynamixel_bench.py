@@ -32,3 +32,16 @@ def test_the_mixed_bus_paced_less_its_pty_and_unpaced_against_the_sdk():
             unpaced["deltoctl_sync_read_hz"] / unpaced["dynamixel_sdk_bulk_read_hz"], abs=0.01)
         assert set(unpaced["ratios_to_sdk"]) == {"sync_read", "bulk_read", "fast_sync_read"}
         assert unpaced["dynamixel_sdk_sync_read_hz"] > 0
+
+
+def test_the_protocol_1_bus_read_in_turn_never_beats_its_wire_time():
+    from deltoctl.benchmarks.dynamixel import measure_protocol1
+
+    report = measure_protocol1(0.1)
+    assert report["wire_ms"] == pytest.approx(5 * (8 + 14) * 10 / 1e6 * 1e3)
+    paced = report["paced"]
+    assert 0 < paced["fraction_of_wire"] <= 1.0
+    assert report["unpaced"]["deltoctl_hz"] > 0
+    if importlib.util.find_spec("dynamixel_sdk") is not None:
+        assert paced["ratio_to_sdk"] == pytest.approx(
+            paced["deltoctl_hz"] / paced["dynamixel_sdk_hz"], abs=0.01)
