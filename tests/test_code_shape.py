@@ -80,3 +80,11 @@ def test_no_block_above_cyclomatic_grade_c_in_the_front_layers():
     assert [(where, rank) for where, rank in front if rank > "C"] == []
     tangled = "def f(x):\n" + "".join(f"    if x == {i}:\n        return {i}\n" for i in range(25))
     assert cc_rank(cc_visit(tangled)[0].complexity) == "D"  # what the walk would catch
+
+
+def test_no_verb_of_the_command_line_reaches_past_the_robot():
+    """cli/ drives the robot through the library's Robot, never its System: what a verb does,
+    a script or the fleet agent can do through the same methods."""
+    found = [f"{p.name}:{n}" for p in sorted((PACKAGE / "cli").glob("*.py"))
+             for n, line in enumerate(p.read_text().splitlines(), 1) if "robot.system" in line]
+    assert found == []

@@ -453,6 +453,21 @@ class Robot:
             confirm(self_test_description(self.system, ask is not None))
         return calibrate_imu(self.system, samples, ask, timeout, output_dir)
 
+    def calibrate_servos(self, half_turn: bool = False, name: str = "my_arm",
+                         output: Path | None = None,
+                         confirm: Callable[[str], None] | None = None) -> dict[str, Any]:
+        """Each servo block's calibration saved in its family's file format (a Feetech SO
+        arm's as LeRobot's calibration JSON) at ``output`` or where the format's tools look
+        for it under the device name ``name``; with ``half_turn``, each servo's present pose
+        made the middle of its turn first. ``confirm`` is told what will happen first (it
+        raises to stop)."""
+        from deltoctl.app.calibrate import calibrate_servos, servo_calibration_description
+
+        description = servo_calibration_description(self.system, half_turn)
+        if confirm is not None:
+            confirm(description)
+        return calibrate_servos(self.system, half_turn, name, output)
+
     def _registers(self, joint: str) -> Any:
         m = self.system.member(joint)
         if not m.can("registers"):

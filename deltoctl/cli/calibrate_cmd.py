@@ -147,21 +147,19 @@ def calibrate_servos(
     LeRobot's calibration JSON (homing offset and position limits per motor), by default at
     LeRobot's place for it ($HF_LEROBOT_CALIBRATION/robots/so_follower/ID.json, a leader's
     under teleoperators/so_leader). With --half-turn, LeRobot's half-turn homing first."""
-    from deltoctl.app.calibrate import calibrate_servos as run
-    from deltoctl.app.calibrate import servo_calibration_description
+    from deltoctl.render.checks import servo_files, servo_tables
 
     opts = options(ctx)
     with open_robot(opts, allow_model_mismatch) as robot:
-        confirm(ctx, servo_calibration_description(robot.system, half_turn))
-        result = run(robot.system, half_turn, name, output)
+        result = robot.calibrate_servos(half_turn, name, output, lambda what: confirm(ctx, what))
     if opts.json:
         emit_json(result)
     else:
-        for b in result["blocks"]:
-            table(b["block"], ["part", *next(iter(b["parts"].values()), {})],
-                  [[part, *values.values()] for part, values in b["parts"].items()])
-            info(f"{b['format']}: {b['file']}")
-    finish(robot.system)
+        for (title, columns, rows), line in zip(servo_tables(result), servo_files(result),
+                                                strict=True):
+            table(title, columns, rows)
+            info(line)
+    finish(robot)
 
 
 def register(root: typer.Typer) -> None:

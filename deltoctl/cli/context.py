@@ -9,9 +9,6 @@ import typer
 
 from deltoctl.errors import InvalidInput
 
-EXIT_LINE = ("Exit codes: 0 ok · 1 failed · 2 usage or invalid input · 3 warnings · "
-             "4 unreachable · 5 refused for safety · 130 interrupted")
-
 TEACH = "deltoctl.teach"  # ctx.meta key: this run shows help or completes, so verbs are taught
 ARGV = "deltoctl.argv"  # ctx.meta key: the command line, global options first
 DOCUMENT = "deltoctl.document"  # ctx.meta key: the verb's JSON document, written as it exits

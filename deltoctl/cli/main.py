@@ -16,16 +16,10 @@ from typer.core import TyperGroup
 
 from deltoctl import verbs
 from deltoctl.cli.completions import complete_blocks, complete_profile
-from deltoctl.cli.context import (
-    ARGV,
-    DOCUMENT,
-    EXIT_LINE,
-    TEACH,
-    Options,
-    parse_pairs,
-)
+from deltoctl.cli.context import ARGV, DOCUMENT, TEACH, Options, parse_pairs
 from deltoctl.cmdline import GLOBAL_OPTIONS, given_options, hoist_global_options
 from deltoctl.errors import DeltoctlError, InvalidInput
+from deltoctl.verb_help import EXIT_LINE
 from deltoctl.version import __version__
 
 # verb → the module of deltoctl.cli whose register(app) adds it (deltoctl.verbs declares
@@ -52,7 +46,7 @@ class DeltoctlGroup(TyperGroup):
             module.register(holder)
             loaded = get_group(holder).commands
             if ctx.resilient_parsing or ctx.meta.get(TEACH):  # help or completion only
-                from deltoctl.cli.help_cmd import teach_verbs
+                from deltoctl.verb_help import teach_verbs
 
                 teach_verbs(self, loaded)
             self.commands.update(loaded)

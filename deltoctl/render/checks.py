@@ -53,3 +53,15 @@ def calibration_files(result: dict[str, Any]) -> list[str]:
     """Where an IMU calibration saved each sensor's tumble, and what to do with it."""
     return [f"calibration: {b['calibration_file']} (name it in {b['sensor']}'s calibration "
             "param)" for b in result["blocks"] if "calibration_file" in b]
+
+
+def servo_tables(result: dict[str, Any]) -> list[tuple[str, list[str], list[list[Any]]]]:
+    """``calibrate servos``: one table per block (a row per part, its file's fields), and
+    the line naming the file each was saved in."""
+    return [(b["block"], ["part", *next(iter(b["parts"].values()), {})],
+             [[part, *values.values()] for part, values in b["parts"].items()])
+            for b in result["blocks"]]
+
+
+def servo_files(result: dict[str, Any]) -> list[str]:
+    return [f"{b['format']}: {b['file']}" for b in result["blocks"]]

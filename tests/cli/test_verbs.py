@@ -13,11 +13,11 @@ import typer.main
 
 from deltoctl import verbs
 from deltoctl.cli import main as cli_main
-from deltoctl.cli.help_cmd import EXAMPLES
 from deltoctl.cmdline import GLOBAL_OPTIONS
 from deltoctl.errors import InvalidInput
 from deltoctl.fleet import ACTUATING, MOTION, NOT_REMOTE
 from deltoctl.fleet.argv import check_argv
+from deltoctl.verb_help import EXAMPLES
 
 
 def _click_tree() -> dict[str, object]:

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from deltoctl import open_robot
-from deltoctl.errors import InvalidInput
+from deltoctl.errors import InvalidInput, Refused
 from deltoctl.families.feetech import calibration as cal
 from deltoctl.profile.catalog import load_profile
 
@@ -90,6 +90,26 @@ def test_the_servos_calibration_is_written_in_lerobots_format(tmp_path, monkeypa
     assert data["gripper"] == {"id": 6, "drive_mode": 0, "homing_offset": 0,
                                "range_min": 2030, "range_max": 4095}
     assert cal.load(path) == motors
+
+
+def test_the_robot_saves_the_servos_calibration_after_its_confirmation(tmp_path):
+    told: list[str] = []
+
+    def refuse(what: str) -> None:
+        told.append(what)
+        raise Refused("not now")
+
+    out = tmp_path / "arm.json"
+    with open_robot("so101-follower", sim=True) as robot:
+        with pytest.raises(Refused):
+            robot.calibrate_servos(True, "arm", out, refuse)
+        assert not out.exists() and "Homing_Offset" in told[0]
+        result = robot.calibrate_servos(False, "arm", out, told.append)
+    assert "read the calibration" in told[1]
+    assert result["blocks"][0]["file"] == str(out)
+    assert set(cal.load(out)) == set(result["blocks"][0]["parts"])
+    with open_robot("dg-5f-right", sim=True) as robot, pytest.raises(InvalidInput):
+        robot.calibrate_servos(output=tmp_path / "none.json")
 
 
 def test_calibrate_servos_does_lerobots_half_turn_homing_and_saves_its_file(cli, tmp_path,
