@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 
 from deltoctl.fleet import lab, zenoh_module
-from deltoctl.fleet.client import RemoteCall
+from deltoctl.fleet.remote_call import RemoteCall
 
 JOINT = "rj_dg_2_2"
 PROFILES = ("dg-5f-right", "dg-3f-m", "bioscara-arm", "rrbot-gpio", "dg-4f")

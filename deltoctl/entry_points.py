@@ -48,7 +48,7 @@ def _cached(key: list[list[object]]) -> dict[str, list[list[str]]]:
     run: each has its own sys.path)."""
     import json
 
-    from deltoctl.data import cache_file
+    from deltoctl.data_paths import cache_file
 
     path = cache_file("entry-points")
     name = json.dumps(key)

@@ -29,7 +29,7 @@ from deltoctl import entry_points
 from deltoctl.errors import DeltoctlError, InvalidInput
 
 if TYPE_CHECKING:
-    from deltoctl.core.serving import Emulator
+    from deltoctl.core.emulator_contract import Emulator
     from deltoctl.transport import Transport
 
 GROUP, TRANSPORTS = entry_points.FAMILIES, entry_points.TRANSPORTS

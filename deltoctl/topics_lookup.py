@@ -28,7 +28,7 @@ def topic_text(name: str) -> str:
 
 
 def examples_dir() -> Path:
-    from deltoctl.data import data_dir
+    from deltoctl.data_paths import data_dir
 
     return data_dir("examples")
 

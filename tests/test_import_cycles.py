@@ -136,7 +136,7 @@ def test_no_longer_loop_of_imports_either():
 
 def test_the_graph_sees_the_packages():
     graph = import_graph(PACKAGES)
-    assert "deltoctl.errors" in graph["deltoctl.core.motion"]
+    assert "deltoctl.errors" in graph["deltoctl.core.envelope"]
     assert "deltoctl.registry" in graph["deltoctl_canopen"]
 
 

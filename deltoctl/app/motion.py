@@ -231,7 +231,7 @@ def plan_home(profile: Profile, hardware: Sequence[str] = (),
     """The homing plan of the selected blocks (or of ``joints`` only), each home pose within
     the envelope — checked before anyone is asked."""
     from deltoctl import registry
-    from deltoctl.core import motion
+    from deltoctl.core import envelope
     from deltoctl.core.system import select_blocks
 
     known = [j.name for j in profile.joints()]
@@ -247,7 +247,7 @@ def plan_home(profile: Profile, hardware: Sequence[str] = (),
         if j.name not in plan.routine and (j.command("effort") or j.command("position")) \
                 and j.mimic is None:
             plan.targets[j.name] = profile.safety.home_pose.get(j.name, 0.0)
-            motion.check_move(profile, j, plan.targets[j.name], None, None, jog=False)
+            envelope.check_move(profile, j, plan.targets[j.name], None, None, jog=False)
     if not plan.routine and not plan.targets:
         raise InvalidInput(f"nothing to home in {profile.name}: no joint with a home, effort "
                            "or position command interface")

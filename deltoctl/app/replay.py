@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 from deltoctl.core.driver import SETPOINT_FIELDS, Setpoint
 from deltoctl.errors import DeviceError, InvalidInput, OutsideEnvelope, Refused
-from deltoctl.record.commands import (
+from deltoctl.record.command_topics import (
     COMMANDS_TOPIC,
     STATES_TOPIC,
     command_key,
@@ -347,7 +347,7 @@ def check_commands(profile: Profile, recorded: Recorded) -> None:
     A gap longer than ``MAX_HOLD_S`` between two rows, or between two commands of one joint,
     is refused too: a replay never holds a setpoint longer than the recording did, plus a
     little. A joint the profile lacks is invalid input (exit 2)."""
-    from deltoctl.core.motion import check_target
+    from deltoctl.core.envelope import check_target
 
     comps = commanded_components(profile, recorded)
     last = recorded.start_pose()

@@ -98,7 +98,7 @@ def limits_of(robot: Robot) -> dict[str, float]:
     """The profile's `report:` limits over the defaults. A move settles within the
     profile's home_tolerance, so two returns home may differ by twice it, and a move may end
     up to it away (half as much again for what the joint does after the stop)."""
-    from deltoctl.core.motion import DEFAULT_TOLERANCE
+    from deltoctl.core.envelope import DEFAULT_TOLERANCE
 
     tolerance = robot.profile.safety.home_tolerance or DEFAULT_TOLERANCE
     limits = {**DEFAULTS, "home_repeatability": 2 * tolerance,

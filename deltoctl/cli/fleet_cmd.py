@@ -47,8 +47,8 @@ def forward(ctx: typer.Context) -> NoReturn:
     from deltoctl.cli.context import ARGV
     from deltoctl.cli.output import emit_error, stdout_is_terminal
     from deltoctl.fleet import ACTUATING, check_robot
-    from deltoctl.fleet.client import ErrorLines, RemoteCall, caller_session
-    from deltoctl.fleet.run import strip_remote, verb_of
+    from deltoctl.fleet.fleet_run import strip_remote, verb_of
+    from deltoctl.fleet.remote_call import ErrorLines, RemoteCall, caller_session
     from deltoctl.render.stream import live_lines
 
     opts = options(ctx)
@@ -82,7 +82,7 @@ def _record_file_dropped(argv: list[str]) -> list[str]:
     computer and never sent, so the agent's path rule (files in its directory only) does not
     judge it. Any other command line as it is."""
     from deltoctl.cmdline import hoist_global_options
-    from deltoctl.fleet.run import verb_args
+    from deltoctl.fleet.fleet_run import verb_args
 
     hoisted = hoist_global_options(argv)
     args = verb_args(hoisted)
@@ -140,8 +140,8 @@ def agent_checks(verb: str, argv: list[str]) -> None:
     """What the agent checks in a remote command line with the CLI's own parse: the duration
     of a record it runs (deltoctl.fleet.host.check_record_duration)."""
     from deltoctl.cmdline import hoist_global_options
+    from deltoctl.fleet.fleet_run import verb_args
     from deltoctl.fleet.host import check_record_duration
-    from deltoctl.fleet.run import verb_args
 
     args = verb_args(hoist_global_options(argv))
     if verb == "record" and not {"--help", "-h"} & set(args):
@@ -158,8 +158,8 @@ def _remote_record(opts: Options, robot: str, argv: list[str], err: Any) -> int:
 
     from deltoctl.app.recording import identified_output, planned_output
     from deltoctl.cli.output import emit_json, info, warn
+    from deltoctl.fleet.fleet_run import verb_args
     from deltoctl.fleet.remote_record import record_remote
-    from deltoctl.fleet.run import verb_args
     from deltoctl.render.fleet import not_received_text
     from deltoctl.render.recording import recorded_lines
 
@@ -196,8 +196,8 @@ def list_cmd(
     """The robots whose agents answer (their liveliness tokens), with profile, identity and
     state."""
     from deltoctl.cli.output import emit_json, info, table
-    from deltoctl.fleet.client import caller_session
-    from deltoctl.fleet.run import robots_found
+    from deltoctl.fleet.fleet_run import robots_found
+    from deltoctl.fleet.remote_call import caller_session
     from deltoctl.render.fleet import list_rows
 
     opts = options(ctx)
@@ -231,8 +231,16 @@ def run_cmd(
     """Run one verb (or a script's verbs) on many robots in parallel: a live table while they
     run, one report at the end; the exit code is the worst of the robots'."""
     from deltoctl.cli.output import emit_json, info, table
-    from deltoctl.fleet.client import agents, caller_session
-    from deltoctl.fleet.run import choose, command_lines, confirmed, start, verb_of, wait_for, worst
+    from deltoctl.fleet.fleet_run import (
+        choose,
+        command_lines,
+        confirmed,
+        start,
+        verb_of,
+        wait_for,
+        worst,
+    )
+    from deltoctl.fleet.remote_call import agents, caller_session
     from deltoctl.render.fleet import live_run, run_rows
 
     opts = options(ctx)

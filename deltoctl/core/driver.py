@@ -5,7 +5,7 @@ capabilities a verb may ask for (identify, detect, home, jog, calibrate_ft, gpio
 torque, reboot, config) — declared in the family's descriptor, so a verb asks what a block can
 do, never which family it is. Every driver is built the same way: ``DriverClass(block)``.
 
-The System checks the safety envelope (core/motion.py) before it calls ``move``, ``write``,
+The System checks the safety envelope (core/envelope.py) before it calls ``move``, ``write``,
 ``set_command`` or ``follow``: a driver sends what it is given.
 """
 

@@ -9,7 +9,7 @@ and releases its link.
 
 The safety envelope is the System's, whoever calls it: a move, a command to a joint's
 position, velocity or effort interface and a replayed setpoint are checked against the joint's
-limits and soft limits, its velocity and effort limits and ``max_jog_step`` (core/motion.py)
+limits and soft limits, its velocity and effort limits and ``max_jog_step`` (core/envelope.py)
 before a byte is sent to any block; a target outside is ``OutsideEnvelope`` (a ``Refused``,
 exit 5).
 """
@@ -21,7 +21,7 @@ from collections.abc import Iterable, Iterator, Mapping
 from typing import Any
 
 from deltoctl import registry, trace
-from deltoctl.core import motion
+from deltoctl.core import envelope
 from deltoctl.core.driver import Block, Driver, Links, MoveResult, Progress, Setpoint
 from deltoctl.core.lifecycle import Lifecycle
 from deltoctl.errors import DeltoctlError, InvalidInput, Refused, Unreachable
@@ -346,7 +346,7 @@ class System:
         comp = self.component(part or name)
         if comp.kind == "joint":
             present = self._positions([part]) if interface == "position" else {}
-            motion.check_command(self.profile, comp, interface, value, present.get(part),
+            envelope.check_command(self.profile, comp, interface, value, present.get(part),
                                  m.driver.effort_cap())
         m.driver.write({name: value})
 
@@ -399,7 +399,7 @@ class System:
         bounded = jog and self.profile.safety.max_jog_step is not None
         present = self._positions(targets) if bounded else {}
         for joint, target in targets.items():
-            motion.check_move(self.profile, self._joint(joint), target, present.get(joint),
+            envelope.check_move(self.profile, self._joint(joint), target, present.get(joint),
                               velocity, jog)
 
     def check_ready(self, joints: Iterable[str]) -> None:
@@ -421,7 +421,7 @@ class System:
         members = []
         for joint, setpoint in setpoints.items():
             m = self.member(joint)
-            motion.check_setpoint(self.profile, self._joint(joint), setpoint,
+            envelope.check_setpoint(self.profile, self._joint(joint), setpoint,
                                   before.get(joint, present.get(joint)))
             if m not in members:
                 members.append(m)

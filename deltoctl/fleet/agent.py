@@ -37,7 +37,7 @@ from deltoctl.fleet import (
     zenoh_module,
 )
 from deltoctl.fleet.argv import _values, check_argv, fits, read_request
-from deltoctl.fleet.client import KEY_BYTES, sign
+from deltoctl.fleet.remote_call import KEY_BYTES, sign
 from deltoctl.verbs import UNRESOLVED
 
 WATCH_PERIOD = 0.005  # s between two looks at the heartbeats

@@ -26,7 +26,7 @@ from typing import Any
 from deltoctl.errors import WARNINGS, DeltoctlError, DeviceError, InvalidInput, Unreachable
 from deltoctl.fleet import key
 from deltoctl.fleet.agent import PROFILE_YAML
-from deltoctl.fleet.client import FOUND_WAIT, RemoteCall
+from deltoctl.fleet.remote_call import FOUND_WAIT, RemoteCall
 from deltoctl.profile.model import Profile
 
 NAN = float("nan")
@@ -360,7 +360,7 @@ def record_remote(zenoh_config: str | None, robot: str, output: Path, rate: floa
     this computer (see RemoteRecord), over a caller's session of ``zenoh_config``; Ctrl-C,
     SIGTERM and SIGHUP end it and the file is finished. ``opened`` is told the file once it
     is created."""
-    from deltoctl.fleet.client import caller_session
+    from deltoctl.fleet.remote_call import caller_session
 
     failure: DeltoctlError | None = None
     with caller_session(zenoh_config, f"robot {robot}") as session:

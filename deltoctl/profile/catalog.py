@@ -7,8 +7,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from deltoctl import entry_points
-from deltoctl.data import cache_file as data_cache_file
-from deltoctl.data import data_dir
+from deltoctl.data_paths import cache_file as data_cache_file
+from deltoctl.data_paths import data_dir
 from deltoctl.errors import InvalidInput, ProfileError
 from deltoctl.profile.files import MAX_PROFILE_BYTES, check_profile_file
 

@@ -159,7 +159,7 @@ class McapRecorder:
 
     def _plan_commands(self) -> None:
         """/joint_commands: a JointState of each joint's setpoints (NaN: not commanded)."""
-        from deltoctl.record.commands import COMMANDS_TOPIC, command_key, commanded_joints
+        from deltoctl.record.command_topics import COMMANDS_TOPIC, command_key, commanded_joints
 
         names = [j.name for j in commanded_joints(self.profile)]
         js = CdrTemplate().header().const_strings(names)

@@ -44,7 +44,7 @@ from typing import Any, BinaryIO, cast
 
 from deltoctl.errors import InvalidInput
 from deltoctl.profile.files import MAX_PROFILE_BYTES
-from deltoctl.record.commands import COMMAND_SUFFIX, COMMANDS_TOPIC
+from deltoctl.record.command_topics import COMMAND_SUFFIX, COMMANDS_TOPIC
 
 MAGIC = b"\x89MCAP0\r\n"
 FOOTER_AND_MAGIC = 1 + 8 + 8 + 8 + 4 + 8  # opcode, length, two offsets, crc; the magic

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from rich.table import Table
 
-    from deltoctl.fleet.run import Job
+    from deltoctl.fleet.fleet_run import Job
 
 
 def identity_text(identity: dict[str, Any]) -> str:

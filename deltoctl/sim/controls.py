@@ -12,7 +12,7 @@ import select
 import threading
 from collections.abc import Callable
 
-from deltoctl.core.serving import ControlHandler
+from deltoctl.core.emulator_contract import ControlHandler
 from deltoctl.errors import DeltoctlError, InvalidInput
 
 MAX_LINE = 200  # bytes: a longer line is left out whole

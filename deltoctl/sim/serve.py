@@ -10,7 +10,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from deltoctl import registry
-from deltoctl.core.serving import ControlHandler, ServeContext
+from deltoctl.core.emulator_contract import ControlHandler, ServeContext
 from deltoctl.errors import InvalidInput
 from deltoctl.profile.model import Component, Hardware, Profile
 from deltoctl.sim.controls import Controls
@@ -39,9 +39,9 @@ class ServeOptions:
 
 
 class _SimContext:
-    """The :class:`~deltoctl.core.serving.ServeContext` each emulator of a profile gets: the
-    options, the stack that closes what it starts, and the simulated I2C buses that devices of
-    several families share."""
+    """The :class:`~deltoctl.core.emulator_contract.ServeContext` each emulator of a profile
+    gets: the options, the stack that closes what it starts, and the simulated I2C buses that
+    devices of several families share."""
 
     def __init__(self, stack: contextlib.ExitStack, profile: Profile, options: ServeOptions,
                  controls: Controls) -> None:

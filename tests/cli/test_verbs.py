@@ -149,7 +149,7 @@ def test_the_effect_of_an_option_is_in_the_table_and_in_help():
 
 def test_the_callers_confirmation_follows_the_parse():
     """A fleet run asks before motion only for a line that moves: `report` reads."""
-    from deltoctl.fleet.run import confirmed
+    from deltoctl.fleet.fleet_run import confirmed
 
     asked: list[bool] = []
 

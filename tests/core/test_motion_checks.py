@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from deltoctl.core.motion import check_target
+from deltoctl.core.envelope import check_target
 from deltoctl.errors import Refused
 from deltoctl.profile.model import Component, Limits, Profile, Safety, SoftLimits
 

@@ -1,4 +1,4 @@
-"""An emulator depends on the emulator contract (deltoctl.core.serving), never on the
+"""An emulator depends on the emulator contract (deltoctl.core.emulator_contract), never on the
 simulators' server that builds the context it receives: a family in a package of its own
 serves its devices without importing deltoctl.sim."""
 
@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from deltoctl import registry
-from deltoctl.core import serving
+from deltoctl.core import emulator_contract
 from tests.conftest import REPO
 
 EMULATORS = sorted([*REPO.glob("deltoctl/families/*/*.py"),
@@ -43,13 +43,13 @@ def test_each_emulator_takes_the_core_context(name):
     assert serve is not None
     annotation = inspect.signature(serve).parameters["ctx"].annotation
     assert annotation == "ServeContext"
-    assert serve.__globals__[annotation] is serving.ServeContext  # resolvable at run time
+    assert serve.__globals__[annotation] is emulator_contract.ServeContext  # resolvable at run time
 
 
 def test_the_context_offers_what_an_emulator_reads():
     """What the four emulators read of their context is declared in the contract."""
-    declared = {n for n in dir(serving.ServeContext) if not n.startswith("_")}
-    declared |= set(serving.ServeContext.__annotations__)
+    declared = {n for n in dir(emulator_contract.ServeContext) if not n.startswith("_")}
+    declared |= set(emulator_contract.ServeContext.__annotations__)
     read = set()
     for path in REPO.glob("deltoctl/families/*/emulator.py"):
         for node in ast.walk(ast.parse(path.read_text())):

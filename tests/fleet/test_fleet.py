@@ -16,7 +16,7 @@ import pytest
 pytest.importorskip("zenoh")
 
 from deltoctl.fleet import lab
-from deltoctl.fleet.client import RemoteCall
+from deltoctl.fleet.remote_call import RemoteCall
 from tests.conftest import REPO, eventually
 
 JOINT = "rj_dg_2_2"

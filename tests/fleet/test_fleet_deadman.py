@@ -22,7 +22,7 @@ pytest.importorskip("zenoh")
 
 from deltoctl.errors import InvalidInput
 from deltoctl.fleet import key, lab, zenoh_module
-from deltoctl.fleet.client import RemoteCall
+from deltoctl.fleet.remote_call import RemoteCall
 from tests.conftest import eventually
 from tests.fleet.test_fleet import JOINT, _children, deltoctl, popen
 

@@ -14,7 +14,7 @@ pytest.importorskip("zenoh")
 
 from deltoctl.fleet import EXIT, MAX_VERBS, key, lab, zenoh_module
 from deltoctl.fleet.argv import MAX_ARG, MAX_ARGS, REQUEST
-from deltoctl.fleet.client import RemoteCall
+from deltoctl.fleet.remote_call import RemoteCall
 from tests.conftest import eventually
 from tests.fleet.test_fleet import Bench
 

@@ -35,7 +35,7 @@ def koch_bus():
     reply as an FTDI adapter's latency timer does."""
     from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
     from deltoctl.families.dynamixel.emulator import _model_of as model_of
-    from deltoctl.families.dynamixel.plugins import servo_ids
+    from deltoctl.families.dynamixel.ros2_control import servo_ids
     from deltoctl.profile.catalog import load_profile
 
     profile = load_profile("koch-arm")

@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, ClassVar
 
-from deltoctl.core.serving import ServeContext
+from deltoctl.core.emulator_contract import ServeContext
 from deltoctl.errors import ProtocolError
 from deltoctl.families.bioscara import codec
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from operator import add, sub
 from typing import TYPE_CHECKING, Any
 
-from deltoctl.core.serving import ServeContext
+from deltoctl.core.emulator_contract import ServeContext
 from deltoctl.errors import InvalidInput, ProtocolError
 from deltoctl.families.delto import codec
 from deltoctl.families.delto.models import (

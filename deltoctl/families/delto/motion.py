@@ -17,8 +17,8 @@ import time
 from typing import Any, Protocol
 
 from deltoctl.core.driver import CycleHook, MoveResult, Progress
+from deltoctl.core.envelope import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
 from deltoctl.core.loop import CycleLoop
-from deltoctl.core.motion import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
 from deltoctl.errors import LinkLost, NoAnswer
 from deltoctl.families.delto.models import KT
 

@@ -13,7 +13,7 @@ FAMILY = Family(
     emulator="deltoctl.families.dynamixel.emulator:serve",
     plugins=("mh5_hardware/MH5DynamixelInterface", "dynamixel_hardware/DynamixelHardware",
              "dynamixel_hardware_interface/DynamixelHardware"),
-    import_block="deltoctl.families.dynamixel.plugins:import_block",
+    import_block="deltoctl.families.dynamixel.ros2_control:import_block",
     address_param="id",  # dynamixel_hardware's joint param
     mock_param="use_dummy",  # dynamixel_hardware's simulated servos
     schemes=("serial", "usb"),

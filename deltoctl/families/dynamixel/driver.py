@@ -23,7 +23,7 @@ from deltoctl.families.dynamixel.control_table import (
     Item,
 )
 from deltoctl.families.dynamixel.models import Model, by_number, expected_model, label
-from deltoctl.families.dynamixel.plugins import gpio_readings, servo_ids
+from deltoctl.families.dynamixel.ros2_control import gpio_readings, servo_ids
 from deltoctl.servo.frames import Reply
 from deltoctl.servo.serial_io import SerialLink
 from deltoctl.servo.sync_loops import SyncLoops, SyncRead
@@ -444,7 +444,7 @@ class DynamixelDriver(Driver):
         timeout passes or the System halts the move."""
         import time
 
-        from deltoctl.core.motion import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
+        from deltoctl.core.envelope import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
 
         safety = self.profile.safety
         tolerance = safety.home_tolerance or DEFAULT_TOLERANCE
@@ -552,7 +552,7 @@ class DynamixelDriver(Driver):
     def _check_goal(self, device_id: int, item: str, raw: int) -> None:
         """A Goal Position (a step from the Present Position) or Goal Velocity in the units
         of the profile, checked against the joint's envelope."""
-        from deltoctl.core.motion import check_command
+        from deltoctl.core.envelope import check_command
 
         joint = self.joints[device_id]
         if item == "Goal Position":

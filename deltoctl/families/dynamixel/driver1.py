@@ -25,7 +25,7 @@ from deltoctl.families.dynamixel.models1 import (
     Model1,
     baud_of,
 )
-from deltoctl.families.dynamixel.plugins import servo_ids
+from deltoctl.families.dynamixel.ros2_control import servo_ids
 from deltoctl.servo.frames import Reply
 from deltoctl.servo.serial_io import SerialLink
 
@@ -255,7 +255,7 @@ class Protocol1Driver(DynamixelDriver):
             self.link.flush()
 
     def _check_goal(self, device_id: int, item: str, raw: int) -> None:
-        from deltoctl.core.motion import check_command
+        from deltoctl.core.envelope import check_command
 
         if item != "Goal Position":
             return

@@ -22,7 +22,7 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from deltoctl.core.serving import ServeContext
+from deltoctl.core.emulator_contract import ServeContext
 from deltoctl.families.dynamixel import codec
 from deltoctl.families.dynamixel.control_table import BAUD_RATES, item_at
 from deltoctl.families.dynamixel.models import (
@@ -355,7 +355,7 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
     URL's baud rate in the block's protocol (a servo named by ``other_protocol`` in the other
     one, on the same wire)."""
     from deltoctl.families.dynamixel import parse_bus_url, protocol_of
-    from deltoctl.families.dynamixel.plugins import servo_ids
+    from deltoctl.families.dynamixel.ros2_control import servo_ids
 
     o = ctx.options
     buses = {}

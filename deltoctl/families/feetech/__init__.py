@@ -15,7 +15,7 @@ FAMILY = Family(
              "so_arm101_ros2_control/SoArm101HardwareInterface",
              "sts_hardware_interface/STSHardwareInterface",
              "feetech_sts_hardware/FeetechSTSHardware"),
-    import_block="deltoctl.families.feetech.plugins:import_block",
+    import_block="deltoctl.families.feetech.ros2_control:import_block",
     address_param="id",
     schemes=("serial", "usb"),
     address_range=(0, 253),

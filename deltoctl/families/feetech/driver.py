@@ -31,7 +31,7 @@ from deltoctl.families.feetech.models import (
     item_named,
     label,
 )
-from deltoctl.families.feetech.plugins import calibration_path, servo_ids, zero_steps
+from deltoctl.families.feetech.ros2_control import calibration_path, servo_ids, zero_steps
 from deltoctl.servo.frames import Reply
 from deltoctl.servo.serial_io import SerialLink
 from deltoctl.servo.sync_loops import SyncLoops, SyncRead
@@ -412,7 +412,7 @@ class FeetechDriver(Driver):
              progress: Progress | None = None) -> MoveResult:
         import time
 
-        from deltoctl.core.motion import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
+        from deltoctl.core.envelope import DEFAULT_TOLERANCE, DEFAULT_VELOCITY
 
         safety = self.profile.safety
         tolerance = safety.home_tolerance or DEFAULT_TOLERANCE
@@ -507,7 +507,7 @@ class FeetechDriver(Driver):
     def write_register(self, joint: str, item: str, value: int) -> int:
         """Write one item (an EEPROM one between unlock and lock) and return what it reads
         back. A goal position or velocity is checked against the joint's envelope."""
-        from deltoctl.core.motion import check_command
+        from deltoctl.core.envelope import check_command
 
         device_id = self.servo(joint)
         model = self.model(device_id)

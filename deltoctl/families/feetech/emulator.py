@@ -15,7 +15,7 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING
 
-from deltoctl.core.serving import ServeContext
+from deltoctl.core.emulator_contract import ServeContext
 from deltoctl.families.feetech import codec
 from deltoctl.families.feetech.models import BAUD_RATES, BY_NUMBER, Model, expected_model
 from deltoctl.servo.items import item_at
@@ -288,7 +288,7 @@ def _model_of(hw: Hardware, joint: Component) -> Model:
 
 def bus_of(ctx: ServeContext, hw: Hardware, baud: int) -> FeetechBus:
     """A block's servos at their joints' IDs, with the faults ``ctx`` names."""
-    from deltoctl.families.feetech.plugins import servo_ids
+    from deltoctl.families.feetech.ros2_control import servo_ids
 
     joints = servo_ids(ctx.profile, hw)
     ids = {j.name: i for i, j in joints.items()}

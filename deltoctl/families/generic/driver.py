@@ -122,7 +122,7 @@ class GenericDriver(Driver):
         envelope it is refused before anything is written (a snapshot is untrusted)."""
         import math
 
-        from deltoctl.core.motion import check_command
+        from deltoctl.core.envelope import check_command
 
         joints = {j.name: j for j in self.hw.joints}
         for part, items in changes.items():

@@ -15,7 +15,7 @@ import time
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from deltoctl.core.serving import ServeContext
+from deltoctl.core.emulator_contract import ServeContext
 from deltoctl.errors import InvalidInput, ProtocolError
 from deltoctl.families.lsm6ds3 import FAMILY, codec
 

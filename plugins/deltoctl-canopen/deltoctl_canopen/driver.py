@@ -495,7 +495,7 @@ class CanopenDriver(Driver):
         own (the trapezoid of the profile velocity and the drive's acceleration) and the
         profile's ``home_timeout`` (else 5 s); when it runs out, or the System halts the move,
         the joints not there are unsettled."""
-        from deltoctl.core.motion import DEFAULT_VELOCITY
+        from deltoctl.core.envelope import DEFAULT_VELOCITY
 
         speed = velocity or DEFAULT_VELOCITY
         values = self.read()

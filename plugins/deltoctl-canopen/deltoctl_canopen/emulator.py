@@ -32,7 +32,7 @@ from deltoctl_canopen.drive import Drive402
 from deltoctl_canopen.session import Abort
 
 if TYPE_CHECKING:
-    from deltoctl.core.serving import ServeContext
+    from deltoctl.core.emulator_contract import ServeContext
     from deltoctl.profile.model import Hardware
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 from deltoctl.core.system import System
 from deltoctl.families.dynamixel.emulator import DynamixelBus, DynamixelPtyServer, Servo
 from deltoctl.families.dynamixel.emulator import _model_of as model_of
-from deltoctl.families.dynamixel.plugins import servo_ids
+from deltoctl.families.dynamixel.ros2_control import servo_ids
 from deltoctl.profile.catalog import load_profile
 from tests.conftest import eventually
 

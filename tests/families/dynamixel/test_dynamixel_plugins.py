@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 import deltoctl
-from deltoctl.families.dynamixel.plugins import servo_ids
+from deltoctl.families.dynamixel.ros2_control import servo_ids
 from deltoctl.profile.catalog import load_profile
 from tests.conftest import block_of, eventually
 

@@ -81,7 +81,7 @@ def command_lines(command: list[str],
 def robots_found(session: Any, wait: float) -> list[dict[str, Any]]:
     """The robots whose agents answer within ``wait`` seconds, by name: each one's profile and
     what its agent says of it (identity, state, motion; its state "unknown" without answer)."""
-    from deltoctl.fleet.client import agents, infos
+    from deltoctl.fleet.remote_call import agents, infos
 
     found = agents(session, wait=wait)
     details = infos(session, wait=wait) if found else {}
@@ -137,7 +137,7 @@ class Job:
         return lines[-1] if lines else ""
 
     def run(self, session: Any) -> None:
-        from deltoctl.fleet.client import RemoteCall
+        from deltoctl.fleet.remote_call import RemoteCall
 
         self.started = time.monotonic()
         for argv in self.lines:
