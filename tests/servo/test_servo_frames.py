@@ -153,3 +153,26 @@ def test_a_protocol_2_header_with_a_length_beyond_any_packet_is_passed_by():
     [(device_id, instruction, body)] = dxl2.PacketReader().feed(longest)
     assert (device_id, instruction) == (dxl2.BROADCAST_ID, dxl2.STATUS)
     assert len(body) == (dxl2.MAX_ID + 1) * 14 - 2
+
+
+def test_a_checksum_sync_read_s_replies_are_checked_in_place_as_they_arrive():
+    first, second = checksum.status(1, 0, bytes(range(6))), checksum.status(2, 0x20, bytes(6))
+    check = checksum.FRAMES.sync_replies(6, [1, 2, 3])
+    check.feed(first + second[:5])  # the first whole, the second on its way
+    assert check.found == [(1, 0, bytes(range(6)))] and check.in_shape
+    bad = bytearray(checksum.status(3, 0, bytes(6)))
+    bad[-2] ^= 1
+    check.feed(first + second + bytes(bad))
+    assert check.found == [(1, 0, bytes(range(6))), (2, 0x20, bytes(6)), False]
+    assert check.in_shape
+
+
+@pytest.mark.parametrize("wire", [
+    checksum.status(2, 0x08),  # an error with no data: shorter than asked
+    checksum.status(3, 0, bytes(6)),  # another servo's
+    checksum.frame(2, 0x82, bytes(6)),  # an instruction heard back, not a status
+], ids=["short", "other-id", "instruction"])
+def test_a_checksum_sync_reply_out_of_shape_is_left_to_split(wire):
+    check = checksum.FRAMES.sync_replies(6, [1, 2])
+    check.feed(checksum.status(1, 0, bytes(6)) + wire + bytes(12))
+    assert not check.in_shape and check.found == [(1, 0, bytes(6))]

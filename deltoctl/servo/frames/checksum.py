@@ -129,6 +129,41 @@ def split_statuses(data: bytes) -> list[Reply]:
         at += size
 
 
+def status_at(data: bytes, offset: int, length: int, device_id: int) -> Reply | bool | None:
+    """The common case of a sync read's reply — the expected servo, in order, ``length``
+    bytes of data — read in place: ``(id, error, data)``; False for a bad checksum; None when
+    the bytes do not have that shape (a short status, an instruction heard back, noise)."""
+    end = offset + 6 + length
+    if len(data) < end or not data.startswith(
+            HEADER + bytes((device_id, length + 2)), offset) or data[offset + 4] > 0x7F:
+        return None
+    if checksum(data, offset + 2, end - 1) != data[end - 1]:
+        return False
+    return device_id, data[offset + 4], bytes(data[offset + 5:end - 1])
+
+
+class SyncReplies:
+    """The replies to one sync read, checked as their bytes arrive (``feed`` the bytes so far
+    while later replies are still on the wire): by offsets while each is the expected
+    servo's status with the data asked for; anything else is left to ``split_statuses``."""
+
+    def __init__(self, length: int, ids: list[int]) -> None:
+        self.length, self.ids, self.size = length, ids, 6 + length
+        self.found: list = []  # (id, error, data), or False for a bad checksum
+        self.in_shape = True
+
+    def feed(self, data: bytes) -> None:
+        found, ids, size, length = self.found, self.ids, self.size, self.length
+        k, whole = len(found), min(len(data) // size, len(ids))
+        while k < whole and self.in_shape:
+            reply = status_at(data, k * size, length, ids[k])
+            if reply is None:
+                self.in_shape = False
+            else:
+                found.append(reply)
+                k += 1
+
+
 def error_words(error: int, names: dict[int, str]) -> list[str]:
     """The names of the bits set in a status's error byte (``names``: bit → name, the
     family's), an unnamed bit as ``bit N``."""
@@ -163,8 +198,8 @@ class ChecksumFrames:
     def split(self, data: bytes) -> list[Reply]:
         return split_statuses(data)
 
-    def sync_replies(self, length: int, ids: list[int]) -> None:
-        return None  # split: a status is short, and a sync read's are few
+    def sync_replies(self, length: int, ids: list[int]) -> SyncReplies:
+        return SyncReplies(length, ids)
 
     def combined_size(self, servos: int, length: int) -> int:
         raise ProtocolError("the checksum frame has no Fast Sync Read")
