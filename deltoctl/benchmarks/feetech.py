@@ -1,7 +1,9 @@
 """``bench feetech``: sync reads of six STS3215 (an SO-101 arm's bus) on an emulated bus in
 another process, side by side with scservo_sdk's GroupSyncRead (feetech-servo-sdk, the SDK
-LeRobot pins): paced at 1 Mbps, each against the wire's limit; unpaced, the CPU a read costs
-each client."""
+LeRobot pins): paced at 1 Mbps, each against the wire's limit, and against it with the
+pseudo-terminal's own round trip taken out (the transport of an emulated bus, which a real one
+does not have: one per read, as the request goes out and the last status comes back); unpaced,
+the CPU a read costs each client."""
 
 from __future__ import annotations
 
@@ -9,7 +11,7 @@ import subprocess
 import sys
 from typing import Any
 
-from deltoctl.benchmarks.dynamixel import _flat_out, _stop
+from deltoctl.benchmarks.dynamixel import _flat_out, _pty_round_trip, _stop
 
 ADDRESS, LENGTH = 56, 6  # Present_Position, Velocity, Load: the driver's read each cycle
 _SERVE_BUS = """
@@ -98,17 +100,30 @@ def _run(pace: bool, servos: int, baud: int, duration: float) -> dict[str, tuple
     return out
 
 
+def _less_pty(hz: float, limit: float, pty_s: float) -> float | None:
+    """The wire's time of a read over the time it took less the pseudo-terminal's round trip
+    (None when the round trip is not shorter than the read)."""
+    left = 1.0 / hz - pty_s
+    return round(1.0 / limit / left, 3) if left > 0 else None
+
+
 def measure(servos: int = 6, duration: float = 3.0, baud: int = 1_000_000) -> dict:
+    from deltoctl.families.feetech import codec
+
     limit = wire_limit(servos, baud)
+    pty_ms, _ = _pty_round_trip(min(duration, 1.0),
+                                len(codec.sync_read(ADDRESS, LENGTH, list(range(1, servos + 1)))))
     paced = _run(True, servos, baud, duration)
     unpaced = _run(False, servos, baud, duration)
     results: dict = {"servos": servos, "baud": baud, "item": f"{ADDRESS}/{LENGTH}",
-                     "wire_limit_hz": round(limit, 1), "errors": paced["errors"][0]}
+                     "wire_limit_hz": round(limit, 1), "errors": paced["errors"][0],
+                     "pty_round_trip_us": round(pty_ms * 1e3, 1)}
     for name in ("deltoctl", "scservo_sdk"):
         if name in paced:
             results[name] = {
                 "paced_hz": round(paced[name][0], 1),
                 "paced_fraction_of_wire": round(paced[name][0] / limit, 3),
+                "paced_fraction_less_pty": _less_pty(paced[name][0], limit, pty_ms / 1e3),
                 "unpaced_hz": round(unpaced[name][0], 1),
                 "cpu_us_per_read": round(unpaced[name][1], 1)}
     if "scservo_sdk" in results:

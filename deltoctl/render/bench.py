@@ -155,6 +155,13 @@ def feetech_lines(results: dict[str, Any]) -> list[str]:
                          f"({100 * r['paced_fraction_of_wire']:.1f} % of the wire's limit); "
                          f"unpaced {r['unpaced_hz']:8.1f} reads/s, "
                          f"{r['cpu_us_per_read']:.1f} µs CPU a read")
+    less = [f"{name} {100 * results[name]['paced_fraction_less_pty']:.1f} %"
+            for name in ("deltoctl", "scservo_sdk")
+            if results.get(name, {}).get("paced_fraction_less_pty") is not None]
+    if "pty_round_trip_us" in results:
+        lines.append(f"  the pseudo-terminal's own round trip {results['pty_round_trip_us']:.1f} "
+                     "µs a read (a real bus has none)"
+                     + (f"; less it, paced: {', '.join(less)} of the wire's limit" if less else ""))
     if "paced_ratio" in results:
         lines.append(f"  deltoctl / scservo_sdk: {results['paced_ratio']:.2f} × the reads paced, "
                      f"{results['cpu_ratio']:.2f} × less CPU a read")
