@@ -111,7 +111,7 @@ def measure(servos: int = 6, duration: float = 3.0, baud: int = 1_000_000) -> di
     from deltoctl.families.feetech import codec
 
     limit = wire_limit(servos, baud)
-    pty_ms, _ = _pty_round_trip(min(duration, 1.0),
+    _, pty_ms = _pty_round_trip(min(duration, 1.0),  # the median: a stray wake-up aside
                                 len(codec.sync_read(ADDRESS, LENGTH, list(range(1, servos + 1)))))
     paced = _run(True, servos, baud, duration)
     unpaced = _run(False, servos, baud, duration)
