@@ -14,9 +14,8 @@ def scan_parts(result: dict[str, Any]) -> list[str | tuple]:
     servos = result["servos"]
     parts: list[str | tuple] = []
     if servos:
-        rows = [["?" if s["id"] is None else s["id"],
-                 "garbled replies" if s["colliding"] and not s["model"] else s["model"],
-                 s["firmware"], s["baud"], s["protocol"]] for s in servos]
+        rows = [["?" if s["id"] is None else s["id"], _model(s), s["firmware"], s["baud"],
+                 s["protocol"]] for s in servos]
         parts.append((None, COLUMNS, rows))
     tried = f"{result['probes']} of {result['of']} probes"
     parts.append(f"{len(servos) or 'nothing'} answered on {result['target']} ({tried}, "
@@ -25,6 +24,12 @@ def scan_parts(result: dict[str, Any]) -> list[str | tuple]:
         parts.append("the adapter refused " + ", ".join(map(str, result["refused_bauds"]))
                      + " baud: not scanned")
     return parts
+
+
+def _model(servo: dict[str, Any]) -> str:
+    if not servo["colliding"]:
+        return servo["model"]
+    return f"{servo['model']} (several servos)" if servo["model"] else "garbled replies"
 
 
 def collision_lines(result: dict[str, Any]) -> list[str]:

@@ -4,6 +4,8 @@ told, colliding replies named, the JSON document, and a link that is not serial 
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import pytest
 
@@ -13,6 +15,7 @@ from deltoctl.families.feetech import emulator as fe
 from deltoctl.families.feetech.models import BY_NUMBER
 
 WAIT = "0.05"  # s a probe waits for a reply: generous, a loaded machine answers late
+ARM = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
 STS3215 = next(m for m in BY_NUMBER.values() if m.name == "STS3215")
 
 
@@ -74,3 +77,38 @@ def test_a_link_that_is_not_serial_is_a_usage_error(cli, link):
     result = cli("scan", link)
     assert result.exit_code == 2
     assert "Traceback" not in result.output
+
+
+def _served(profile, *faults):
+    """`deltoctl sim serve PROFILE --factory-new …` in its own process: (process, bus URL)."""
+    proc = subprocess.Popen([sys.executable, "-m", "deltoctl", "sim", "serve", profile,
+                             "--json", "--factory-new", *faults], stdout=subprocess.PIPE,
+                            text=True)
+    [url] = json.loads(proc.stdout.readline())["buses"].values()
+    return proc, url
+
+
+@pytest.mark.parametrize(("profile", "one", "found"), [
+    ("koch-arm", ["shoulder_pan"], ("XL430-W250", "Dynamixel 2.0", 57_600)),
+    ("so101-follower", ["shoulder_pan"], ("STS3215", "Feetech", 1_000_000)),
+])
+def test_factory_new_servos_collide_at_id_1_and_one_alone_is_found(cli, profile, one, found):
+    proc, url = _served(profile)
+    try:
+        result, doc = _scan(cli, url.split("?")[0])
+    finally:
+        proc.terminate()
+        proc.wait(timeout=5)
+    assert result.exit_code == 3, result.output
+    assert doc["result"]["colliding"] == [1]
+    assert "several servos at ID 1" in result.stderr
+    missing = [a for j in ARM if j not in one for a in ("--missing", j)]
+    proc, url = _served(profile, *missing)
+    try:
+        result, doc = _scan(cli, url.split("?")[0])
+    finally:
+        proc.terminate()
+        proc.wait(timeout=5)
+    assert result.exit_code == 0, result.output
+    [servo] = doc["result"]["servos"]
+    assert (servo["id"], servo["model"], servo["protocol"], servo["baud"]) == (1, *found)

@@ -31,6 +31,9 @@ FAMILY = Family(
                   "Fault: a servo set to another baud rate than its bus (repeatable)."),
         SimOption("other_protocol", "joints",
                   "Fault: a servo set to the other protocol than its bus's (repeatable)."),
+        SimOption("factory_new", "flag", "Servos as they leave the factory, whatever the "
+                  "profile says: Dynamixel at ID 1, 57,600 bps, Protocol 2.0 (X) or 1.0 (AX, "
+                  "MX); Feetech at ID 1, 1 Mbps (deltoctl scan finds them).", False),
     ),
     permissions=(Permission(
         "torque-off",
