@@ -1,9 +1,9 @@
 """``deltoctl scan``: what answers on a serial link, at every rate and in every protocol the
 installed servo families speak, with no profile. Each family declares its probes (its
 descriptor's ``scan``); they run in one order: the common rates first (1 Mbps, 57,600), every
-broadcast before any per-ID sweep. Unless ``every`` is asked, the scan stops after the first
-probe that finds a servo (a box of parts is one servo at a time) — a sweep only once no
-broadcast found one. The bus time is the time spent on the link."""
+broadcast before any per-ID sweep. Unless ``every`` is asked, the scan stops at the first
+servo found, a sweep's too (a box of parts is one servo at a time, at the factory's ID first) —
+a sweep runs only once no broadcast found one. The bus time is the time spent on the link."""
 
 from __future__ import annotations
 
@@ -29,10 +29,11 @@ def target_of(port_or_url: str) -> str:
 
 
 def ordered(probes: list[Any]) -> list[Any]:
-    """Broadcasts before sweeps, the common rates first, then the faster."""
+    """Broadcasts, then a PING to the factory's ID, then sweeps of every ID; in each, the
+    common rates first, then the faster."""
     def key(p: Any) -> tuple:
         common = COMMON.index(p.baud) if p.baud in COMMON else len(COMMON)
-        return (not p.broadcast, common, -p.baud)
+        return (p.stage, common, -p.baud)
     return sorted(probes, key=key)
 
 
@@ -60,7 +61,8 @@ def scan(port_or_url: str, wait: float = 0.01, every: bool = False) -> dict[str,
                 refused.append(probe.baud)
                 continue
             ran += 1
-            found += [f.as_dict() for f in probe.run(port, wait)]
+            found += [f for f in (s.as_dict() for s in probe.run(port, wait, not every))
+                      if f["id"] is None or f not in found]
     finally:
         port.close()
     seconds = time.perf_counter() - start

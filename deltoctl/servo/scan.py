@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from deltoctl.servo.frames import Reply
-from deltoctl.servo.session import Done, Session
+from deltoctl.servo.session import Session
 
 
 @dataclass(frozen=True)
@@ -31,41 +31,36 @@ class Found:
                 "protocol": self.protocol, "baud": self.baud, "colliding": self.colliding}
 
 
+BROADCAST, FACTORY_ID, SWEEP = range(3)
+
+
 @dataclass(frozen=True)
 class Probe:
-    """One protocol at one rate: ``run(port, wait)`` → the servos that answered, ``wait``
-    the seconds it waits for a reply (a broadcast listens for 30 servos' replies besides)."""
+    """One protocol at one rate: ``run(port, wait, first)`` → the servos that answered,
+    ``wait`` the seconds it waits for a reply (a broadcast listens for 30 servos' replies
+    besides); ``first``: a sweep ends at the first servo that answers."""
 
     protocol: str
     baud: int
-    broadcast: bool
-    run: Callable[[Any, float], list[Found]] = field(compare=False)
+    stage: int  # the order probes run in: BROADCAST, FACTORY_ID (one ID), SWEEP (every ID)
+    run: Callable[[Any, float, bool], list[Found]] = field(compare=False)
 
 
 def listen(port: Any, session: Session, device_id: int, instruction: int, params: bytes,
            wait: float) -> tuple[list[Reply], bool]:
-    """One request's replies, read until all are in (a broadcast PING's: for ``wait``), and
-    whether bytes came that are no valid reply (replies that collided)."""
+    """One request's replies, every one heard within ``wait`` (an ID answering twice is two
+    servos at it), and whether bytes came that are no valid reply (replies that collided)."""
     port.reset_input_buffer()
     port.write(session.send(device_id, instruction, params))
     port.flush()
-    if not session.expecting:
-        return [], False
     data = b""
     deadline = time.monotonic() + wait
-    done: Done | None = None
     while time.monotonic() < deadline:
-        chunk = port.read(port.in_waiting or 1)
-        if chunk:
-            data += chunk
-            event = session.receive(chunk)
-            if isinstance(event, Done):
-                done = event
-                break
-    done = done or session.give_up()
+        data += port.read(port.in_waiting or 1)
     frames = session.frames
-    heard = sum(frames.status_size(len(r[2])) for r in frames.split(data))
-    return done.replies, heard < len(data)
+    replies = frames.split(data)
+    heard = sum(frames.status_size(len(r[2])) for r in replies)
+    return replies, heard < len(data)
 
 
 def broadcast_wait(baud: int, wait: float, reply_bytes: int = 14) -> float:

@@ -88,11 +88,13 @@ def _served(profile, *faults):
     return proc, url
 
 
-@pytest.mark.parametrize(("profile", "one", "found"), [
-    ("koch-arm", ["shoulder_pan"], ("XL430-W250", "Dynamixel 2.0", 57_600)),
-    ("so101-follower", ["shoulder_pan"], ("STS3215", "Feetech", 1_000_000)),
+@pytest.mark.parametrize(("profile", "joints", "found"), [
+    ("koch-arm", ARM, ("XL430-W250", "Dynamixel 2.0", 57_600)),
+    ("so101-follower", ARM, ("STS3215", "Feetech", 1_000_000)),
+    ("phantomx-arm", ("waist", "shoulder", "elbow", "wrist", "gripper"),
+     ("AX-12A", "Dynamixel 1.0", 57_600)),
 ])
-def test_factory_new_servos_collide_at_id_1_and_one_alone_is_found(cli, profile, one, found):
+def test_factory_new_servos_collide_at_id_1_and_one_alone_is_found(cli, profile, joints, found):
     proc, url = _served(profile)
     try:
         result, doc = _scan(cli, url.split("?")[0])
@@ -102,7 +104,7 @@ def test_factory_new_servos_collide_at_id_1_and_one_alone_is_found(cli, profile,
     assert result.exit_code == 3, result.output
     assert doc["result"]["colliding"] == [1]
     assert "several servos at ID 1" in result.stderr
-    missing = [a for j in ARM if j not in one for a in ("--missing", j)]
+    missing = [a for j in joints[1:] for a in ("--missing", j)]
     proc, url = _served(profile, *missing)
     try:
         result, doc = _scan(cli, url.split("?")[0])

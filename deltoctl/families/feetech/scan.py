@@ -9,11 +9,11 @@ from typing import Any
 
 from deltoctl.families.feetech import codec
 from deltoctl.families.feetech.models import BAUD_RATES, by_bytes
-from deltoctl.servo.scan import Found, Probe, broadcast_wait, listen, several
+from deltoctl.servo.scan import BROADCAST, Found, Probe, broadcast_wait, listen, several
 
 
 def _broadcast(baud: int) -> Probe:
-    def run(port: Any, wait: float) -> list[Found]:
+    def run(port: Any, wait: float, first: bool = False) -> list[Found]:
         replies, garbled = listen(port, codec.session(), codec.BROADCAST_ID, codec.PING, b"",
                                   broadcast_wait(baud, wait, 6))
         ids = [i for i, _, _ in replies]
@@ -23,7 +23,7 @@ def _broadcast(baud: int) -> Probe:
             rows.append(Found(None, "", "", "Feetech", baud, True))
         return rows
 
-    return Probe("Feetech", baud, True, run)
+    return Probe("Feetech", baud, BROADCAST, run)
 
 
 def _identify(port: Any, device_id: int, baud: int, wait: float, twice: bool) -> Found:
@@ -34,7 +34,8 @@ def _identify(port: Any, device_id: int, baud: int, wait: float, twice: bool) ->
     data = replies[0][2]
     model = by_bytes(data[3:5])
     name = model.name if model else f"model bytes {data[3]:02x} {data[4]:02x}"
-    return Found(device_id, name, f"{data[0]}.{data[1]}", "Feetech", baud, twice or garbled)
+    return Found(device_id, name, f"{data[0]}.{data[1]}", "Feetech", baud,
+                 twice or garbled or len(replies) > 1)
 
 
 def probes() -> list[Probe]:
