@@ -114,3 +114,9 @@ def test_factory_new_servos_collide_at_id_1_and_one_alone_is_found(cli, profile,
     assert result.exit_code == 0, result.output
     [servo] = doc["result"]["servos"]
     assert (servo["id"], servo["model"], servo["protocol"], servo["baud"]) == (1, *found)
+
+
+def test_a_port_that_is_not_there_is_unreachable(cli, tmp_path):
+    result = cli("scan", str(tmp_path / "ttyUSB9"))
+    assert result.exit_code == 4
+    assert "cannot open" in result.stderr
