@@ -233,6 +233,9 @@ class Family:
     # a homing routine of its own (the driver's ``home``), as its configuration says; a joint
     # with a ``home`` command interface has one whatever this says
     homing_joints: str | None = None
+    # "module:function" () → its deltoctl.servo.scan.Probe's: how `deltoctl scan` finds its
+    # devices on a serial link at an unknown rate and protocol
+    scan: str | None = None
 
     def __post_init__(self) -> None:
         unknown = self.capabilities - CAPABILITIES.keys()
@@ -271,6 +274,9 @@ class Family:
     def joints_with_homing(self, profile: Any, hw: Any) -> set[str]:
         """The joints of block ``hw`` that its devices home by a routine of their own."""
         return set(_load(self.homing_joints)(profile, hw)) if self.homing_joints else set()
+
+    def scan_probes(self) -> list[Any]:
+        return list(_load(self.scan)()) if self.scan else []
 
     def show_address(self, address: int) -> str:
         return format(address, self.address_format)

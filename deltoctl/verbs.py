@@ -132,6 +132,7 @@ TABLE: dict[str, Verb] = {
         "i2c": Verb(READS),
     }),
     "ports": Verb(READS, "deltoctl ports --json", "ports_cmd", stage=TOOLS),
+    "scan": Verb(READS, "deltoctl scan /dev/ttyUSB0 --json", "scan_cmd", stage=TOOLS),
     "doctor": Verb(READS, "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 doctor",
                    "doctor_cmd", stage=TOOLS,
                    when={("--write-udev-rule",): ACTUATES}),  # the host's udev

@@ -47,7 +47,7 @@ def forward(ctx: typer.Context) -> NoReturn:
     from deltoctl.cli.context import ARGV
     from deltoctl.cli.output import emit_error, stdout_is_terminal
     from deltoctl.fleet import ACTUATING, check_robot
-    from deltoctl.fleet.fleet_run import strip_remote, verb_of
+    from deltoctl.fleet.fleet_run import record_file_dropped, strip_remote, verb_of
     from deltoctl.fleet.remote_call import ErrorLines, RemoteCall, caller_session
     from deltoctl.render.stream import live_lines
 
@@ -56,7 +56,7 @@ def forward(ctx: typer.Context) -> NoReturn:
     argv = strip_remote(list(ctx.find_root().meta.get(ARGV, [])))
     errors = ErrorLines(robot, opts.json, _write_err)
     try:
-        verb = verb_of(_record_file_dropped(argv), robot)
+        verb = verb_of(record_file_dropped(argv, _value_options), robot)
         if verb == "record" and not {"--help", "-h"} & set(argv):
             raise typer.Exit(_remote_record(opts, robot, argv, errors.feed))
         if verb in ACTUATING and confirmed_remotely(opts, f"robot {robot}: {' '.join(argv)}"):
@@ -77,26 +77,6 @@ def forward(ctx: typer.Context) -> NoReturn:
 
 # -- --robot R record: the file on this computer -----------------------------------------------
 
-def _record_file_dropped(argv: list[str]) -> list[str]:
-    """The command line as the agent judges it: a remote record's FILE is written on this
-    computer and never sent, so the agent's path rule (files in its directory only) does not
-    judge it. Any other command line as it is."""
-    from deltoctl.cmdline import hoist_global_options
-    from deltoctl.fleet.fleet_run import verb_args
-
-    hoisted = hoist_global_options(argv)
-    args = verb_args(hoisted)
-    try:
-        if verbs.resolve(hoisted) != "record" or {"--help", "-h"} & set(args):
-            return argv
-    except InvalidInput:
-        return argv
-    at = _positional(args)
-    if at is None:
-        return argv
-    return hoisted[:len(hoisted) - len(args)] + args[:at] + args[at + 1:]
-
-
 def _record_command() -> Any:
     """``deltoctl record``'s click command: its options, as the CLI parses them."""
     from typer.main import get_command
@@ -108,13 +88,10 @@ def _record_command() -> Any:
     return get_command(holder)
 
 
-def _positional(args: list[str]) -> int | None:
-    """Where record's FILE argument stands among its arguments."""
-    from deltoctl.cmdline import first_argument
-
-    return first_argument(args, {o for p in _record_command().params if getattr(p, "opts", None)
-                                 and p.param_type_name == "option" and not p.is_flag
-                                 for o in p.opts})
+def _value_options() -> set[str]:
+    """record's options that take a value, as the CLI parses them."""
+    return {o for p in _record_command().params if getattr(p, "opts", None)
+            and p.param_type_name == "option" and not p.is_flag for o in p.opts}
 
 
 def record_options(args: list[str]) -> dict[str, Any]:

@@ -63,6 +63,27 @@ def verb_args(argv: list[str]) -> list[str]:
     return argv[i + 1:]
 
 
+def record_file_dropped(argv: list[str], value_options: Callable[[], set[str]]) -> list[str]:
+    """The command line as the agent judges it: a remote record's FILE is written on this
+    computer and never sent, so the agent's path rule (files in its directory only) does not
+    judge it. Any other command line as it is. ``value_options``: record's options that take
+    a value (where its FILE argument stands depends on them)."""
+    from deltoctl import verbs
+    from deltoctl.cmdline import first_argument, hoist_global_options
+
+    hoisted = hoist_global_options(argv)
+    args = verb_args(hoisted)
+    try:
+        if verbs.resolve(hoisted) != "record" or {"--help", "-h"} & set(args):
+            return argv
+    except InvalidInput:
+        return argv
+    at = first_argument(args, value_options())
+    if at is None:
+        return argv
+    return hoisted[:len(hoisted) - len(args)] + args[:at] + args[at + 1:]
+
+
 def command_lines(command: list[str],
                   verbs: Collection[str]) -> tuple[list[list[str]], list[str], bool]:
     """What a fleet run sends each robot: the deltoctl lines of a bring-up script when

@@ -11,6 +11,7 @@ FAMILY = Family(
     driver="deltoctl.families.dynamixel.protocols:BusDriver",
     frame_names="deltoctl.families.dynamixel.codec:frame_name",
     emulator="deltoctl.families.dynamixel.emulator:serve",
+    scan="deltoctl.families.dynamixel.scan:probes",
     plugins=("mh5_hardware/MH5DynamixelInterface", "dynamixel_hardware/DynamixelHardware",
              "dynamixel_hardware_interface/DynamixelHardware"),
     import_block="deltoctl.families.dynamixel.ros2_control:import_block",
@@ -30,6 +31,9 @@ FAMILY = Family(
                   "Fault: a servo set to another baud rate than its bus (repeatable)."),
         SimOption("other_protocol", "joints",
                   "Fault: a servo set to the other protocol than its bus's (repeatable)."),
+        SimOption("factory_new", "flag", "Servos as they leave the factory, whatever the "
+                  "profile says: Dynamixel at ID 1, 57,600 bps, Protocol 2.0 (X) or 1.0 (AX, "
+                  "MX); Feetech at ID 1, 1 Mbps (deltoctl scan finds them).", False),
     ),
     permissions=(Permission(
         "torque-off",

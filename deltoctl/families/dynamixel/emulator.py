@@ -364,6 +364,11 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
         protocol = protocol_of(hw.params, hw.name)
         _, baud, _ = parse_bus_url(url, protocol)
         joints = servo_ids(ctx.profile, hw)
+        if o.factory_new:
+            bus = _factory_new(ctx, hw, joints)
+            server = ctx.stack.enter_context(DynamixelPtyServer(bus, pace=o.pace))
+            buses[hw.bus or hw.name] = f"serial://{server.port}?baud={baud}"
+            continue
         ids = {j.name: i for i, j in joints.items()}
         other = {ids[j.name] for j in ctx.named("other_protocol", hw) if j.name in ids}
         mine = {i: j for i, j in joints.items() if i not in other}
@@ -393,6 +398,23 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
         query = url.split("?", 1)[1] if "?" in url else f"baud={baud}"
         buses[hw.bus or hw.name] = f"serial://{server.port}?{query}"
     return buses
+
+
+def _factory_new(ctx: ServeContext, hw: Hardware, joints: dict[int, Component]) -> Any:
+    """Servos as they leave the factory: each at ID 1 and 57,600 bps, an X-series in
+    Protocol 2.0, an AX or MX in 1.0; all on one wire, so several answer at ID 1."""
+    from deltoctl.families.dynamixel.emulator1 import MixedBus
+    from deltoctl.families.dynamixel.models1 import Model1
+
+    missing = {j.name for j in ctx.named("missing", hw)}
+    buses = [_bus(hw, {1: j}, 57_600, 1.0 if isinstance(_listed_model(hw, j), Model1) else 2.0)
+             for j in joints.values() if j.name not in missing]
+    return MixedBus(*buses) if buses else DynamixelBus([], 57_600)
+
+
+def _listed_model(hw: Hardware, joint: Component) -> Any:
+    number = expected_model(hw.params, joint.params, joint.name)
+    return by_number(number) if number is not None else None
 
 
 def _bus(hw: Hardware, joints: dict[int, Component], baud: int, protocol: float) -> Any:

@@ -11,6 +11,7 @@ FAMILY = Family(
     driver="deltoctl.families.feetech.driver:FeetechDriver",
     frame_names="deltoctl.families.feetech.codec:frame_name",
     emulator="deltoctl.families.feetech.emulator:serve",
+    scan="deltoctl.families.feetech.scan:probes",
     plugins=("feetech_ros2_driver/FeetechHardwareInterface",
              "so_arm101_ros2_control/SoArm101HardwareInterface",
              "sts_hardware_interface/STSHardwareInterface",
@@ -37,6 +38,9 @@ FAMILY = Family(
                   "limits (16 V on a 12 V servo) (repeatable)."),
         SimOption("old_firmware", "joints", "Fault: the servo runs firmware 3.9 where the "
                   "others run 3.10 (repeatable)."),
+        SimOption("factory_new", "flag", "Servos as they leave the factory, whatever the "
+                  "profile says: Dynamixel at ID 1, 57,600 bps, Protocol 2.0 (X) or 1.0 (AX, "
+                  "MX); Feetech at ID 1, 1 Mbps (deltoctl scan finds them).", False),
     ),
     identity_fields=(("servos", "{} Feetech servos"),),
     register_items="deltoctl.families.feetech.models:item_names",

@@ -296,6 +296,13 @@ def bus_of(ctx: ServeContext, hw: Hardware, baud: int) -> FeetechBus:
     volts = {j.name for j in ctx.named("voltage", hw)}
     servos = [Servo(i, _model_of(hw, j), (3, 9) if j.name in old else (3, 10),
                     16.0 if j.name in volts else 12.0) for i, j in joints.items()]
+    if ctx.options.factory_new:  # each at ID 1, 1 Mbps: their replies collide
+        missing = {ids[j.name] for j in ctx.named("missing", hw) if j.name in ids}
+        present = [s for s in servos if s.id not in missing]
+        for k, servo in enumerate(present):
+            servo.set("ID", 1)
+            servo.actual += 300 * k  # poses of their own: their replies differ
+        return FeetechBus(present, baud=1_000_000)
     bus = FeetechBus(servos, baud=baud)
     by_id = {s.id: s for s in servos}
     bus.missing |= {ids[j.name] for j in ctx.named("missing", hw) if j.name in ids}

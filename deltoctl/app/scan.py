@@ -1,0 +1,75 @@
+"""``deltoctl scan``: what answers on a serial link, at every rate and in every protocol the
+installed servo families speak, with no profile. Each family declares its probes (its
+descriptor's ``scan``); they run in one order: the common rates first (1 Mbps, 57,600), every
+broadcast before any per-ID sweep. Unless ``every`` is asked, the scan stops at the first
+servo found, a sweep's too (a box of parts is one servo at a time, at the factory's ID first) —
+a sweep runs only once no broadcast found one. The bus time is the time spent on the link."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from deltoctl import registry
+from deltoctl.errors import InvalidInput, Unreachable
+
+COMMON = (1_000_000, 57_600)
+
+
+def target_of(port_or_url: str) -> str:
+    """A serial URL from a port path or a serial URL; anything else is a usage error."""
+    from deltoctl.transport.serial_port import parse_serial_url
+
+    url = f"serial://{port_or_url}" if port_or_url.startswith("/") else port_or_url
+    if url.startswith("usb:") or url.startswith("serial:"):
+        parse_serial_url(url)
+        return url
+    raise InvalidInput(f"{port_or_url!r} is not a serial link: scan takes a port "
+                       "(/dev/ttyUSB0) or a serial:// or usb: target")
+
+
+def ordered(probes: list[Any]) -> list[Any]:
+    """Broadcasts, then a PING to the factory's ID, then sweeps of every ID; in each, the
+    common rates first, then the faster."""
+    def key(p: Any) -> tuple:
+        common = COMMON.index(p.baud) if p.baud in COMMON else len(COMMON)
+        return (p.stage, common, -p.baud)
+    return sorted(probes, key=key)
+
+
+def scan(port_or_url: str, wait: float = 0.01, every: bool = False) -> dict[str, Any]:
+    """Run the probes of every installed family on the link: the servos found, the probes
+    run, the rates the adapter refused, the bus time (s)."""
+    from deltoctl.transport.serial_port import open_serial
+
+    url = target_of(port_or_url)
+    probes = ordered([p for f in registry.families().values() for p in f.scan_probes()])
+    if not probes:
+        raise InvalidInput("no installed family scans a serial link")
+    port = open_serial(url, timeout=0.002)
+    found: list[dict[str, Any]] = []
+    refused: list[int] = []
+    ran = 0
+    start = time.perf_counter()
+    try:
+        for probe in probes:
+            if found and not every:
+                break
+            try:
+                port.baudrate = probe.baud
+            except (OSError, ValueError):
+                refused.append(probe.baud)
+                continue
+            ran += 1
+            found += [f for f in (s.as_dict() for s in probe.run(port, wait, not every))
+                      if f["id"] is None or f not in found]
+    finally:
+        port.close()
+    seconds = time.perf_counter() - start
+    if not found:
+        raise Unreachable(f"nothing answers on {url} ({ran} probes, {seconds:.3f} s)",
+                          hint="check the power and the wiring (GND, data), then scan again")
+    return {"target": url, "servos": found, "probes": ran, "of": len(probes),
+            "refused_bauds": sorted(set(refused)), "bus_seconds": round(seconds, 3),
+            "colliding": sorted({f["id"] for f in found if f["colliding"] and
+                                 f["id"] is not None})}

@@ -1,0 +1,85 @@
+"""How a box of Dynamixel servos is found at an unknown rate and protocol: a broadcast PING
+per X-series rate in Protocol 2.0 (every servo answers with its model and firmware), and in
+Protocol 1.0, whose broadcast PING no servo answers, a PING to ID 1 (the factory's) per AX/MX
+rate, then to each ID 0–252 in turn, and the model and firmware of each that answers read at
+address 0. The common rates come first (1 Mbps, the AX's default; 57,600, the X's and MX's)."""
+
+from __future__ import annotations
+
+import struct
+from typing import Any
+
+from deltoctl.families.dynamixel import codec, protocol1
+from deltoctl.families.dynamixel.control_table import BAUD_RATES
+from deltoctl.families.dynamixel.models import by_number
+from deltoctl.families.dynamixel.models1 import BAUD_CODES
+from deltoctl.servo.scan import (
+    BROADCAST,
+    FACTORY_ID,
+    SWEEP,
+    Found,
+    Probe,
+    broadcast_wait,
+    listen,
+    several,
+)
+
+COMMON = (1_000_000, 57_600)
+EVERY_ID = (1, 0, *range(2, 253))  # the factory's ID first
+
+
+def _ordered(rates: Any) -> list[int]:
+    return sorted(rates, key=lambda b: (b not in COMMON, COMMON.index(b) if b in COMMON else -b))
+
+
+def _model(number: int) -> str:
+    model = by_number(number)
+    return model.name if model else f"model number {number}"
+
+
+def _broadcast_2(baud: int) -> Probe:
+    def run(port: Any, wait: float, first: bool = False) -> list[Found]:
+        replies, garbled = listen(port, codec.session(), codec.BROADCAST_ID, codec.PING, b"",
+                                  broadcast_wait(baud, wait))
+        ids = [i for i, _, _ in replies]
+        twice = several(ids)
+        found = {i: Found(i, _model(struct.unpack_from("<H", d)[0]), str(d[2]),
+                          "Dynamixel 2.0", baud, i in twice) for i, _, d in replies if len(d) == 3}
+        rows = list(found.values())
+        if garbled:
+            rows.append(Found(None, "", "", "Dynamixel 2.0", baud, True))
+        return rows
+
+    return Probe("Dynamixel 2.0", baud, BROADCAST, run)
+
+
+def _sweep_1(baud: int, ids: tuple[int, ...]) -> Probe:
+    def run(port: Any, wait: float, first: bool = False) -> list[Found]:
+        rows: list[Found] = []
+        for i in ids:
+            if rows and first:
+                break
+            replies, garbled = listen(port, protocol1.session(), i, protocol1.PING, b"", wait)
+            if not replies and not garbled:
+                continue
+            data, garbled_read = _read(port, i, wait)
+            garbled = garbled or len(replies) > 1
+            number, firmware = struct.unpack_from("<HB", data) if len(data) >= 3 else (0, 0)
+            rows.append(Found(i, _model(number) if data else "", str(firmware) if data else "",
+                              "Dynamixel 1.0", baud, garbled or garbled_read))
+        return rows
+
+    return Probe("Dynamixel 1.0", baud, FACTORY_ID if len(ids) == 1 else SWEEP, run)
+
+
+def _read(port: Any, device_id: int, wait: float) -> tuple[bytes, bool]:
+    """Model, firmware and present position (two servos at one ID differ in it: they garble)."""
+    replies, garbled = listen(port, protocol1.session(), device_id, protocol1.READ,
+                              protocol1.read_params(0, 38), wait)
+    return (replies[0][2] if replies else b""), garbled or len(replies) != 1
+
+
+def probes() -> list[Probe]:
+    return [*(_broadcast_2(b) for b in _ordered(BAUD_RATES.values())),
+            *(_sweep_1(b, (1,)) for b in _ordered(BAUD_CODES)),
+            *(_sweep_1(b, EVERY_ID) for b in _ordered(BAUD_CODES))]
