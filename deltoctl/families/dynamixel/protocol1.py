@@ -9,13 +9,35 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from deltoctl.servo.frames.checksum import BROADCAST_ID, FRAMES, HEADER, checksum, frame
+from deltoctl.servo.frames.checksum import (
+    ACTION,
+    BROADCAST_ID,
+    FRAMES,
+    HEADER,
+    PING,
+    READ,
+    REG_WRITE,
+    SYNC_WRITE,
+    WRITE,
+    action,
+    checksum,
+    frame,
+    ping,
+    read,
+    read_params,
+    reg_write,
+    sync_write,
+    sync_write_params,
+    write,
+    write_params,
+)
 from deltoctl.servo.session import DEVICE, HOST, Instructions, Session
 
-__all__ = ["BROADCAST_ID", "DEVICE", "HOST"]
+__all__ = ["ACTION", "BROADCAST_ID", "DEVICE", "HOST", "PING", "READ", "REG_WRITE", "SYNC_WRITE",
+           "WRITE", "action", "ping", "read", "read_params", "reg_write", "sync_write",
+           "sync_write_params", "write", "write_params"]
 
-PING, READ, WRITE, REG_WRITE, ACTION, RESET = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06
-SYNC_WRITE, BULK_READ = 0x83, 0x92
+RESET, BULK_READ = 0x06, 0x92
 INSTRUCTIONS = {PING: "PING", READ: "READ", WRITE: "WRITE", REG_WRITE: "REG_WRITE",
                 ACTION: "ACTION", RESET: "RESET", SYNC_WRITE: "SYNC_WRITE",
                 BULK_READ: "BULK_READ"}
@@ -77,59 +99,16 @@ def frame_name(data: bytes) -> str | None:
     return names[0] if len(names) == 1 else " + ".join(dict.fromkeys(names))
 
 
-# -- params -------------------------------------------------------------------------------------
-
-def read_params(address: int, length: int) -> bytes:
-    return bytes((address, length))
-
-
-def write_params(address: int, data: bytes) -> bytes:
-    return bytes((address,)) + data
-
+# -- requests of its own (the shared ones are the kit's: deltoctl.servo.frames.checksum) ----------
 
 def bulk_read_params(requests: Iterable[tuple[int, int, int]]) -> bytes:
     """(ID, address, length) per servo."""
     return b"\x00" + b"".join(bytes((n, i, a)) for i, a, n in requests)
 
 
-def sync_write_params(address: int, length: int, data: dict[int, bytes]) -> bytes:
-    params = bytearray((address, length))
-    for device_id, values in data.items():
-        if len(values) != length:
-            raise ValueError(f"sync write to ID {device_id}: {len(values)} bytes, not {length}")
-        params += bytes((device_id,)) + values
-    return bytes(params)
-
-
-# -- requests -------------------------------------------------------------------------------------
-
-def ping(device_id: int) -> bytes:
-    return frame(device_id, PING)
-
-
-def read(device_id: int, address: int, length: int) -> bytes:
-    return frame(device_id, READ, read_params(address, length))
-
-
-def write(device_id: int, address: int, data: bytes) -> bytes:
-    return frame(device_id, WRITE, write_params(address, data))
-
-
-def reg_write(device_id: int, address: int, data: bytes) -> bytes:
-    return frame(device_id, REG_WRITE, write_params(address, data))
-
-
-def action(device_id: int = BROADCAST_ID) -> bytes:
-    return frame(device_id, ACTION)
-
-
 def reset(device_id: int) -> bytes:
     """Every item back to its factory default (the ID to 1)."""
     return frame(device_id, RESET)
-
-
-def sync_write(address: int, length: int, data: dict[int, bytes]) -> bytes:
-    return frame(BROADCAST_ID, SYNC_WRITE, sync_write_params(address, length, data))
 
 
 def bulk_read(requests: Iterable[tuple[int, int, int]]) -> bytes:

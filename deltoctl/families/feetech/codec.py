@@ -8,13 +8,35 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from deltoctl.servo.frames.checksum import BROADCAST_ID, FRAMES, HEADER, MAX_ID, frame
+from deltoctl.servo.frames.checksum import (
+    ACTION,
+    BROADCAST_ID,
+    FRAMES,
+    HEADER,
+    MAX_ID,
+    PING,
+    READ,
+    REG_WRITE,
+    SYNC_WRITE,
+    WRITE,
+    action,
+    frame,
+    ping,
+    read,
+    read_params,
+    reg_write,
+    sync_write,
+    sync_write_params,
+    write,
+    write_params,
+)
 from deltoctl.servo.session import DEVICE, HOST, Instructions, Session
 
-__all__ = ["BROADCAST_ID", "DEVICE", "HOST", "MAX_ID"]
+__all__ = ["ACTION", "BROADCAST_ID", "DEVICE", "HOST", "MAX_ID", "PING", "READ", "REG_WRITE",
+           "SYNC_WRITE", "WRITE", "action", "ping", "read", "read_params", "reg_write",
+           "sync_write", "sync_write_params", "write", "write_params"]
 
-PING, READ, WRITE, REG_WRITE, ACTION = 0x01, 0x02, 0x03, 0x04, 0x05
-SYNC_READ, SYNC_WRITE = 0x82, 0x83
+SYNC_READ = 0x82
 INSTRUCTIONS = {PING: "PING", READ: "READ", WRITE: "WRITE", REG_WRITE: "REG_WRITE",
                 ACTION: "ACTION", SYNC_READ: "SYNC_READ", SYNC_WRITE: "SYNC_WRITE"}
 
@@ -62,55 +84,14 @@ def error_advice(error: int) -> str:
     return "; ".join(ERRORS[bit][1] for bit in range(7) if error >> bit & 1 and bit in ERRORS)
 
 
-# -- requests -------------------------------------------------------------------------------------
-
-def read_params(address: int, length: int) -> bytes:
-    return bytes((address, length))
-
-
-def write_params(address: int, data: bytes) -> bytes:
-    return bytes((address,)) + data
-
+# -- requests of its own (the shared ones are the kit's: deltoctl.servo.frames.checksum) ----------
 
 def sync_read_params(address: int, length: int, ids: Iterable[int]) -> bytes:
     return bytes((address, length)) + bytes(ids)
 
 
-def sync_write_params(address: int, length: int, data: dict[int, bytes]) -> bytes:
-    params = bytearray((address, length))
-    for device_id, values in data.items():
-        if len(values) != length:
-            raise ValueError(f"sync write to ID {device_id}: {len(values)} bytes, not {length}")
-        params += bytes((device_id,)) + values
-    return bytes(params)
-
-
-def ping(device_id: int = BROADCAST_ID) -> bytes:
-    return frame(device_id, PING)
-
-
-def read(device_id: int, address: int, length: int) -> bytes:
-    return frame(device_id, READ, read_params(address, length))
-
-
-def write(device_id: int, address: int, data: bytes) -> bytes:
-    return frame(device_id, WRITE, write_params(address, data))
-
-
-def reg_write(device_id: int, address: int, data: bytes) -> bytes:
-    return frame(device_id, REG_WRITE, write_params(address, data))
-
-
-def action(device_id: int = BROADCAST_ID) -> bytes:
-    return frame(device_id, ACTION)
-
-
 def sync_read(address: int, length: int, ids: Iterable[int]) -> bytes:
     return frame(BROADCAST_ID, SYNC_READ, sync_read_params(address, length, ids))
-
-
-def sync_write(address: int, length: int, data: dict[int, bytes]) -> bytes:
-    return frame(BROADCAST_ID, SYNC_WRITE, sync_write_params(address, length, data))
 
 
 def session(role: str = HOST) -> Session:

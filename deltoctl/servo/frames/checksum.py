@@ -21,6 +21,10 @@ MAX_FRAME = 250  # bytes of a whole frame (the SDKs' TX/RX packet limit)
 
 INCOMPLETE, NOT_A_FRAME, BAD_CHECKSUM = 0, -1, -2
 
+# the instructions Dynamixel Protocol 1.0 and Feetech share, with the same codes and params
+# (one-byte address and length); each family's set adds its own (RESET, BULK_READ, SYNC_READ)
+PING, READ, WRITE, REG_WRITE, ACTION, SYNC_WRITE = 0x01, 0x02, 0x03, 0x04, 0x05, 0x83
+
 
 def checksum(data: bytes, start: int = 0, end: int | None = None) -> int:
     """``~Σ data[start:end] & 0xFF``: over ID, LEN, INST (or error) and the params."""
@@ -36,6 +40,47 @@ def frame(device_id: int, code: int, params: bytes = b"") -> bytes:
                          f"{MAX_FRAME - 6}")
     body = bytes((device_id, len(params) + 2, code)) + params
     return HEADER + body + bytes((checksum(body),))
+
+
+def read_params(address: int, length: int) -> bytes:
+    return bytes((address, length))
+
+
+def write_params(address: int, data: bytes) -> bytes:
+    return bytes((address,)) + data
+
+
+def sync_write_params(address: int, length: int, data: dict[int, bytes]) -> bytes:
+    params = bytearray((address, length))
+    for device_id, values in data.items():
+        if len(values) != length:
+            raise ValueError(f"sync write to ID {device_id}: {len(values)} bytes, not {length}")
+        params += bytes((device_id,)) + values
+    return bytes(params)
+
+
+def ping(device_id: int = BROADCAST_ID) -> bytes:
+    return frame(device_id, PING)
+
+
+def read(device_id: int, address: int, length: int) -> bytes:
+    return frame(device_id, READ, read_params(address, length))
+
+
+def write(device_id: int, address: int, data: bytes) -> bytes:
+    return frame(device_id, WRITE, write_params(address, data))
+
+
+def reg_write(device_id: int, address: int, data: bytes) -> bytes:
+    return frame(device_id, REG_WRITE, write_params(address, data))
+
+
+def action(device_id: int = BROADCAST_ID) -> bytes:
+    return frame(device_id, ACTION)
+
+
+def sync_write(address: int, length: int, data: dict[int, bytes]) -> bytes:
+    return frame(BROADCAST_ID, SYNC_WRITE, sync_write_params(address, length, data))
 
 
 def _size_at(data: bytes | bytearray, at: int) -> int:
