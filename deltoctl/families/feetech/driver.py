@@ -17,7 +17,7 @@ from typing import Any
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
 from deltoctl.core.exchange import ExchangePolicy
 from deltoctl.core.loop import CommLoop
-from deltoctl.errors import DeviceError, DeviceFault, InvalidInput, NoAnswer
+from deltoctl.errors import DeviceError, DeviceFault, InvalidInput, NoAnswer, Refused
 from deltoctl.families.feetech import calibration, codec, parse_bus_url
 from deltoctl.families.feetech.models import (
     BAUD_RATES,
@@ -516,6 +516,7 @@ class FeetechDriver(Driver):
             raise InvalidInput(f"{chosen.name} is read-only")
         comp = self.joints[device_id]
         if chosen.name == "Goal_Position":
+            self._check_calibrated_range(comp.name, value)
             here = self.read_register(device_id, model.by_name["Present_Position"])
             check_command(self.profile, comp, "position", self.to_joint(device_id, value),
                           self.to_joint(device_id, here))
@@ -526,6 +527,16 @@ class FeetechDriver(Driver):
         if chosen.name == "ID":
             return value  # it answers at its new ID now
         return self.read_register(device_id, chosen)
+
+    def _check_calibrated_range(self, joint: str, value: int) -> None:
+        """A range mode clamps a raw goal into the calibration's range: a goal beyond it
+        would pass the envelope as its bound while the servo goes elsewhere."""
+        cal = self.calibration.get(joint)
+        if cal is not None and self.modes[joint] != calibration.DEGREES and not (
+                min(cal.range_min, cal.range_max) <= value
+                <= max(cal.range_min, cal.range_max)):
+            raise Refused(f"{joint}: Goal_Position {value} is outside the calibrated range "
+                          f"{cal.range_min}..{cal.range_max}")
 
     # -- configuration ---------------------------------------------------------------------------
     def config_read(self) -> dict[str, dict[str, dict[str, Any]]]:

@@ -132,3 +132,13 @@ def test_calibrate_servos_does_lerobots_half_turn_homing_and_saves_its_file(cli,
     assert cli("-p", "so101-follower", "--sim", "--yes", "calibrate", "servos", "-o",
                str(out)).exit_code == 0
     assert set(cal.load(out)) == set(motors)
+
+
+def test_a_raw_goal_outside_the_calibrated_range_is_refused_not_clamped(tmp_path):
+    with open_robot(_calibrated_profile(tmp_path), sim=True) as robot:
+        driver = robot.blocks[0].driver
+        # 100 steps is below the gripper's range_min (2030): LeRobot's range mode would clamp
+        # it to 0 %, inside the envelope, while the servo would go to step 100
+        with pytest.raises(Refused, match=r"2030\.\.3500"):
+            driver.write_register("gripper", "goal_position", 100)
+        assert driver.write_register("gripper", "goal_position", 2050) == 2050
