@@ -298,14 +298,17 @@ def servo_calibration_description(system: System, half_turn: bool) -> str:
     if not half_turn:
         return f"read the calibration of the servos of {', '.join(blocks)}"
     return (f"switch torque off on {', '.join(blocks)} and make each servo's present pose the "
-            "middle of its turn (its Homing_Offset, written into the servo): support the arm "
-            "and put it in the middle of its range")
+            "middle of its turn (its Homing_Offset, written into the servo), its position limits "
+            "reset to the whole turn (0..4095 on an STS3215): support the arm and put it in "
+            "the middle of its range")
 
 
 def calibrate_servos(system: System, half_turn: bool, name: str,
                      output: Path | None = None) -> dict[str, Any]:
     """Each able block's servo calibration in its family's file format, saved at ``output``
     or where the format's tools look for it (a block more: ``<name>-<block>``)."""
+    if half_turn:
+        system.check_allowed("half-turn homing")
     able = system.able("calibrate_servos")
     blocks = []
     for m in able:

@@ -463,6 +463,8 @@ class Robot:
         raises to stop)."""
         from deltoctl.app.calibrate import calibrate_servos, servo_calibration_description
 
+        if half_turn:
+            self.system.check_allowed("half-turn homing")
         description = servo_calibration_description(self.system, half_turn)
         if confirm is not None:
             confirm(description)

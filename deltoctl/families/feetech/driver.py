@@ -634,24 +634,38 @@ class FeetechDriver(Driver):
         return motors
 
     def half_turn_homing(self) -> None:
-        """LeRobot's half-turn homing: torque off, Homing_Offset 0, then each servo's offset
-        set so that its present pose reads the middle of the turn (2047 on an STS3215)."""
+        """LeRobot's half-turn homing: each servo's offset set so that its present pose reads
+        the middle of the turn (2047 on an STS3215), its position limits reset to the whole
+        turn. Every new offset is checked before anything is written (torque off first)."""
         ids = [i for i in self.joints if i in self.present
                and "Homing_Offset" in self.model(i).by_name]
+        offsets = {i: self._half_turn_offset(i) for i in ids}
         if not ids:
             return
         self.set_torque([self.joints[i].name for i in ids], False)
-        for i in ids:
+        for i, offset in offsets.items():
             items = self.model(i).by_name
-            self.write_register_item(i, items["Homing_Offset"], 0)
-            here = self.read_register(i, items["Present_Position"])
-            offset = here - (self.model(i).resolution - 1) // 2
-            if abs(offset) > 2047:
-                raise DeviceError(f"{self.joints[i].name}: its present position {here} is "
-                                  f"beyond the reach of Homing_Offset (±2047)",
-                                  hint="clear Phase bit 4 (positions in one turn), or cycle "
-                                       "the servo's power, then calibrate again")
             self.write_register_item(i, items["Homing_Offset"], offset)
+            self.write_register_item(i, items["Min_Position_Limit"], 0)
+            self.write_register_item(i, items["Max_Position_Limit"],
+                                     self.model(i).resolution - 1)
+
+    def _half_turn_offset(self, device_id: int) -> int:
+        """The Homing_Offset that makes the present pose read mid-turn (present = actual −
+        offset; within one turn unless Phase bit 4 asks for the full angle)."""
+        model = self.model(device_id)
+        items = model.by_name
+        here = self.read_register(device_id, items["Present_Position"])
+        actual = here + self.read_register(device_id, items["Homing_Offset"])
+        if not self.read_register(device_id, items["Phase"]) & 0x10:
+            actual %= model.resolution
+        offset = actual - (model.resolution - 1) // 2
+        if abs(offset) > 2047:
+            raise DeviceError(f"{self.joints[device_id].name}: its present position {actual} "
+                              "is beyond the reach of Homing_Offset (±2047); nothing written",
+                              hint="clear Phase bit 4 (positions in one turn), or cycle "
+                                   "the servo's power, then calibrate again")
+        return offset
 
     def calibrate_servos(self, half_turn: bool, name: str) -> dict[str, Any]:
         """LeRobot's calibration file of the servos (after its half-turn homing when asked),

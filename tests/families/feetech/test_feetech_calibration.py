@@ -142,3 +142,12 @@ def test_a_raw_goal_outside_the_calibrated_range_is_refused_not_clamped(tmp_path
         with pytest.raises(Refused, match=r"2030\.\.3500"):
             driver.write_register("gripper", "goal_position", 100)
         assert driver.write_register("gripper", "goal_position", 2050) == 2050
+
+
+def test_half_turn_homing_is_refused_where_no_motion_is_allowed(tmp_path):
+    with open_robot("so101-follower", sim=True, allow_motion=False) as robot:
+        with pytest.raises(Refused, match="allows no motion"):
+            robot.calibrate_servos(True, "arm", tmp_path / "arm.json")
+        assert robot.blocks[0].driver.lerobot_calibration()["gripper"].homing_offset == 0
+        # reading the calibration actuates nothing
+        robot.calibrate_servos(False, "arm", tmp_path / "arm.json")

@@ -180,3 +180,28 @@ def test_a_move_settles_once_the_servo_has_stopped_not_when_it_is_near(so101):
     assert bus.servos[5].read(66, 1) == b"\x00"  # Moving: arrived, not on its way
     driver.make_safe()  # every servo holds where it is, the torque left on
     assert bus.servos[5].get("Torque_Enable") == 1
+
+
+def test_a_refused_half_turn_homing_writes_nothing(so101):
+    from deltoctl.errors import DeviceError
+
+    driver, bus = so101
+    driver.set_torque(["shoulder_pan", "elbow_flex"], True)
+    bus.servos[0].set("Homing_Offset", 5)
+    elbow = bus.servos[2]
+    elbow.set("Phase", elbow.get("Phase") | 0x10)  # full angle: beyond one turn
+    elbow.actual = 2048 + 4000.0
+    with pytest.raises(DeviceError, match="elbow_flex: its present position 6048"):
+        driver.half_turn_homing()
+    assert bus.servos[0].get("Homing_Offset") == 5
+    assert bus.servos[0].get("Torque_Enable") == 1 and elbow.get("Torque_Enable") == 1
+
+
+def test_half_turn_homing_resets_the_position_limits(so101):
+    driver, bus = so101
+    bus.servos[0].set("Min_Position_Limit", 500)
+    bus.servos[0].set("Max_Position_Limit", 3000)
+    driver.half_turn_homing()
+    for servo in bus.servos:
+        assert (servo.get("Min_Position_Limit"), servo.get("Max_Position_Limit")) == (0, 4095)
+        assert servo.get("Homing_Offset") == 1 and servo.get("Present_Position") == 2047
