@@ -148,11 +148,31 @@ class FeetechDriver(Driver):
         lock = self.model(device_id).lock
         if item.eeprom:
             self._write(device_id, lock, b"\x00", "unlock the EEPROM (Lock 0)")
+        if item.name in ("ID", "Baud_Rate"):
+            self._write_bus_item(device_id, item, value, data, lock)
+            return
         try:
             self._write(device_id, item.address, data, f"write {item.name}")
         finally:
             if item.eeprom:
                 self._write(device_id, lock, b"\x01", "lock the EEPROM (Lock 1)")
+
+    def _write_bus_item(self, device_id: int, item: Item, value: int, data: bytes,
+                        lock: int) -> None:
+        """A new ID or baud rate: the servo answers at it from this write on (its status
+        too), so the EEPROM is locked again there."""
+        self.link.exchange(self.session, device_id, codec.WRITE,
+                           codec.write_params(item.address, data), 0.05)
+        baud = BAUD_RATES.get(value) if item.name == "Baud_Rate" else None
+        new_id = value if item.name == "ID" else device_id
+        own = self.port.baudrate if self.port is not None else None
+        try:
+            if baud is not None and own is not None:
+                self.port.baudrate = baud
+            self._write(new_id, lock, b"\x01", "lock the EEPROM (Lock 1)")
+        finally:
+            if own is not None:
+                self.port.baudrate = own
 
     def _write(self, device_id: int, address: int, data: bytes, what: str) -> None:
         self._request(device_id, codec.WRITE, codec.write_params(address, data), what)
@@ -524,8 +544,8 @@ class FeetechDriver(Driver):
             check_command(self.profile, comp, "velocity",
                           value * 2 * math.pi / model.resolution, None)
         self.write_register_item(device_id, chosen, value)
-        if chosen.name == "ID":
-            return value  # it answers at its new ID now
+        if chosen.name in ("ID", "Baud_Rate"):
+            return value  # it answers at its new ID or rate now
         return self.read_register(device_id, chosen)
 
     def _check_calibrated_range(self, joint: str, value: int) -> None:

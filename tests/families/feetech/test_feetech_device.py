@@ -205,3 +205,14 @@ def test_half_turn_homing_resets_the_position_limits(so101):
     for servo in bus.servos:
         assert (servo.get("Min_Position_Limit"), servo.get("Max_Position_Limit")) == (0, 4095)
         assert servo.get("Homing_Offset") == 1 and servo.get("Present_Position") == 2047
+
+
+def test_a_new_id_or_baud_rate_is_locked_again_where_the_servo_now_answers(so101):
+    driver, bus = so101
+    gripper, wrist = bus.servos[5], bus.servos[4]
+    assert driver.write_register("gripper", "ID", 9) == 9
+    assert gripper.id == 9 and gripper.get("Lock") == 1
+    code = next(c for c, b in BAUD_RATES.items() if b == 500_000)
+    assert driver.write_register("wrist_roll", "Baud_Rate", code) == code
+    assert wrist.baud == 500_000 and wrist.get("Lock") == 1
+    assert driver.port.baudrate == 1_000_000  # the bus's other servos stay at its rate
