@@ -534,6 +534,9 @@ class FeetechDriver(Driver):
         chosen = item_named(item, model)
         if chosen.access != "RW":
             raise InvalidInput(f"{chosen.name} is read-only")
+        if not chosen.in_range(value):
+            raise InvalidInput(f"{joint}: {chosen.name} {value} is outside the {model.name}'s "
+                               f"documented range {chosen.low}..{chosen.high}")
         comp = self.joints[device_id]
         if chosen.name == "Goal_Position":
             self._check_calibrated_range(comp.name, value)

@@ -278,9 +278,9 @@ def test_a_goal_outside_the_joint_is_refused_and_a_status_error_says_what_to_do(
     assert run.exit_code == 5  # 149.7° past the elbow's 1.8 rad: nothing written
     assert "outside its limits" in run.stderr
     run = cli(*sim, "register", "set", "elbow", "cw_compliance_slope", "255", "--yes")
-    assert run.exit_code == 1
-    assert "refused to write CW Compliance Slope: range error" in run.stderr
-    assert "check the value written" in run.stderr and "Traceback" not in run.stderr
+    assert run.exit_code == 2  # the table's range is checked before anything is sent
+    assert "CW Compliance Slope 255 is outside the AX-12A's documented range 0..254" \
+        in run.stderr and "Traceback" not in run.stderr
     run = cli(*sim, "reboot", "elbow", "--yes")
     assert run.exit_code == 1 and "no REBOOT instruction" in run.stderr
 

@@ -216,3 +216,12 @@ def test_a_new_id_or_baud_rate_is_locked_again_where_the_servo_now_answers(so101
     assert driver.write_register("wrist_roll", "Baud_Rate", code) == code
     assert wrist.baud == 500_000 and wrist.get("Lock") == 1
     assert driver.port.baudrate == 1_000_000  # the bus's other servos stay at its rate
+
+
+def test_register_set_keeps_to_an_items_documented_range(so101):
+    from deltoctl.errors import InvalidInput
+
+    driver, bus = so101
+    with pytest.raises(InvalidInput, match=r"Torque_Enable 128 is outside .*range 0\.\.1"):
+        driver.write_register("gripper", "Torque_Enable", 128)
+    assert bus.servos[5].get("Homing_Offset") == 0  # 128 would have re-centred it
