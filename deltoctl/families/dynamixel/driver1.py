@@ -12,7 +12,7 @@ from typing import Any
 
 from deltoctl.core.driver import Block, Driver
 from deltoctl.core.loop import CommLoop
-from deltoctl.errors import DeviceError, DeviceFault, InvalidInput, NoAnswer
+from deltoctl.errors import DeviceError, DeviceFault, InvalidInput, NoAnswer, Refused
 from deltoctl.families.dynamixel import parse_bus_url
 from deltoctl.families.dynamixel import protocol1 as p1
 from deltoctl.families.dynamixel.driver import POLICY, REGISTER_POLICY, DynamixelDriver
@@ -255,12 +255,21 @@ class Protocol1Driver(DynamixelDriver):
             self.link.flush()
 
     def _check_goal(self, device_id: int, item: str, raw: int) -> None:
+        """A Goal Position or Moving Speed against the joint's envelope; the angle limits
+        (both 0: wheel mode) only through ``config restore --allow``."""
         from deltoctl.core.envelope import check_command
 
-        if item != "Goal Position":
-            return
         model = self.model(device_id)
         joint = self.joints[device_id]
+        if item in ("CW Angle Limit", "CCW Angle Limit"):
+            key = item.lower().replace(" ", "-")
+            raise Refused(f"{joint.name}: {item} is a safety setting (0 and 0: wheel mode)",
+                          hint=f"write it with deltoctl config restore --allow {key}")
+        if item == "Moving Speed":  # 0: the servo's greatest speed, uncontrolled
+            check_command(self.profile, joint, "velocity",
+                          (abs(raw) or 1023) * model.rad_s_per_unit, None)
+        if item != "Goal Position":
+            return
         here = self.read_register(device_id, model.by_name["Present Position"])
         sign = -1.0 if joint.inverse else 1.0
 

@@ -307,3 +307,14 @@ def test_the_trace_names_protocol_1_frames(cli, tmp_path):
     names = {record["frame"] for record in map(json.loads, log.read_text().splitlines())
              if record["logger"] == "deltoctl.wire" and "frame" in record}
     assert {"PING", "READ", "SYNC_WRITE"} <= names  # (a reply read in pieces has no name)
+
+
+def test_register_set_keeps_moving_speed_and_the_angle_limits_in_the_envelope(cli):
+    sim = ("--sim", "-p", "phantomx-arm", "--yes")
+    fast = cli(*sim, "register", "set", "elbow", "moving_speed", "1023")
+    assert fast.exit_code == 5 and "velocity" in fast.stderr, fast.stderr
+    # 0 is the servo's greatest speed, uncontrolled
+    assert cli(*sim, "register", "set", "elbow", "moving_speed", "0").exit_code == 5
+    assert cli(*sim, "register", "set", "elbow", "moving_speed", "400").exit_code == 0
+    wheel = cli(*sim, "register", "set", "elbow", "ccw_angle_limit", "0")
+    assert wheel.exit_code == 5 and "--allow ccw-angle-limit" in wheel.stderr, wheel.stderr
