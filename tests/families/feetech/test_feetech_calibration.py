@@ -151,3 +151,18 @@ def test_half_turn_homing_is_refused_where_no_motion_is_allowed(tmp_path):
         assert robot.blocks[0].driver.lerobot_calibration()["gripper"].homing_offset == 0
         # reading the calibration actuates nothing
         robot.calibrate_servos(False, "arm", tmp_path / "arm.json")
+
+
+def test_a_calibration_path_that_is_no_regular_file_or_too_large_is_refused(tmp_path):
+    import os
+
+    with pytest.raises(InvalidInput, match="must be a regular file"):
+        cal.load(Path("/dev/zero"))
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    with pytest.raises(InvalidInput, match="must be a regular file"):
+        cal.load(fifo)
+    big = tmp_path / "big.json"
+    big.write_text(" " * (cal.MAX_BYTES + 1))
+    with pytest.raises(InvalidInput, match="larger than"):
+        cal.load(big)
