@@ -12,7 +12,7 @@ from typing import Any
 
 from deltoctl.core.driver import Block, Driver
 from deltoctl.core.loop import CommLoop
-from deltoctl.errors import DeviceError, DeviceFault, InvalidInput, NoAnswer, Refused
+from deltoctl.errors import DeviceError, DeviceFault, InvalidInput, LinkLost, NoAnswer, Refused
 from deltoctl.families.dynamixel import parse_bus_url
 from deltoctl.families.dynamixel import protocol1 as p1
 from deltoctl.families.dynamixel.driver import POLICY, REGISTER_POLICY, DynamixelDriver
@@ -140,7 +140,7 @@ class Protocol1Driver(DynamixelDriver):
         ids = list(self.present)
         try:
             replies = self.read_present(ids)
-        except OSError as exc:
+        except (OSError, LinkLost) as exc:  # pyserial's errors are OSErrors too
             self._lost(exc)
             return self.values
         loop.count(len(replies) == len(ids))

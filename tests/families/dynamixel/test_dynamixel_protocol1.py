@@ -318,3 +318,20 @@ def test_register_set_keeps_moving_speed_and_the_angle_limits_in_the_envelope(cl
     assert cli(*sim, "register", "set", "elbow", "moving_speed", "400").exit_code == 0
     wheel = cli(*sim, "register", "set", "elbow", "ccw_angle_limit", "0")
     assert wheel.exit_code == 5 and "--allow ccw-angle-limit" in wheel.stderr, wheel.stderr
+
+
+def test_a_lost_link_is_a_lost_bus_that_reconnects_not_an_error(monkeypatch):
+    from deltoctl import open_robot
+    from deltoctl.errors import LinkLost
+
+    with open_robot("phantomx-arm", sim=True) as robot:
+        driver = robot.blocks[0].driver
+        loop = driver.loops["pvl_reader"]
+
+        def gone(*_args, **_kwargs):
+            raise LinkLost("the adapter was unplugged")
+
+        monkeypatch.setattr(driver, "read_present", gone)
+        monkeypatch.setattr(loop, "due", lambda: True)
+        driver.read()
+        assert not driver.connected and any("lost" in w for w in driver.warnings)
