@@ -199,13 +199,19 @@ class Protocol1Driver(DynamixelDriver):
         ids = {by_name[name]: rad for name, rad in goals.items() if name in by_name}
         if not ids:
             return
-        self._torque(list(ids), True)
         data = {}
         for i, rad in ids.items():
             model = self._model_or_ax(i)
             now = self.values.get(f"{self.joints[i].name}/position", rad)
             speed = min(1023, max(1, round(abs(rad - now) / seconds / model.rad_s_per_unit)))
-            data[i] = struct.pack("<HH", self._raw_goal(i, rad), speed)
+            goal, reach = self._raw_goal(i, rad), model.by_name["Goal Position"]
+            if not reach.in_range(goal):
+                raise Refused(f"{self.joints[i].name}: {rad:.4f} rad is step {goal}, beyond "
+                              f"the {model.name}'s Goal Position {reach.low}..{reach.high}",
+                              hint="bring the joint's limits in the profile within the "
+                                   "servo's reach")
+            data[i] = struct.pack("<HH", goal, speed)
+        self._torque(list(ids), True)
         self.moving.update(ids)
         self.link.write(p1.sync_write(GOAL_POSITION, 4, data))
         self.link.flush()

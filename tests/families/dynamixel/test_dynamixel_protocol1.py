@@ -335,3 +335,20 @@ def test_a_lost_link_is_a_lost_bus_that_reconnects_not_an_error(monkeypatch):
         monkeypatch.setattr(loop, "due", lambda: True)
         driver.read()
         assert not driver.connected and any("lost" in w for w in driver.warnings)
+
+
+def test_a_goal_beyond_the_servos_reach_is_refused_before_torque_is_on(tmp_path):
+    from deltoctl import open_robot
+    from deltoctl.errors import Refused
+    from tests.conftest import REPO
+
+    wide = tmp_path / "wide.yaml"
+    wide.write_text((REPO / "profiles" / "phantomx-arm.yaml").read_text()
+                    .replace("lower: -1.8, upper: 1.8", "lower: -900, upper: 900"))
+    bus = Protocol1Bus([Servo1(i) for i in range(1, 6)], baud=1_000_000)
+    with DynamixelPtyServer(bus) as server, \
+            open_robot(wide, f"serial://{server.port}?baud=1000000") as robot:
+        driver = robot.blocks[0].driver
+        with pytest.raises(Refused, match=r"elbow.*0\.\.1023"):
+            driver.send_goals({"elbow": 800.0}, 1.0)
+        assert all(s.get("Torque Enable") == 0 for s in bus.servos.values())
