@@ -300,9 +300,11 @@ class FeetechDriver(Driver):
             name = self.joints[device_id].name
             values[name + "/position"] = self.to_joint(
                 device_id, items["Present_Position"].decode(data, 0))
+            # an inverse joint turns its velocity and effort with its position
+            sign = -1 if self.joints[device_id].inverse and name not in self.calibration else 1
             steps_s = items["Present_Velocity"].decode(data, 2)
-            values[name + "/velocity"] = steps_s * 2 * math.pi / model.resolution
-            values[name + "/effort"] = items["Present_Load"].decode(data, 4) / 1000 \
+            values[name + "/velocity"] = sign * steps_s * 2 * math.pi / model.resolution
+            values[name + "/effort"] = sign * items["Present_Load"].decode(data, 4) / 1000 \
                 * model.stall_torque
 
     def _take_voltage_temperature(self, replies: list[Reply]) -> None:

@@ -225,3 +225,18 @@ def test_register_set_keeps_to_an_items_documented_range(so101):
     with pytest.raises(InvalidInput, match=r"Torque_Enable 128 is outside .*range 0\.\.1"):
         driver.write_register("gripper", "Torque_Enable", 128)
     assert bus.servos[5].get("Homing_Offset") == 0  # 128 would have re-centred it
+
+
+def test_an_inverse_joints_velocity_and_effort_turn_with_its_position(so101):
+    import dataclasses
+
+    driver, _ = so101
+    items = driver.model(6).by_name
+    data = (items["Present_Position"].encode(2148) + items["Present_Velocity"].encode(100)
+            + items["Present_Load"].encode(200))
+    driver._take_pvl([(6, 0, data)])
+    plain = {k: driver.values[f"gripper/{k}"] for k in ("position", "velocity", "effort")}
+    driver.joints[6] = dataclasses.replace(driver.joints[6], inverse=True)
+    driver._take_pvl([(6, 0, data)])
+    for key in ("velocity", "effort"):
+        assert plain[key] > 0 and driver.values[f"gripper/{key}"] == -plain[key]
