@@ -166,3 +166,20 @@ def test_a_calibration_path_that_is_no_regular_file_or_too_large_is_refused(tmp_
     big.write_text(" " * (cal.MAX_BYTES + 1))
     with pytest.raises(InvalidInput, match="larger than"):
         cal.load(big)
+
+
+def test_calibrate_servos_keeps_an_existing_file_without_force(cli, tmp_path, monkeypatch):
+    monkeypatch.setenv("HF_LEROBOT_CALIBRATION", str(tmp_path))
+    run = ("-p", "so101-follower", "--sim", "--yes", "calibrate", "servos")
+    assert cli(*run, "--id", "arm").exit_code == 0
+    path = tmp_path / "robots" / "so_follower" / "arm.json"
+    path.write_text("kept")
+    again = cli(*run, "--half-turn", "--id", "arm")
+    assert again.exit_code == 2 and "pass --force" in again.stderr, again.stderr
+    assert path.read_text() == "kept"
+    assert cli(*run, "--id", "arm", "--force").exit_code == 0
+    assert cal.load(path)
+    for bad in ("../escape", "a/b", ".."):
+        refused = cli(*run, "--id", bad)
+        assert refused.exit_code == 2 and "plain name" in refused.stderr, refused.stderr
+    assert not (tmp_path / "robots" / "escape.json").exists()
