@@ -209,7 +209,7 @@ class Family:
     # a third-party block names its device by params: (host param, port param, default port)
     endpoint_params: tuple[str, str, int] | None = None
     capabilities: frozenset[str] = frozenset()
-    emulator: str | None = None  # "module:function", a core.serving.Emulator (sim/serve.py)
+    emulator: str | None = None  # "module:function", a core.emulator_contract.Emulator
     serve_options: tuple[SimOption, ...] = ()  # the `sim serve` faults and settings it takes
     permissions: tuple[Permission, ...] = ()  # what `config restore --allow` names for it
     # how a table (fleet list) shows a block's identify report: (key, template), in order,

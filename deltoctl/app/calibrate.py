@@ -298,21 +298,43 @@ def servo_calibration_description(system: System, half_turn: bool) -> str:
     if not half_turn:
         return f"read the calibration of the servos of {', '.join(blocks)}"
     return (f"switch torque off on {', '.join(blocks)} and make each servo's present pose the "
-            "middle of its turn (its Homing_Offset, written into the servo): support the arm "
-            "and put it in the middle of its range")
+            "middle of its turn (its Homing_Offset, written into the servo), its position limits "
+            "reset to the whole turn (0..4095 on an STS3215): support the arm and put it in "
+            "the middle of its range")
+
+
+def check_device_name(name: str) -> None:
+    """A device name is a file's name: no folder in it."""
+    if not name or "/" in name or "\\" in name or name in (".", "..") or "\0" in name:
+        raise InvalidInput(f"--id {name!r} must be a plain name (no '/', no '..')")
+
+
+def _servo_file(output: Path | None, single: bool, device: str, default: str) -> Path:
+    if output is None:
+        return Path(default)
+    return Path(output) if single else Path(output) / f"{device}.json"
 
 
 def calibrate_servos(system: System, half_turn: bool, name: str,
-                     output: Path | None = None) -> dict[str, Any]:
+                     output: Path | None = None, force: bool = False) -> dict[str, Any]:
     """Each able block's servo calibration in its family's file format, saved at ``output``
-    or where the format's tools look for it (a block more: ``<name>-<block>``)."""
+    or where the format's tools look for it (a block more: ``<name>-<block>``); an existing
+    file is overwritten only with ``force``, checked before the servos are touched."""
+    check_device_name(name)
+    if half_turn:
+        system.check_allowed("half-turn homing")
     able = system.able("calibrate_servos")
+    devices = {m.name: name if len(able) == 1 else f"{name}-{m.name}" for m in able}
+    for m in able if not force else ():
+        there = _servo_file(output, len(able) == 1, devices[m.name],
+                            m.driver.calibrate_servos(False, devices[m.name])["file"])
+        if there.exists():
+            raise InvalidInput(f"{there} exists: pass --force to overwrite it")
     blocks = []
     for m in able:
-        device = name if len(able) == 1 else f"{name}-{m.name}"
+        device = devices[m.name]
         result = m.driver.calibrate_servos(half_turn, device)
-        path = Path(output) if output is not None and len(able) == 1 else \
-            (Path(output) / f"{device}.json" if output is not None else Path(result["file"]))
+        path = _servo_file(output, len(able) == 1, device, result["file"])
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text(result["text"])

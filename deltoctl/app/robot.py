@@ -455,18 +455,26 @@ class Robot:
 
     def calibrate_servos(self, half_turn: bool = False, name: str = "my_arm",
                          output: Path | None = None,
-                         confirm: Callable[[str], None] | None = None) -> dict[str, Any]:
+                         confirm: Callable[[str], None] | None = None,
+                         force: bool = False) -> dict[str, Any]:
         """Each servo block's calibration saved in its family's file format (a Feetech SO
         arm's as LeRobot's calibration JSON) at ``output`` or where the format's tools look
         for it under the device name ``name``; with ``half_turn``, each servo's present pose
         made the middle of its turn first. ``confirm`` is told what will happen first (it
         raises to stop)."""
-        from deltoctl.app.calibrate import calibrate_servos, servo_calibration_description
+        from deltoctl.app.calibrate import (
+            calibrate_servos,
+            check_device_name,
+            servo_calibration_description,
+        )
 
+        check_device_name(name)
+        if half_turn:
+            self.system.check_allowed("half-turn homing")
         description = servo_calibration_description(self.system, half_turn)
         if confirm is not None:
             confirm(description)
-        return calibrate_servos(self.system, half_turn, name, output)
+        return calibrate_servos(self.system, half_turn, name, output, force)
 
     def _registers(self, joint: str) -> Any:
         m = self.system.member(joint)

@@ -141,6 +141,7 @@ def calibrate_servos(
     output: Annotated[Path | None, typer.Option(
         "--output", "-o", help="Where the file goes (default: where the format's tools look "
                                "for it).")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing file.")] = False,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """Save the servos' calibration in their family's file format: a Feetech SO arm's as
@@ -151,7 +152,8 @@ def calibrate_servos(
 
     opts = options(ctx)
     with open_robot(opts, allow_model_mismatch) as robot:
-        result = robot.calibrate_servos(half_turn, name, output, lambda what: confirm(ctx, what))
+        result = robot.calibrate_servos(half_turn, name, output, lambda what: confirm(ctx, what),
+                                        force)
     if opts.json:
         emit_json(result)
     else:

@@ -81,7 +81,7 @@ class McapRecorder:
         ``gpio_type``: /gpio's message type, a key of ``GPIO_TYPES``. ``writer``: what takes
         the records instead of mcap's Writer on ``stream`` (the same methods: the live view's
         ``FoxgloveWriter``). ``commands``: a /joint_commands topic too, each cycle's
-        setpoints (``record.commands``: ``<joint>/position_command`` …)."""
+        setpoints (``record.command_topics``: ``<joint>/position_command`` …)."""
         from deltoctl.record.mcap_cycles import CycleAppender
         from deltoctl.version import __version__
 

@@ -37,6 +37,11 @@ class Item:
             return "sign-magnitude"
         return "two's complement" if self.signed else "unsigned"
 
+    def in_range(self, value: int) -> bool:
+        """Whether ``value`` lies in the documented range (where the table gives one)."""
+        return (self.low is None or value >= self.low) and (self.high is None
+                                                             or value <= self.high)
+
     def span(self) -> tuple[int, int]:
         """The least and greatest values the encoding holds."""
         bits = self.size * 8

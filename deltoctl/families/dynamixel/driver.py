@@ -545,6 +545,9 @@ class DynamixelDriver(Driver):
         chosen = item_named(item, model.table, model.name)
         if chosen.access != "RW":
             raise InvalidInput(f"{chosen.name} is read-only")
+        if not chosen.in_range(value):
+            raise InvalidInput(f"{joint}: {chosen.name} {value} is outside the {model.name}'s "
+                               f"documented range {chosen.low}..{chosen.high}")
         self._check_goal(device_id, chosen.name, value)
         self.write_register_item(device_id, chosen, value)
         return self.read_register(device_id, chosen)

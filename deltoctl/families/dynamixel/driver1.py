@@ -12,7 +12,7 @@ from typing import Any
 
 from deltoctl.core.driver import Block, Driver
 from deltoctl.core.loop import CommLoop
-from deltoctl.errors import DeviceError, DeviceFault, InvalidInput, NoAnswer
+from deltoctl.errors import DeviceError, DeviceFault, InvalidInput, LinkLost, NoAnswer, Refused
 from deltoctl.families.dynamixel import parse_bus_url
 from deltoctl.families.dynamixel import protocol1 as p1
 from deltoctl.families.dynamixel.driver import POLICY, REGISTER_POLICY, DynamixelDriver
@@ -140,7 +140,7 @@ class Protocol1Driver(DynamixelDriver):
         ids = list(self.present)
         try:
             replies = self.read_present(ids)
-        except OSError as exc:
+        except (OSError, LinkLost) as exc:  # pyserial's errors are OSErrors too
             self._lost(exc)
             return self.values
         loop.count(len(replies) == len(ids))
@@ -199,13 +199,19 @@ class Protocol1Driver(DynamixelDriver):
         ids = {by_name[name]: rad for name, rad in goals.items() if name in by_name}
         if not ids:
             return
-        self._torque(list(ids), True)
         data = {}
         for i, rad in ids.items():
             model = self._model_or_ax(i)
             now = self.values.get(f"{self.joints[i].name}/position", rad)
             speed = min(1023, max(1, round(abs(rad - now) / seconds / model.rad_s_per_unit)))
-            data[i] = struct.pack("<HH", self._raw_goal(i, rad), speed)
+            goal, reach = self._raw_goal(i, rad), model.by_name["Goal Position"]
+            if not reach.in_range(goal):
+                raise Refused(f"{self.joints[i].name}: {rad:.4f} rad is step {goal}, beyond "
+                              f"the {model.name}'s Goal Position {reach.low}..{reach.high}",
+                              hint="bring the joint's limits in the profile within the "
+                                   "servo's reach")
+            data[i] = struct.pack("<HH", goal, speed)
+        self._torque(list(ids), True)
         self.moving.update(ids)
         self.link.write(p1.sync_write(GOAL_POSITION, 4, data))
         self.link.flush()
@@ -255,12 +261,21 @@ class Protocol1Driver(DynamixelDriver):
             self.link.flush()
 
     def _check_goal(self, device_id: int, item: str, raw: int) -> None:
+        """A Goal Position or Moving Speed against the joint's envelope; the angle limits
+        (both 0: wheel mode) only through ``config restore --allow``."""
         from deltoctl.core.envelope import check_command
 
-        if item != "Goal Position":
-            return
         model = self.model(device_id)
         joint = self.joints[device_id]
+        if item in ("CW Angle Limit", "CCW Angle Limit"):
+            key = item.lower().replace(" ", "-")
+            raise Refused(f"{joint.name}: {item} is a safety setting (0 and 0: wheel mode)",
+                          hint=f"write it with deltoctl config restore --allow {key}")
+        if item == "Moving Speed":  # 0: the servo's greatest speed, uncontrolled
+            check_command(self.profile, joint, "velocity",
+                          (abs(raw) or 1023) * model.rad_s_per_unit, None)
+        if item != "Goal Position":
+            return
         here = self.read_register(device_id, model.by_name["Present Position"])
         sign = -1.0 if joint.inverse else 1.0
 

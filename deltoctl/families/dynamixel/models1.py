@@ -3,8 +3,9 @@
 tables as data (ROBOTIS e-manual, emanual.robotis.com/docs/en/dxl/ax/ax-12a/ and siblings; each
 model's page in ``MODELS_1``).
 
-EEPROM items lie below address 24 and take writes only with torque off. Present Speed, Present
-Load and Moving Speed are sign-magnitude with the sign in bit 10 (a set bit: clockwise).
+EEPROM items lie below address 24 and, unlike Protocol 2.0's, take writes with torque on.
+Present Speed, Present Load and Moving Speed are sign-magnitude with the sign in bit 10 (a set
+bit: clockwise).
 What a page leaves open is in ``UNVERIFIED_1``.
 """
 

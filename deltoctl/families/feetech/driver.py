@@ -17,7 +17,7 @@ from typing import Any
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
 from deltoctl.core.exchange import ExchangePolicy
 from deltoctl.core.loop import CommLoop
-from deltoctl.errors import DeviceError, DeviceFault, InvalidInput, NoAnswer
+from deltoctl.errors import DeviceError, DeviceFault, InvalidInput, NoAnswer, Refused
 from deltoctl.families.feetech import calibration, codec, parse_bus_url
 from deltoctl.families.feetech.models import (
     BAUD_RATES,
@@ -148,11 +148,31 @@ class FeetechDriver(Driver):
         lock = self.model(device_id).lock
         if item.eeprom:
             self._write(device_id, lock, b"\x00", "unlock the EEPROM (Lock 0)")
+        if item.name in ("ID", "Baud_Rate"):
+            self._write_bus_item(device_id, item, value, data, lock)
+            return
         try:
             self._write(device_id, item.address, data, f"write {item.name}")
         finally:
             if item.eeprom:
                 self._write(device_id, lock, b"\x01", "lock the EEPROM (Lock 1)")
+
+    def _write_bus_item(self, device_id: int, item: Item, value: int, data: bytes,
+                        lock: int) -> None:
+        """A new ID or baud rate: the servo answers at it from this write on (its status
+        too), so the EEPROM is locked again there."""
+        self.link.exchange(self.session, device_id, codec.WRITE,
+                           codec.write_params(item.address, data), 0.05)
+        baud = BAUD_RATES.get(value) if item.name == "Baud_Rate" else None
+        new_id = value if item.name == "ID" else device_id
+        own = self.port.baudrate if self.port is not None else None
+        try:
+            if baud is not None and own is not None:
+                self.port.baudrate = baud
+            self._write(new_id, lock, b"\x01", "lock the EEPROM (Lock 1)")
+        finally:
+            if own is not None:
+                self.port.baudrate = own
 
     def _write(self, device_id: int, address: int, data: bytes, what: str) -> None:
         self._request(device_id, codec.WRITE, codec.write_params(address, data), what)
@@ -280,9 +300,11 @@ class FeetechDriver(Driver):
             name = self.joints[device_id].name
             values[name + "/position"] = self.to_joint(
                 device_id, items["Present_Position"].decode(data, 0))
+            # an inverse joint turns its velocity and effort with its position
+            sign = -1 if self.joints[device_id].inverse and name not in self.calibration else 1
             steps_s = items["Present_Velocity"].decode(data, 2)
-            values[name + "/velocity"] = steps_s * 2 * math.pi / model.resolution
-            values[name + "/effort"] = items["Present_Load"].decode(data, 4) / 1000 \
+            values[name + "/velocity"] = sign * steps_s * 2 * math.pi / model.resolution
+            values[name + "/effort"] = sign * items["Present_Load"].decode(data, 4) / 1000 \
                 * model.stall_torque
 
     def _take_voltage_temperature(self, replies: list[Reply]) -> None:
@@ -514,8 +536,12 @@ class FeetechDriver(Driver):
         chosen = item_named(item, model)
         if chosen.access != "RW":
             raise InvalidInput(f"{chosen.name} is read-only")
+        if not chosen.in_range(value):
+            raise InvalidInput(f"{joint}: {chosen.name} {value} is outside the {model.name}'s "
+                               f"documented range {chosen.low}..{chosen.high}")
         comp = self.joints[device_id]
         if chosen.name == "Goal_Position":
+            self._check_calibrated_range(comp.name, value)
             here = self.read_register(device_id, model.by_name["Present_Position"])
             check_command(self.profile, comp, "position", self.to_joint(device_id, value),
                           self.to_joint(device_id, here))
@@ -523,9 +549,19 @@ class FeetechDriver(Driver):
             check_command(self.profile, comp, "velocity",
                           value * 2 * math.pi / model.resolution, None)
         self.write_register_item(device_id, chosen, value)
-        if chosen.name == "ID":
-            return value  # it answers at its new ID now
+        if chosen.name in ("ID", "Baud_Rate"):
+            return value  # it answers at its new ID or rate now
         return self.read_register(device_id, chosen)
+
+    def _check_calibrated_range(self, joint: str, value: int) -> None:
+        """A range mode clamps a raw goal into the calibration's range: a goal beyond it
+        would pass the envelope as its bound while the servo goes elsewhere."""
+        cal = self.calibration.get(joint)
+        if cal is not None and self.modes[joint] != calibration.DEGREES and not (
+                min(cal.range_min, cal.range_max) <= value
+                <= max(cal.range_min, cal.range_max)):
+            raise Refused(f"{joint}: Goal_Position {value} is outside the calibrated range "
+                          f"{cal.range_min}..{cal.range_max}")
 
     # -- configuration ---------------------------------------------------------------------------
     def config_read(self) -> dict[str, dict[str, dict[str, Any]]]:
@@ -623,24 +659,38 @@ class FeetechDriver(Driver):
         return motors
 
     def half_turn_homing(self) -> None:
-        """LeRobot's half-turn homing: torque off, Homing_Offset 0, then each servo's offset
-        set so that its present pose reads the middle of the turn (2047 on an STS3215)."""
+        """LeRobot's half-turn homing: each servo's offset set so that its present pose reads
+        the middle of the turn (2047 on an STS3215), its position limits reset to the whole
+        turn. Every new offset is checked before anything is written (torque off first)."""
         ids = [i for i in self.joints if i in self.present
                and "Homing_Offset" in self.model(i).by_name]
+        offsets = {i: self._half_turn_offset(i) for i in ids}
         if not ids:
             return
         self.set_torque([self.joints[i].name for i in ids], False)
-        for i in ids:
+        for i, offset in offsets.items():
             items = self.model(i).by_name
-            self.write_register_item(i, items["Homing_Offset"], 0)
-            here = self.read_register(i, items["Present_Position"])
-            offset = here - (self.model(i).resolution - 1) // 2
-            if abs(offset) > 2047:
-                raise DeviceError(f"{self.joints[i].name}: its present position {here} is "
-                                  f"beyond the reach of Homing_Offset (±2047)",
-                                  hint="clear Phase bit 4 (positions in one turn), or cycle "
-                                       "the servo's power, then calibrate again")
             self.write_register_item(i, items["Homing_Offset"], offset)
+            self.write_register_item(i, items["Min_Position_Limit"], 0)
+            self.write_register_item(i, items["Max_Position_Limit"],
+                                     self.model(i).resolution - 1)
+
+    def _half_turn_offset(self, device_id: int) -> int:
+        """The Homing_Offset that makes the present pose read mid-turn (present = actual −
+        offset; within one turn unless Phase bit 4 asks for the full angle)."""
+        model = self.model(device_id)
+        items = model.by_name
+        here = self.read_register(device_id, items["Present_Position"])
+        actual = here + self.read_register(device_id, items["Homing_Offset"])
+        if not self.read_register(device_id, items["Phase"]) & 0x10:
+            actual %= model.resolution
+        offset = actual - (model.resolution - 1) // 2
+        if abs(offset) > 2047:
+            raise DeviceError(f"{self.joints[device_id].name}: its present position {actual} "
+                              "is beyond the reach of Homing_Offset (±2047); nothing written",
+                              hint="clear Phase bit 4 (positions in one turn), or cycle "
+                                   "the servo's power, then calibrate again")
+        return offset
 
     def calibrate_servos(self, half_turn: bool, name: str) -> dict[str, Any]:
         """LeRobot's calibration file of the servos (after its half-turn homing when asked),

@@ -202,3 +202,10 @@ def test_config_restore_checks_each_servo_against_its_models_range(cli, tmp_path
         assert server.bus.servos[3].get("Current Limit") == 1000
     finally:
         server.close()
+
+
+def test_register_set_keeps_to_an_items_documented_range(cli):
+    run = cli("--sim", "-p", "koch-arm", "--yes", "register", "set", "shoulder_pan",
+              "torque_enable", "128")
+    assert run.exit_code == 2, run.stderr
+    assert "Torque Enable 128 is outside the XL430-W250's documented range 0..1" in run.stderr

@@ -278,9 +278,9 @@ def test_a_goal_outside_the_joint_is_refused_and_a_status_error_says_what_to_do(
     assert run.exit_code == 5  # 149.7° past the elbow's 1.8 rad: nothing written
     assert "outside its limits" in run.stderr
     run = cli(*sim, "register", "set", "elbow", "cw_compliance_slope", "255", "--yes")
-    assert run.exit_code == 1
-    assert "refused to write CW Compliance Slope: range error" in run.stderr
-    assert "check the value written" in run.stderr and "Traceback" not in run.stderr
+    assert run.exit_code == 2  # the table's range is checked before anything is sent
+    assert "CW Compliance Slope 255 is outside the AX-12A's documented range 0..254" \
+        in run.stderr and "Traceback" not in run.stderr
     run = cli(*sim, "reboot", "elbow", "--yes")
     assert run.exit_code == 1 and "no REBOOT instruction" in run.stderr
 
@@ -307,3 +307,48 @@ def test_the_trace_names_protocol_1_frames(cli, tmp_path):
     names = {record["frame"] for record in map(json.loads, log.read_text().splitlines())
              if record["logger"] == "deltoctl.wire" and "frame" in record}
     assert {"PING", "READ", "SYNC_WRITE"} <= names  # (a reply read in pieces has no name)
+
+
+def test_register_set_keeps_moving_speed_and_the_angle_limits_in_the_envelope(cli):
+    sim = ("--sim", "-p", "phantomx-arm", "--yes")
+    fast = cli(*sim, "register", "set", "elbow", "moving_speed", "1023")
+    assert fast.exit_code == 5 and "velocity" in fast.stderr, fast.stderr
+    # 0 is the servo's greatest speed, uncontrolled
+    assert cli(*sim, "register", "set", "elbow", "moving_speed", "0").exit_code == 5
+    assert cli(*sim, "register", "set", "elbow", "moving_speed", "400").exit_code == 0
+    wheel = cli(*sim, "register", "set", "elbow", "ccw_angle_limit", "0")
+    assert wheel.exit_code == 5 and "--allow ccw-angle-limit" in wheel.stderr, wheel.stderr
+
+
+def test_a_lost_link_is_a_lost_bus_that_reconnects_not_an_error(monkeypatch):
+    from deltoctl import open_robot
+    from deltoctl.errors import LinkLost
+
+    with open_robot("phantomx-arm", sim=True) as robot:
+        driver = robot.blocks[0].driver
+        loop = driver.loops["pvl_reader"]
+
+        def gone(*_args, **_kwargs):
+            raise LinkLost("the adapter was unplugged")
+
+        monkeypatch.setattr(driver, "read_present", gone)
+        monkeypatch.setattr(loop, "due", lambda: True)
+        driver.read()
+        assert not driver.connected and any("lost" in w for w in driver.warnings)
+
+
+def test_a_goal_beyond_the_servos_reach_is_refused_before_torque_is_on(tmp_path):
+    from deltoctl import open_robot
+    from deltoctl.errors import Refused
+    from tests.conftest import REPO
+
+    wide = tmp_path / "wide.yaml"
+    wide.write_text((REPO / "profiles" / "phantomx-arm.yaml").read_text()
+                    .replace("lower: -1.8, upper: 1.8", "lower: -900, upper: 900"))
+    bus = Protocol1Bus([Servo1(i) for i in range(1, 6)], baud=1_000_000)
+    with DynamixelPtyServer(bus) as server, \
+            open_robot(wide, f"serial://{server.port}?baud=1000000") as robot:
+        driver = robot.blocks[0].driver
+        with pytest.raises(Refused, match=r"elbow.*0\.\.1023"):
+            driver.send_goals({"elbow": 800.0}, 1.0)
+        assert all(s.get("Torque Enable") == 0 for s in bus.servos.values())

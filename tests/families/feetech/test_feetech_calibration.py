@@ -132,3 +132,54 @@ def test_calibrate_servos_does_lerobots_half_turn_homing_and_saves_its_file(cli,
     assert cli("-p", "so101-follower", "--sim", "--yes", "calibrate", "servos", "-o",
                str(out)).exit_code == 0
     assert set(cal.load(out)) == set(motors)
+
+
+def test_a_raw_goal_outside_the_calibrated_range_is_refused_not_clamped(tmp_path):
+    with open_robot(_calibrated_profile(tmp_path), sim=True) as robot:
+        driver = robot.blocks[0].driver
+        # 100 steps is below the gripper's range_min (2030): LeRobot's range mode would clamp
+        # it to 0 %, inside the envelope, while the servo would go to step 100
+        with pytest.raises(Refused, match=r"2030\.\.3500"):
+            driver.write_register("gripper", "goal_position", 100)
+        assert driver.write_register("gripper", "goal_position", 2050) == 2050
+
+
+def test_half_turn_homing_is_refused_where_no_motion_is_allowed(tmp_path):
+    with open_robot("so101-follower", sim=True, allow_motion=False) as robot:
+        with pytest.raises(Refused, match="allows no motion"):
+            robot.calibrate_servos(True, "arm", tmp_path / "arm.json")
+        assert robot.blocks[0].driver.lerobot_calibration()["gripper"].homing_offset == 0
+        # reading the calibration actuates nothing
+        robot.calibrate_servos(False, "arm", tmp_path / "arm.json")
+
+
+def test_a_calibration_path_that_is_no_regular_file_or_too_large_is_refused(tmp_path):
+    import os
+
+    with pytest.raises(InvalidInput, match="must be a regular file"):
+        cal.load(Path("/dev/zero"))
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    with pytest.raises(InvalidInput, match="must be a regular file"):
+        cal.load(fifo)
+    big = tmp_path / "big.json"
+    big.write_text(" " * (cal.MAX_BYTES + 1))
+    with pytest.raises(InvalidInput, match="larger than"):
+        cal.load(big)
+
+
+def test_calibrate_servos_keeps_an_existing_file_without_force(cli, tmp_path, monkeypatch):
+    monkeypatch.setenv("HF_LEROBOT_CALIBRATION", str(tmp_path))
+    run = ("-p", "so101-follower", "--sim", "--yes", "calibrate", "servos")
+    assert cli(*run, "--id", "arm").exit_code == 0
+    path = tmp_path / "robots" / "so_follower" / "arm.json"
+    path.write_text("kept")
+    again = cli(*run, "--half-turn", "--id", "arm")
+    assert again.exit_code == 2 and "pass --force" in again.stderr, again.stderr
+    assert path.read_text() == "kept"
+    assert cli(*run, "--id", "arm", "--force").exit_code == 0
+    assert cal.load(path)
+    for bad in ("../escape", "a/b", ".."):
+        refused = cli(*run, "--id", bad)
+        assert refused.exit_code == 2 and "plain name" in refused.stderr, refused.stderr
+    assert not (tmp_path / "robots" / "escape.json").exists()

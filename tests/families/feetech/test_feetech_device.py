@@ -180,3 +180,63 @@ def test_a_move_settles_once_the_servo_has_stopped_not_when_it_is_near(so101):
     assert bus.servos[5].read(66, 1) == b"\x00"  # Moving: arrived, not on its way
     driver.make_safe()  # every servo holds where it is, the torque left on
     assert bus.servos[5].get("Torque_Enable") == 1
+
+
+def test_a_refused_half_turn_homing_writes_nothing(so101):
+    from deltoctl.errors import DeviceError
+
+    driver, bus = so101
+    driver.set_torque(["shoulder_pan", "elbow_flex"], True)
+    bus.servos[0].set("Homing_Offset", 5)
+    elbow = bus.servos[2]
+    elbow.set("Phase", elbow.get("Phase") | 0x10)  # full angle: beyond one turn
+    elbow.actual = 2048 + 4000.0
+    with pytest.raises(DeviceError, match="elbow_flex: its present position 6048"):
+        driver.half_turn_homing()
+    assert bus.servos[0].get("Homing_Offset") == 5
+    assert bus.servos[0].get("Torque_Enable") == 1 and elbow.get("Torque_Enable") == 1
+
+
+def test_half_turn_homing_resets_the_position_limits(so101):
+    driver, bus = so101
+    bus.servos[0].set("Min_Position_Limit", 500)
+    bus.servos[0].set("Max_Position_Limit", 3000)
+    driver.half_turn_homing()
+    for servo in bus.servos:
+        assert (servo.get("Min_Position_Limit"), servo.get("Max_Position_Limit")) == (0, 4095)
+        assert servo.get("Homing_Offset") == 1 and servo.get("Present_Position") == 2047
+
+
+def test_a_new_id_or_baud_rate_is_locked_again_where_the_servo_now_answers(so101):
+    driver, bus = so101
+    gripper, wrist = bus.servos[5], bus.servos[4]
+    assert driver.write_register("gripper", "ID", 9) == 9
+    assert gripper.id == 9 and gripper.get("Lock") == 1
+    code = next(c for c, b in BAUD_RATES.items() if b == 500_000)
+    assert driver.write_register("wrist_roll", "Baud_Rate", code) == code
+    assert wrist.baud == 500_000 and wrist.get("Lock") == 1
+    assert driver.port.baudrate == 1_000_000  # the bus's other servos stay at its rate
+
+
+def test_register_set_keeps_to_an_items_documented_range(so101):
+    from deltoctl.errors import InvalidInput
+
+    driver, bus = so101
+    with pytest.raises(InvalidInput, match=r"Torque_Enable 128 is outside .*range 0\.\.1"):
+        driver.write_register("gripper", "Torque_Enable", 128)
+    assert bus.servos[5].get("Homing_Offset") == 0  # 128 would have re-centred it
+
+
+def test_an_inverse_joints_velocity_and_effort_turn_with_its_position(so101):
+    import dataclasses
+
+    driver, _ = so101
+    items = driver.model(6).by_name
+    data = (items["Present_Position"].encode(2148) + items["Present_Velocity"].encode(100)
+            + items["Present_Load"].encode(200))
+    driver._take_pvl([(6, 0, data)])
+    plain = {k: driver.values[f"gripper/{k}"] for k in ("position", "velocity", "effort")}
+    driver.joints[6] = dataclasses.replace(driver.joints[6], inverse=True)
+    driver._take_pvl([(6, 0, data)])
+    for key in ("velocity", "effort"):
+        assert plain[key] > 0 and driver.values[f"gripper/{key}"] == -plain[key]
