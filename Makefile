@@ -31,6 +31,7 @@ bench: $(BIN)/deltoctl
 	$(BIN)/python bench/startup.py
 	$(BIN)/deltoctl bench loop --foxglove
 	$(BIN)/deltoctl bench dynamixel
+	$(BIN)/deltoctl bench feetech
 	$(BIN)/deltoctl bench i2c
 	$(BIN)/python bench/fleet.py --stream
 
