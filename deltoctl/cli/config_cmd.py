@@ -12,6 +12,7 @@ import typer
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.output import emit_json, info, say, show, table, warn
 from deltoctl.errors import WARNINGS
+from deltoctl.verb_help import DESCRIPTIONS
 
 if TYPE_CHECKING:
     from deltoctl.app.config import Snapshot
@@ -22,7 +23,7 @@ def register(root: typer.Typer) -> None:
                          no_args_is_help=True)
     config.command("snapshot")(snapshot)
     config.command("diff")(diff)
-    config.command("restore")(restore)
+    config.command("restore", help=DESCRIPTIONS["config restore"])(restore)
     root.add_typer(config, name="config")
 
 
@@ -137,11 +138,6 @@ def restore(
              "max-position-limit (limits, shutdown, homing offset and modes are written "
              "only when named).")] = None,
 ) -> None:
-    """Write back what differs from a snapshot, in the order each device requires, after
-    confirmation (--yes skips it); each item is verified by reading it back. A value outside
-    its item's documented range is exit 2, before anything is written. Exit 1 when a
-    verification fails, 5 when refused for safety (EEPROM with torque on, a safety setting
-    not named by --allow), 3 when some items could not be written (read-only)."""
     from deltoctl.app import config
     from deltoctl.cli.confirm import confirm
     from deltoctl.cli.device_cmd import open_robot

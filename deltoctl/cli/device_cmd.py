@@ -12,6 +12,7 @@ from deltoctl.cli.context import Options, options
 from deltoctl.cli.output import emit_json, emit_json_line, info, show, stdout_is_terminal, warn
 from deltoctl.core.runner import check_loop
 from deltoctl.errors import WARNINGS, InvalidInput
+from deltoctl.verb_help import DESCRIPTIONS
 
 AllowMismatch = Annotated[bool, typer.Option(
     "--allow-model-mismatch",
@@ -70,7 +71,7 @@ def register(app: typer.Typer) -> None:
     app.command("connect")(connect)
     app.command("identify")(identify)
     app.command("detect")(detect)
-    app.command("stream")(stream)
+    app.command("stream", help=DESCRIPTIONS["stream"])(stream)
     gpio_app = typer.Typer(help="Read and set GPIOs (a Delto's outputs: motor on, grasp, "
                            "release; vacuum, digital and analog IOs).", no_args_is_help=True)
     gpio_app.command("get")(gpio_get)
@@ -195,10 +196,6 @@ def stream(
     foxglove_host: FoxgloveHostOpt = "127.0.0.1",
     foxglove_origin: StreamOriginOpt = None,
 ) -> None:
-    """Stream every block's state interfaces: a live table on a terminal (fitted to it; the
-    rows that do not fit are counted, -i picks fewer), NDJSON with --json or when piped; with
-    --foxglove, to Foxglove as well (every interface, whatever -i picks). Exit 4 when a link
-    is down at the end, 3 when one was lost and came back."""
     from deltoctl.app.live import foxglove_live, start_foxglove
     from deltoctl.app.sinks import LinesSink
     from deltoctl.render.stream import LiveSink

@@ -25,22 +25,6 @@ def register(root: typer.Typer) -> None:
 
 # -- --robot ---------------------------------------------------------------------------------
 
-def _write_out(data: bytes) -> None:
-    buffer = getattr(sys.stdout, "buffer", None)
-    if buffer is not None:
-        sys.stdout.flush()
-        buffer.write(data)
-        buffer.flush()
-    else:
-        sys.stdout.write(data.decode(errors="replace"))
-        sys.stdout.flush()
-
-
-def _write_err(text: str) -> None:
-    sys.stderr.write(text)
-    sys.stderr.flush()
-
-
 def forward(ctx: typer.Context) -> NoReturn:
     """Run the command line on ``--robot``'s agent: its stdout, stderr (errors naming the
     robot) and exit code, as if run there."""
@@ -49,12 +33,12 @@ def forward(ctx: typer.Context) -> NoReturn:
     from deltoctl.fleet import ACTUATING, check_robot
     from deltoctl.fleet.fleet_run import record_file_dropped, strip_remote, verb_of
     from deltoctl.fleet.remote_call import ErrorLines, RemoteCall, caller_session
-    from deltoctl.render.stream import live_lines
+    from deltoctl.render.stream import live_lines, write_err, write_out
 
     opts = options(ctx)
     robot = check_robot(opts.robot or "")
     argv = strip_remote(list(ctx.find_root().meta.get(ARGV, [])))
-    errors = ErrorLines(robot, opts.json, _write_err)
+    errors = ErrorLines(robot, opts.json, write_err)
     try:
         verb = verb_of(record_file_dropped(argv, _value_options), robot)
         if verb == "record" and not {"--help", "-h"} & set(argv):
@@ -63,7 +47,7 @@ def forward(ctx: typer.Context) -> NoReturn:
             argv = ["--yes", *argv]
         drawn = verb == "stream" and not opts.json and not {"-h", "--help"} & set(argv)
         with caller_session(opts.zenoh_config, f"robot {robot}") as session, live_lines(
-                f"from robot {robot}", _write_out, drawn and stdout_is_terminal()) as out:
+                f"from robot {robot}", write_out, drawn and stdout_is_terminal()) as out:
             code = RemoteCall(session, robot, argv, out, errors.feed).run()
     except DeltoctlError as exc:  # this side failed (nothing answers): the robot named too
         if not opts.json:

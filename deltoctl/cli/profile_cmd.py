@@ -1,7 +1,7 @@
 """``deltoctl profile list|show|validate|import|export|tests``."""
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import Annotated, Any
 
 import typer
 
@@ -9,10 +9,6 @@ from deltoctl.cli.completions import complete_part, complete_profile
 from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, info, say, table
 from deltoctl.errors import InvalidInput
-
-if TYPE_CHECKING:
-
-    pass
 
 app = typer.Typer(help="Browse, check and convert device profiles.", no_args_is_help=True)
 

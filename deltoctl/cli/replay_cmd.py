@@ -20,10 +20,11 @@ from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import advancing, emit_json, info, progress, show, warn
 from deltoctl.errors import WARNINGS
+from deltoctl.verb_help import DESCRIPTIONS
 
 
 def register(app: typer.Typer) -> None:
-    app.command("replay")(replay)
+    app.command("replay", help=DESCRIPTIONS["replay"])(replay)
 
 
 RecordingArg = Annotated[Path, typer.Argument(
@@ -51,17 +52,6 @@ def replay(
     max_deviation: MaxDeviationOpt = None,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
-    """Play a recording's commands back at their recorded timing, then report per joint the
-    difference between recorded and replayed position (RMS, max).
-
-    The profile is the recording's own (its metadata), or -p PROFILE. Every command is
-    checked against the profile's limits and jog step before anything moves; then the
-    joints go to the recorded start pose; then the commands follow, and a joint that leaves
-    its limits or strays beyond --max-deviation from the recording stops every block
-    (exit 5). Runs on the profile's simulators unless --device (with --yes, or confirmed on
-    a terminal, --sim too): then on the device -t names, under the limits of -p PROFILE or of the
-    catalog's profile of the recorded name; a recorded profile looser than that is refused
-    (exit 5)."""
     import copy
 
     from deltoctl.app.replay import Deviated, plan_replay, replay_limits, where_to_replay

@@ -9,6 +9,7 @@ from deltoctl.cli.completions import complete_joints, complete_profile
 from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_error, say, warn
 from deltoctl.errors import USAGE, InvalidInput
+from deltoctl.verb_help import DESCRIPTIONS
 
 if TYPE_CHECKING:
     from deltoctl.registry import SimOption
@@ -31,17 +32,6 @@ def serve(
         "--private", help="Keep this simulator to -t: --sim does not use it.")] = False,
     **given: Any,
 ) -> None:
-    """Serve every block's simulated device until Ctrl-C or SIGTERM, printing one target per
-    bus (--target 'BUS=URL', quoted for a POSIX shell; --env: one export line).
-
-    Each family's emulator serves its blocks behind a real link, with the faults and settings
-    the family declares (below). --hardware serves some blocks only; --json prints one line.
-    A device that can be turned or moved from outside answers control lines on the standard
-    input, one a line (face -x, tilt 10 0 0 …); the line help lists them.
-
-    While it runs, --sim of the same profile (same content and faults) drives it instead of
-    starting a simulator of its own, so a robot homed by one command stays homed for the
-    next; --sim-fresh or --private keep them apart."""
     from deltoctl.sim.serve import ServeOptions, serve_until_stopped
 
     opts = options(ctx)
@@ -88,11 +78,11 @@ def _command() -> Any:
     def command(**kwargs: Any) -> None:
         serve(**kwargs)
 
-    command.__doc__ = serve.__doc__
     cast(Any, command).__signature__ = inspect.Signature(fixed + declared)  # what typer reads
     return command
 
 
 def register(root: typer.Typer) -> None:
-    app.command("serve")(_command())  # built now: the families installed are the options
+    # built now: the families installed are the options
+    app.command("serve", help=DESCRIPTIONS["sim serve"])(_command())
     root.add_typer(app, name="sim")
