@@ -1,7 +1,7 @@
 """What every verb's help shows besides its own options: the global options in their panel,
 the verb's effect on the robot, its example (from deltoctl.verbs) and the exit codes. The CLI
 applies it to its click commands only when help is shown or a command line is completed: a
-verb that just runs pays nothing for it. The descriptions that run to paragraphs are here too
+verb that just runs pays nothing for it. The longer descriptions of verbs are here too
 (DESCRIPTIONS): each verb's module registers its command with its own."""
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ EXAMPLES = verbs.examples()
 GLOBAL_PANEL = "Global options (before or after the verb)"
 _NOT_GLOBAL = ("version", "help", "install_completion", "show_completion")
 
-# the help of the verbs whose description runs to paragraphs, by command path (each other
+# the help of the verbs whose description runs past two lines, by command path (each other
 # verb's is its function's docstring); typer dedents it as it dedents a docstring
 DESCRIPTIONS = {
     "agent": """\
@@ -119,6 +119,30 @@ DESCRIPTIONS = {
     While it runs, --sim of the same profile (same content and faults) drives it instead of
     starting a simulator of its own, so a robot homed by one command stays homed for the
     next; --sim-fresh or --private keep them apart.""",
+    "record": """\
+    Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
+    valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back, 1 when
+    the file could not be written to the end (disk full, file too large, removed).""",
+    "info": """\
+    What a recording holds: its times, blocks and their identities, topics with counts and
+    rates, link losses and gaps with their times, the loop's lateness and jitter. Reads the
+    file's summary and index, not every message.""",
+    "plot": """\
+    Interfaces over time: in the terminal (plotext), or as a figure with --out
+    (matplotlib). Reads only the topics that carry them. Needs pip install 'deltoctl\\[plot]'.""",
+    "help": """\
+    Show the help of deltoctl, of a verb, of a topic (targets, the trust model, security,
+    shell completion, exit codes …), the shipped examples, or the JSON Schema of a verb's
+    --json document.""",
+    "profile tests": """\
+    Write a starting pytest suite for a robot: identify, detect, its configuration against
+    a golden snapshot (taken of the simulators), link quality and homing. It passes on the
+    simulators as written, and runs on the robot with --deltoctl-target (`deltoctl help pytest`).
+    """,
+    "config snapshot": """\
+    Read every configurable value of every block (--hardware narrows) into one YAML file:
+    the whole control table of each servo, the Bioscara joints' parameters, the gripper's
+    firmware and sensors, the IMU's registers. --json prints the document.""",
 }
 
 

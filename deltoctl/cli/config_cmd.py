@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 def register(root: typer.Typer) -> None:
     config = typer.Typer(help="Snapshot every block's configuration, compare it, restore it.",
                          no_args_is_help=True)
-    config.command("snapshot")(snapshot)
+    config.command("snapshot", help=DESCRIPTIONS["config snapshot"])(snapshot)
     config.command("diff")(diff)
     config.command("restore", help=DESCRIPTIONS["config restore"])(restore)
     root.add_typer(config, name="config")
@@ -37,9 +37,6 @@ def snapshot(
         help="Where to write it (a directory: the default name in it; -: stdout). Default: "
              "config-<profile>[-<address>]-<time>.yaml here.")] = None,
 ) -> None:
-    """Read every configurable value of every block (--hardware narrows) into one YAML file:
-    the whole control table of each servo, the Bioscara joints' parameters, the gripper's
-    firmware and sensors, the IMU's registers. --json prints the document."""
     from deltoctl.app import config
     from deltoctl.cli.device_cmd import finish, open_robot
     from deltoctl.render.config import snapshot_table

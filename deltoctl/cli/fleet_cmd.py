@@ -115,25 +115,16 @@ def _remote_record(opts: Options, robot: str, argv: list[str], err: Any) -> int:
     (4 when its link was down at the end, 3 when lost and back), 3 when cycles it ran did not
     arrive, 4 when the robot was lost (the file finished), 130 when interrupted before the
     stream started."""
-    from pathlib import Path
-
-    from deltoctl.app.recording import identified_output, planned_output
+    from deltoctl.app.recording import record_from_robot
     from deltoctl.cli.output import emit_json, info, warn
     from deltoctl.fleet.fleet_run import verb_args
-    from deltoctl.fleet.remote_record import record_remote
     from deltoctl.render.fleet import not_received_text
     from deltoctl.render.recording import recorded_lines
 
-    params = record_options(verb_args(argv))
-    output = planned_output(Path(params["output"]), params["force"])
-    done = record_remote(
-        opts.zenoh_config, robot, output, params["rate"], params["duration"],
-        [f"--hardware={h}" for h in opts.hardware], params["gpio_type"],
-        params["allow_model_mismatch"], err,
-        opened=lambda path: info(f"recording {path} from robot {robot} "
-                                 "(its cycle times; Ctrl-C ends it)"),
-        name=lambda template, identities: identified_output(template, identities,
-                                                            params["force"]))
+    done = record_from_robot(opts.zenoh_config, robot, record_options(verb_args(argv)),
+                             opts.hardware, err, lambda path: info(
+                                 f"recording {path} from robot {robot} (its cycle times; "
+                                 "Ctrl-C ends it)"))
     if done.result:
         if opts.json:
             emit_json(done.result, profile=done.profile)

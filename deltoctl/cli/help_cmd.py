@@ -8,10 +8,11 @@ import typer
 from deltoctl import verbs
 from deltoctl.cli.context import TEACH, options
 from deltoctl.errors import EXIT_CODES, InvalidInput
+from deltoctl.verb_help import DESCRIPTIONS
 
 
 def register(holder: typer.Typer) -> None:
-    holder.command("help")(help_cmd)
+    holder.command("help", help=DESCRIPTIONS["help"])(help_cmd)
 
 
 def _topics() -> list[str]:
@@ -33,9 +34,6 @@ def help_cmd(
     force: Annotated[bool, typer.Option(
         "--force", help="With examples --copy: overwrite examples already in DIR.")] = False,
 ) -> None:
-    """Show the help of deltoctl, of a verb, of a topic (targets, the trust model, security,
-    shell completion, exit codes …), the shipped examples, or the JSON Schema of a verb's
-    --json document."""
     words = list(topic or [])
     if (copy is not None or force) and words != ["examples"]:
         raise InvalidInput("--copy and --force go with `deltoctl help examples`")

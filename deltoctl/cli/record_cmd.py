@@ -18,6 +18,7 @@ from deltoctl.cli.device_cmd import (
     open_robot,
 )
 from deltoctl.cli.output import emit_json, info, progress, warn
+from deltoctl.verb_help import DESCRIPTIONS
 
 ForceOpt = Annotated[bool, typer.Option(
     "--force", help="Overwrite the file when it exists (without: exit 2).")]
@@ -45,9 +46,6 @@ def record(
     foxglove_origin: FoxgloveOriginOpt = None,
     force: ForceOpt = False,
 ) -> None:
-    """Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
-    valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back, 1 when
-    the file could not be written to the end (disk full, file too large, removed)."""
     from deltoctl.app.live import foxglove_live, start_foxglove
     from deltoctl.app.recording import check_record, planned_output
     from deltoctl.core.runner import interrupted_by_signals
@@ -84,4 +82,4 @@ def record(
 
 
 def register(root: typer.Typer) -> None:
-    root.command("record")(record)
+    root.command("record", help=DESCRIPTIONS["record"])(record)

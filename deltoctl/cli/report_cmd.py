@@ -71,14 +71,13 @@ def fleet_summary(runs: list[dict[str, Any]], as_json: bool, code: int) -> None:
     robot, the worst first), fleet-report-<time>.html and its JSON twin; exits with the
     fleet's worst code."""
     from deltoctl.app.report import write_fleet_report
+    from deltoctl.render.fleet import report_rows
     from deltoctl.render.report_html import fleet_html
 
     doc, html = write_fleet_report(runs, fleet_html)
     if as_json:
         emit_json(doc)
     else:
-        table(None, ["robot", "verdict", "failed"],
-              [[r["robot"], r["verdict"], ", ".join(r["failed"]) or r["error"] or ""]
-               for r in doc["robots"]])
+        table(None, ["robot", "verdict", "failed"], report_rows(doc))
     info(f"fleet report: {html} and {html.with_suffix('.json').name}")
     raise typer.Exit(code)

@@ -47,13 +47,8 @@ def serve(
 def _parameter(option: "SimOption") -> inspect.Parameter:
     """A family's declared option as a typer option of `sim serve`: given or not (None,
     False, no joints), converted and checked by its declaration when the profile is served."""
-    shown = option.default if option.default not in (None, (), False) else None
-    if isinstance(shown, tuple):
-        shown = ",".join(format(x, "g") for x in shown)
-    elif isinstance(shown, int) and option.kind == "int" and option.high == 0xFF:
-        shown = f"{shown:#04x}"
     info: dict[str, Any] = {
-        "help": option.help + (f" Default: {shown}." if shown is not None else ""),
+        "help": option.described(),
         "metavar": option.metavar or ("JOINT" if option.kind == "joints" else None),
         "show_default": False}
     if option.kind == "joints":

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 from deltoctl.errors import InvalidInput
 
 if TYPE_CHECKING:
+    from deltoctl.cmdline import Options
     from deltoctl.fleet.agent import Agent
 
 AGENT_RECORD_MAX = 3600.0  # s: the longest record an agent writes in its own directory
@@ -158,7 +159,7 @@ def served_links(links: list[str], sim: bool) -> Iterator[list[str]]:
         stop_process(simulator)
 
 
-def run_agent(opts: Any, name: str | None,
+def run_agent(opts: Options, name: str | None,
               endpoints: tuple[list[str] | None, list[str] | None], deadline: float,
               allow_unauthenticated: bool, given_workdir: str | None, runners: tuple[str, str],
               check: Callable[[str, list[str]], None]) -> None:
