@@ -1,7 +1,7 @@
 """The lifecycle verbs on every block of a robot: connect, identify, detect, gpio, stream."""
 
 import contextlib
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from typing import Annotated, Any
 
 import typer
@@ -27,30 +27,16 @@ SERVED_SIMULATED: str | None = None
 SET_SAFE = False
 
 
-@contextlib.contextmanager
 def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any = None,
-               probe: bool = False) -> Iterator[Any]:
+               probe: bool = False) -> contextlib.AbstractContextManager[Any]:
     """The robot of the selected profile's blocks (``--hardware``), configured and active;
     with ``--sim``, on the ``sim serve`` of this profile running for the user, else on
     simulators started first. Pass ``profile`` when the verb loaded it already; ``probe`` for
     a verb that looks at a bus where nothing may answer."""
-    from deltoctl.app.robot import open_robot as open_app_robot
+    from deltoctl.app.robot import open_selected
 
-    prof = profile or opts.load_profile()
-    sim: Any = opts.sim
-    if opts.sim and opts.sim_options:
-        from deltoctl.sim.serve import options_given
-
-        sim = options_given(opts.sim_options, "--sim-option", prof, opts.hardware)
-    with open_app_robot(prof, opts.target, sim=sim, hardware=opts.hardware,
-                        allow_model_mismatch=allow_model_mismatch, probe=probe, notice=info,
-                        served_by=SERVED_SIMULATED, reuse=not opts.sim_fresh,
-                        warn=warn) as robot:
-        try:
-            yield robot
-        finally:
-            if SET_SAFE:
-                robot.make_safe()
+    return open_selected(opts, allow_model_mismatch, profile, probe, notice=info, warn=warn,
+                         served_by=SERVED_SIMULATED, make_safe=SET_SAFE)
 
 
 def finish(robot: Any, extra: list[str] | None = None,
