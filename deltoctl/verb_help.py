@@ -1,8 +1,8 @@
 """What every verb's help shows besides its own options: the global options in their panel,
 the verb's effect on the robot, its example (from deltoctl.verbs) and the exit codes. The CLI
 applies it to its click commands only when help is shown or a command line is completed: a
-verb that just runs pays nothing for it. The longer descriptions of verbs are here too
-(DESCRIPTIONS): each verb's module registers its command with its own."""
+verb that just runs pays nothing for it. The longer help texts of verbs and options are here
+too (DESCRIPTIONS, OPTION_HELP): each verb's module declares its command with its own."""
 
 from __future__ import annotations
 
@@ -143,6 +143,33 @@ DESCRIPTIONS = {
     Read every configurable value of every block (--hardware narrows) into one YAML file:
     the whole control table of each servo, the Bioscara joints' parameters, the gripper's
     firmware and sensors, the IMU's registers. --json prints the document.""",
+}
+
+
+# the help of the options whose text runs past two lines, by command path and option (or
+# argument)
+OPTION_HELP = {
+    "config restore --allow": (
+        "Permit what a restore does not do unasked (repeatable): torque-off (switch a servo's "
+        "torque off for its EEPROM writes, on again after), home-offset (write a joint's stored "
+        "home offset), or a safety setting by its item name, e.g. max-position-limit (limits, "
+        "shutdown, homing offset and modes are written only when named)."),
+    "record --foxglove-origin": (
+        "Also let in browser pages of this origin (repeatable, e.g. http://localhost:8080 for a "
+        "self-hosted Foxglove); by default only Foxglove's own (https://app.foxglove.dev, the "
+        "desktop app) and clients that send no Origin."),
+    "record OUTPUT": (
+        "The .mcap file to write; {time} in its name becomes the start time (UTC, "
+        "20261125T211400Z), {serial} each block's device serial, or its target's address where "
+        "the device reports none (joined by +)."),
+    "record --gpio-type": (
+        "/gpio's type: group-values (control_msgs/DynamicInterfaceGroupValues, control_msgs 4.7+ "
+        "on Humble, 5.3+ on Jazzy) or joint-state (control_msgs/DynamicJointState, every "
+        "control_msgs)."),
+    "jog --record": (
+        "Record the motion to MCAP: every block's states and each cycle's commands "
+        "(/joint_commands), for `deltoctl replay`; {time} and {serial} in its name are filled as "
+        "record fills them."),
 }
 
 

@@ -190,13 +190,18 @@ def record_from_robot(zenoh_config: str | None, robot: str, params: Mapping[str,
                                                             params["force"]))
 
 
-def check_record(output: Path, rate: float, duration: float | None, gpio_type: str) -> None:
-    """A recording's options, checked before any device is opened."""
+def check_record_options(rate: float, duration: float | None, gpio_type: str) -> None:
+    """A recording's rate, duration and /gpio type, wherever its file is written."""
     from deltoctl.record.ros2_msgs import GPIO_TYPES
 
     check_loop(rate, duration)
     if gpio_type not in GPIO_TYPES:
         raise InvalidInput(f"--gpio-type {gpio_type!r}: one of {', '.join(GPIO_TYPES)}")
+
+
+def check_record(output: Path, rate: float, duration: float | None, gpio_type: str) -> None:
+    """A recording's options, checked before any device is opened."""
+    check_record_options(rate, duration, gpio_type)
     if not output.parent.is_dir():
         raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
 

@@ -12,7 +12,7 @@ import typer
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.output import emit_json, info, say, show, table, warn
 from deltoctl.errors import WARNINGS
-from deltoctl.verb_help import DESCRIPTIONS
+from deltoctl.verb_help import DESCRIPTIONS, OPTION_HELP
 
 if TYPE_CHECKING:
     from deltoctl.app.config import Snapshot
@@ -129,11 +129,7 @@ def restore(
                                                   help="The snapshot to restore.")],
     allow: Annotated[list[str] | None, typer.Option(
         "--allow", metavar="WHAT", autocompletion=_complete_allow,
-        help="Permit what a restore does not do unasked (repeatable): torque-off (switch a "
-             "servo's torque off for its EEPROM writes, on again after), home-offset (write "
-             "a joint's stored home offset), or a safety setting by its item name, e.g. "
-             "max-position-limit (limits, shutdown, homing offset and modes are written "
-             "only when named).")] = None,
+        help=OPTION_HELP["config restore --allow"])] = None,
 ) -> None:
     from deltoctl.app import config
     from deltoctl.cli.confirm import confirm

@@ -12,7 +12,7 @@ from deltoctl.cli.context import Options, options
 from deltoctl.cli.output import emit_json, emit_json_line, info, show, stdout_is_terminal, warn
 from deltoctl.core.runner import check_loop
 from deltoctl.errors import WARNINGS, InvalidInput
-from deltoctl.verb_help import DESCRIPTIONS
+from deltoctl.verb_help import DESCRIPTIONS, OPTION_HELP
 
 AllowMismatch = Annotated[bool, typer.Option(
     "--allow-model-mismatch",
@@ -160,10 +160,7 @@ FoxgloveHostOpt = Annotated[str, typer.Option(
     help="The address to serve Foxglove on; another than loopback serves the robot's data to "
          "other machines.")]
 FoxgloveOriginOpt = Annotated[list[str] | None, typer.Option(
-    "--foxglove-origin", metavar="ORIGIN",
-    help="Also let in browser pages of this origin (repeatable, e.g. http://localhost:8080 for "
-         "a self-hosted Foxglove); by default only Foxglove's own (https://app.foxglove.dev, "
-         "the desktop app) and clients that send no Origin.")]
+    "--foxglove-origin", metavar="ORIGIN", help=OPTION_HELP["record --foxglove-origin"])]
 StreamOriginOpt = Annotated[list[str] | None, typer.Option(
     "--foxglove-origin", metavar="ORIGIN", help="Also let in browser pages of this origin "
     "(repeatable); by default only Foxglove's own and clients that send no Origin.")]

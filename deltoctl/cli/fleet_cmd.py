@@ -10,7 +10,8 @@ import typer
 
 from deltoctl import verbs
 from deltoctl.cli.confirm import confirmed_remotely
-from deltoctl.cli.context import Options, options
+from deltoctl.cli.context import ARGV, Options, options
+from deltoctl.cli.output import emit_error, emit_json, info, stdout_is_terminal, table, warn
 from deltoctl.errors import DeltoctlError, InvalidInput
 
 app = typer.Typer(help="The robots whose agents answer over Zenoh, and verbs on many at once.",
@@ -28,8 +29,6 @@ def register(root: typer.Typer) -> None:
 def forward(ctx: typer.Context) -> NoReturn:
     """Run the command line on ``--robot``'s agent: its stdout, stderr (errors naming the
     robot) and exit code, as if run there."""
-    from deltoctl.cli.context import ARGV
-    from deltoctl.cli.output import emit_error, stdout_is_terminal
     from deltoctl.fleet import ACTUATING, check_robot
     from deltoctl.fleet.fleet_run import record_file_dropped, strip_remote, verb_of
     from deltoctl.fleet.remote_call import ErrorLines, RemoteCall, caller_session
@@ -83,17 +82,13 @@ def record_options(args: list[str]) -> dict[str, Any]:
     it checks them; those that make no sense remotely refused."""
     from typer._click import exceptions as click_exceptions
 
-    from deltoctl.core.runner import check_loop
-    from deltoctl.record.ros2_msgs import GPIO_TYPES
+    from deltoctl.app.recording import check_record_options
 
     try:
         params = _record_command().make_context("record", list(args)).params
     except click_exceptions.ClickException as exc:
         raise InvalidInput(f"record: {exc.format_message()}") from None
-    check_loop(params["rate"], params["duration"])
-    if params["gpio_type"] not in GPIO_TYPES:
-        raise InvalidInput(f"--gpio-type {params['gpio_type']!r}: one of "
-                           f"{', '.join(GPIO_TYPES)}")
+    check_record_options(params["rate"], params["duration"], params["gpio_type"])
     return params
 
 
@@ -116,7 +111,6 @@ def _remote_record(opts: Options, robot: str, argv: list[str], err: Any) -> int:
     arrive, 4 when the robot was lost (the file finished), 130 when interrupted before the
     stream started."""
     from deltoctl.app.recording import record_from_robot
-    from deltoctl.cli.output import emit_json, info, warn
     from deltoctl.fleet.fleet_run import verb_args
     from deltoctl.render.fleet import not_received_text
     from deltoctl.render.recording import recorded_lines
@@ -147,7 +141,6 @@ def list_cmd(
 ) -> None:
     """The robots whose agents answer (their liveliness tokens), with profile, identity and
     state."""
-    from deltoctl.cli.output import emit_json, info, table
     from deltoctl.fleet.fleet_run import robots_found
     from deltoctl.fleet.remote_call import caller_session
     from deltoctl.render.fleet import list_rows
@@ -182,7 +175,6 @@ def run_cmd(
 ) -> None:
     """Run one verb (or a script's verbs) on many robots in parallel: a live table while they
     run, one report at the end; the exit code is the worst of the robots'."""
-    from deltoctl.cli.output import emit_json, info, table
     from deltoctl.fleet.fleet_run import (
         choose,
         command_lines,

@@ -7,6 +7,7 @@ import typer
 
 from deltoctl import verbs
 from deltoctl.cli.context import TEACH, options
+from deltoctl.cli.output import emit_json, info, stdout_is_terminal, table
 from deltoctl.errors import EXIT_CODES, InvalidInput
 from deltoctl.verb_help import DESCRIPTIONS
 
@@ -52,8 +53,6 @@ def help_cmd(
 
 
 def _exit_codes(ctx: typer.Context) -> None:
-    from deltoctl.cli.output import emit_json, table
-
     if options(ctx).json:
         emit_json([{"code": c, "meaning": m} for c, m in EXIT_CODES])
     else:
@@ -61,7 +60,6 @@ def _exit_codes(ctx: typer.Context) -> None:
 
 
 def _topic(ctx: typer.Context, name: str) -> None:
-    from deltoctl.cli.output import emit_json, stdout_is_terminal
     from deltoctl.topics_lookup import topic_text
 
     text = topic_text(name)
@@ -77,7 +75,6 @@ def _topic(ctx: typer.Context, name: str) -> None:
 
 
 def _examples(ctx: typer.Context, copy: Path | None, force: bool) -> None:
-    from deltoctl.cli.output import emit_json, info, table
     from deltoctl.topics_lookup import copy_examples, examples, examples_dir
 
     listed = examples()

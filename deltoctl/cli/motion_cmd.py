@@ -12,8 +12,9 @@ from deltoctl.cli.completions import complete_part as complete_joint
 from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
-from deltoctl.cli.output import advancing, emit_json, info, progress, say
-from deltoctl.verb_help import DESCRIPTIONS
+from deltoctl.cli.output import emit_json, info, progress, say
+from deltoctl.render.progress import advancing
+from deltoctl.verb_help import DESCRIPTIONS, OPTION_HELP
 
 VelocityOpt = Annotated[str | None, typer.Option(
     "--velocity", help="Setpoint speed: 20deg/s, 10mm/s, or a bare number in rad/s "
@@ -68,10 +69,7 @@ def home(
 
 
 JogRecordOpt = Annotated[Path | None, typer.Option(
-    "--record", metavar="FILE.mcap",
-    help="Record the motion to MCAP: every block's states and each cycle's commands "
-         "(/joint_commands), for `deltoctl replay`; {time} and {serial} in its name "
-         "are filled as record fills them.")]
+    "--record", metavar="FILE.mcap", help=OPTION_HELP["jog --record"])]
 JogForceOpt = Annotated[bool, typer.Option(
     "--force", help="Overwrite --record's file when it exists (without: exit 2).")]
 

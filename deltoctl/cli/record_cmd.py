@@ -18,19 +18,13 @@ from deltoctl.cli.device_cmd import (
     open_robot,
 )
 from deltoctl.cli.output import emit_json, info, progress, warn
-from deltoctl.verb_help import DESCRIPTIONS
+from deltoctl.verb_help import DESCRIPTIONS, OPTION_HELP
 
 ForceOpt = Annotated[bool, typer.Option(
     "--force", help="Overwrite the file when it exists (without: exit 2).")]
-OutputArg = Annotated[Path, typer.Argument(
-    help="The .mcap file to write; {time} in its name becomes the start time (UTC, "
-         "20261125T211400Z), {serial} each block's device serial, or its target's "
-         "address where the device reports none (joined by +).")]
+OutputArg = Annotated[Path, typer.Argument(help=OPTION_HELP["record OUTPUT"])]
 GpioTypeOpt = Annotated[str, typer.Option(
-    "--gpio-type", metavar="TYPE",
-    help="/gpio's type: group-values (control_msgs/DynamicInterfaceGroupValues, control_msgs "
-         "4.7+ on Humble, 5.3+ on Jazzy) or joint-state (control_msgs/DynamicJointState, "
-         "every control_msgs).")]
+    "--gpio-type", metavar="TYPE", help=OPTION_HELP["record --gpio-type"])]
 
 
 def record(

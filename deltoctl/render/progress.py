@@ -22,8 +22,11 @@ def started_bar(transient: bool = True, elapsed: bool = False) -> Progress:
     return bar
 
 
-def advancing(bar: Progress, label: str) -> Callable[[float], None]:
-    """A task named ``label`` on ``bar`` and what moves it to a fraction done."""
+def advancing(bar: Progress | None, label: str) -> Callable[[float], None] | None:
+    """A task named ``label`` on ``bar`` and what moves it to a fraction done; None without
+    a bar."""
+    if bar is None:
+        return None
     task = bar.add_task(label, total=1.0)
     return lambda fraction: bar.update(task, completed=fraction)
 
