@@ -1,10 +1,16 @@
 """The grammar of a deltoctl command line that is not the verbs': which global options there
-are, whether each takes a value, and where they may stand. The CLI parses with it, and the
-fleet agent judges a remote command line with the same rules."""
+are, whether each takes a value, and where they may stand; and their values once parsed
+(Options). The CLI parses with it, and the fleet agent judges a remote command line with the
+same rules."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+from deltoctl.errors import InvalidInput
+
+if TYPE_CHECKING:
+    from deltoctl.profile.model import Profile
 
 # option spellings → whether they take a value: the root command's options (cli/main.py), which
 # the fleet reads without loading the CLI; a test holds the two equal
@@ -113,3 +119,60 @@ def given_options(ctx: Any) -> list[str]:
         if ctx.params.get(param.name) is not False:
             given += getattr(param, "opts", [])
     return given
+
+
+class Options:
+    """The parsed global options (a plain class: dataclasses cost start-up time)."""
+
+    def __init__(
+        self,
+        profile: str | None = None,
+        target: list[str] | None = None,
+        sim: bool = False,
+        sim_fresh: bool = False,
+        sim_options: list[str] | None = None,
+        json: bool = False,
+        yes: bool = False,
+        verbose: int = 0,
+        quiet: bool = False,
+        xacro_args: dict[str, str] | None = None,
+        package_paths: dict[str, str] | None = None,
+        hardware: list[str] | None = None,
+        xacro: bool = False,
+        robot: str | None = None,
+        zenoh_config: str | None = None,
+    ) -> None:
+        self.profile = profile
+        self.target = target or []
+        self.sim = sim
+        self.sim_fresh = sim_fresh  # --sim-fresh: never a running 'sim serve'
+        self.sim_options = sim_options or []  # --sim-option NAME=VALUE, as given
+        self.json = json
+        self.yes = yes
+        self.verbose = verbose
+        self.quiet = quiet
+        self.xacro_args = xacro_args or {}
+        self.package_paths = package_paths or {}
+        self.hardware = hardware or []  # --hardware: the blocks a verb works on (all if empty)
+        self.xacro = xacro  # run xacro on a file not named .xacro
+        self.robot = robot  # --robot: the verb runs on that robot's agent, over Zenoh
+        self.zenoh_config = zenoh_config  # --zenoh-config: endpoints and TLS of the session
+
+    def load_profile(self, spec: str | None = None) -> Profile:
+        from deltoctl.profile.catalog import load_profile
+
+        spec = spec or self.profile
+        if not spec:
+            raise InvalidInput("no profile given: pass --profile NAME|PATH (or set "
+                               "DELTOCTL_PROFILE); 'deltoctl profile list' shows the catalog")
+        return load_profile(spec, self.xacro_args, self.package_paths, xacro=self.xacro)
+
+
+def parse_pairs(items: list[str], sep: str, what: str, example: str) -> dict[str, str]:
+    pairs: dict[str, str] = {}
+    for item in items:
+        key, found, value = item.partition(sep)
+        if not found or not key:
+            raise InvalidInput(f"{what} {item!r} is not of the form {example}")
+        pairs[key] = value
+    return pairs

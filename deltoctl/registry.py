@@ -86,6 +86,16 @@ class SimOption:
     def flag(self) -> str:
         return "--" + self.name.replace("_", "-")
 
+    def described(self) -> str:
+        """Its help, and its default (if any) as a command line gives it: numbers apart by
+        commas, a byte in hex."""
+        shown = self.default if self.default not in (None, (), False) else None
+        if isinstance(shown, tuple):
+            shown = ",".join(format(x, "g") for x in shown)
+        elif isinstance(shown, int) and self.kind == "int" and self.high == 0xFF:
+            shown = f"{shown:#04x}"
+        return self.help + (f" Default: {shown}." if shown is not None else "")
+
     def value(self, given: Any) -> Any:
         """A value given (a command line's text or a program's value) as the emulator takes
         it; anything else is one InvalidInput naming the option and what it takes."""

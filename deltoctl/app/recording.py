@@ -19,6 +19,7 @@ from deltoctl.errors import DeviceError, InvalidInput
 
 if TYPE_CHECKING:
     from deltoctl.core.system import System
+    from deltoctl.fleet.remote_record import Recorded
     from deltoctl.profile.model import Profile
 
 SHOW_PERIOD = 0.25  # s between two calls of a recording's ``show``
@@ -172,13 +173,35 @@ class RecordSink(Sink):
         self.recorder.close(stats.summary())
 
 
-def check_record(output: Path, rate: float, duration: float | None, gpio_type: str) -> None:
-    """A recording's options, checked before any device is opened."""
+def record_from_robot(zenoh_config: str | None, robot: str, params: Mapping[str, Any],
+                      hardware: Sequence[str], err: Callable[[bytes], None],
+                      opened: Callable[[Path], None]) -> Recorded:
+    """``--robot ROBOT record FILE``: the robot's stream recorded to FILE on this computer, by
+    the record's options ``params`` (as ``deltoctl record`` parses them), of the blocks
+    ``hardware`` names (all if none); ``opened`` is told the file once it is created."""
+    from deltoctl.fleet.remote_record import record_remote
+
+    output = planned_output(Path(params["output"]), params["force"])
+    return record_remote(
+        zenoh_config, robot, output, params["rate"], params["duration"],
+        [f"--hardware={h}" for h in hardware], params["gpio_type"],
+        params["allow_model_mismatch"], err, opened=opened,
+        name=lambda template, identities: identified_output(template, identities,
+                                                            params["force"]))
+
+
+def check_record_options(rate: float, duration: float | None, gpio_type: str) -> None:
+    """A recording's rate, duration and /gpio type, wherever its file is written."""
     from deltoctl.record.ros2_msgs import GPIO_TYPES
 
     check_loop(rate, duration)
     if gpio_type not in GPIO_TYPES:
         raise InvalidInput(f"--gpio-type {gpio_type!r}: one of {', '.join(GPIO_TYPES)}")
+
+
+def check_record(output: Path, rate: float, duration: float | None, gpio_type: str) -> None:
+    """A recording's options, checked before any device is opened."""
+    check_record_options(rate, duration, gpio_type)
     if not output.parent.is_dir():
         raise InvalidInput(f"cannot write {output}: {output.parent} is not a directory")
 

@@ -11,7 +11,9 @@ refuses, before anything moves, a command outside the profile's limits or a setp
 longer than ``MAX_HOLD_S``; ``Replay`` sends each row at its recorded time to the blocks it
 commands, reading them first, and compares what they report with what was recorded (RMS and
 max per joint): a joint outside its limits or further than ``max_deviation`` from the
-recording stops the replay.
+recording stops the replay. A recording is untrusted: on a device (``plan_replay``), the limits
+are those of the named profile or of the catalog's, never the recording's, and its bus URLs
+never choose a device.
 """
 
 from __future__ import annotations

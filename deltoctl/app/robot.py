@@ -23,6 +23,7 @@ if TYPE_CHECKING:
     from deltoctl.app.motion import HomePlan
     from deltoctl.app.replay import ReplayPlan
     from deltoctl.app.sinks import LinkWatch
+    from deltoctl.cmdline import Options
     from deltoctl.core.system import Member, System
     from deltoctl.profile.model import Profile
 
@@ -693,3 +694,29 @@ def gpio_value(text: str) -> float:
         raise InvalidInput(f"value must be finite, got {text!r}")
     return number
 
+
+@contextlib.contextmanager
+def open_selected(opts: Options, allow_model_mismatch: bool = False,
+                  profile: Profile | None = None, probe: bool = False, *,
+                  notice: Callable[[str], None] | None = None,
+                  warn: Callable[[str], None] | None = None, served_by: str | None = None,
+                  make_safe: bool = False) -> Iterator[Robot]:
+    """The robot the global options ``opts`` select (see open_robot): ``profile`` when loaded
+    already, else --profile's; --target's links, or with --sim simulators with --sim-option's
+    faults (the ``sim serve`` of the profile running for the user unless --sim-fresh); only
+    --hardware's blocks. ``make_safe``: every block set safe on the way out, whatever was
+    sent."""
+    prof = profile or opts.load_profile()
+    sim: bool | Mapping[str, Any] = opts.sim
+    if opts.sim and opts.sim_options:
+        from deltoctl.sim.serve import options_given
+
+        sim = options_given(opts.sim_options, "--sim-option", prof, opts.hardware)
+    with open_robot(prof, opts.target, sim=sim, hardware=opts.hardware,
+                    allow_model_mismatch=allow_model_mismatch, probe=probe, notice=notice,
+                    served_by=served_by, reuse=not opts.sim_fresh, warn=warn) as robot:
+        try:
+            yield robot
+        finally:
+            if make_safe:
+                robot.make_safe()

@@ -10,18 +10,18 @@ import typer
 
 from deltoctl.cli.context import options
 from deltoctl.errors import InvalidInput
+from deltoctl.verb_help import DESCRIPTIONS
 
-# the agent's verb processes: argv[1] the profile, then SIMULATED when --sim serves the robot
-# (the zygote's socket comes last)
+# the agent's verb processes: argv[1] the profile, then host.SIMULATED when --sim serves the
+# robot (the zygote's socket comes last)
 SPARE = ("import sys; from deltoctl.cli.agent_cmd import verb_process; "
          "verb_process(sys.argv[1], 'simulated' in sys.argv[2:])")
 ZYGOTE = ("import sys; from deltoctl.cli.agent_cmd import verb_process; "
           "verb_process(sys.argv[1], 'simulated' in sys.argv[2:-1], int(sys.argv[-1]))")
-SIMULATED = "simulated"
 
 
 def register(root: typer.Typer) -> None:
-    root.command("agent")(agent)
+    root.command("agent", help=DESCRIPTIONS["agent"])(agent)
 
 
 NameOpt = Annotated[str | None, typer.Option(
@@ -55,15 +55,8 @@ def agent(
     allow_unauthenticated_motion: UnauthenticatedOpt = False,
     workdir: WorkdirOpt = None,
 ) -> None:
-    """Serve the robot of --profile (its links from --target, or --sim) over Zenoh until
-    Ctrl-C or SIGTERM: every verb as a queryable, a liveliness token, a deadman on motion.
-
-    Motion and outputs are served only to authenticated callers: when every link of the
-    agent is mutual TLS (`deltoctl help security`)."""
     from deltoctl.cli.fleet_cmd import agent_checks
-    from deltoctl.fleet import check_robot, host
-    from deltoctl.fleet.agent import Agent
-    from deltoctl.profile.exporter import to_yaml
+    from deltoctl.fleet import host
 
     opts = options(ctx)
     if opts.robot:
@@ -71,23 +64,8 @@ def agent(
     if opts.sim_options:
         raise InvalidInput("--sim-option is not for the agent: its simulator serves the "
                            "profile as 'sim serve' does by default")
-    robot = check_robot(name or host.default_name())
-    host.check_deadline(deadline)
-    workdir = host.workdir(workdir, robot)
-    profile = opts.load_profile()  # a bad profile stops here, with its file:line
-    own_files = host.profile_files(opts.profile, opts.xacro)
-    spec = host.profile_spec(opts.profile, profile.name)
-    config, config_files = host.zenoh_config(opts.zenoh_config, listen, connect)
-    motion, why_not = host.motion_rule(config, allow_unauthenticated_motion)
-    links = host.verb_links(spec, opts.target, opts.xacro_args, opts.package_paths,
-                            opts.hardware, opts.xacro)
-    with host.served_links(links, opts.sim) as links:
-        marks = [SIMULATED] if opts.sim else []
-        children = ([sys.executable, "-c", ZYGOTE, spec, *marks],
-                    [sys.executable, "-c", SPARE, spec, *marks])
-        host.serve(Agent(robot, spec, profile.name, links, children, config, motion, why_not,
-                         deadline, workdir, simulated=opts.sim, profile_yaml=to_yaml(profile),
-                         own_files=own_files + config_files, check=agent_checks))
+    host.run_agent(opts, name, (listen, connect), deadline, allow_unauthenticated_motion,
+                   workdir, (ZYGOTE, SPARE), agent_checks)
 
 
 # -- the agent's warm verb processes (deltoctl/fleet/host.py): deltoctl's own command line ---

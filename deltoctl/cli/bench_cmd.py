@@ -10,11 +10,12 @@ from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, say
 from deltoctl.errors import InvalidInput
 from deltoctl.render.bench import dynamixel_lines, feetech_lines, i2c_lines, loop_lines
+from deltoctl.verb_help import DESCRIPTIONS
 
 app = typer.Typer(help="Benchmarks that ship with deltoctl.", no_args_is_help=True)
 
 
-@app.command("loop")
+@app.command("loop", help=DESCRIPTIONS["bench loop"])
 def bench_loop(
     ctx: typer.Context,
     rate: Annotated[float, typer.Option("--rate", help="Requested cycle rate, Hz.")] = 1000.0,
@@ -32,12 +33,6 @@ def bench_loop(
                                     "answering them (default: all; 1: a process per hand).")
     ] = None,
 ) -> None:
-    """The read+write cycle of N hands while recording, paced and unpaced.
-
-    A gripper profile (default dg-5f-right: F/T and IO), N copies of its block, each against
-    its own `sim serve` over loopback TCP, through the cycle runner, recording to MCAP; beside
-    it, the same loop idle (what this machine allows). With --foxglove, the paced run again
-    while the live view serves it to a Foxglove WebSocket client in another process."""
     from deltoctl.benchmarks.loop import loop_options, measure
 
     opts = options(ctx)
@@ -47,17 +42,12 @@ def bench_loop(
     _report(opts.json, results, loop_lines, counts, rate)
 
 
-@app.command("dynamixel")
+@app.command("dynamixel", help=DESCRIPTIONS["bench dynamixel"])
 def bench_dynamixel(
     ctx: typer.Context,
     servos: Annotated[int, typer.Option(help="Servos on the bus.")] = 11,
     duration: Annotated[float, typer.Option(help="Seconds per measurement.")] = 3.0,
 ) -> None:
-    """Dynamixel sync reads against dynamixel-sdk, and against the wire's limit.
-
-    Present load/velocity/position (126, 10) from N servos of an emulated bus in another
-    process: deltoctl's driver against dynamixel-sdk's GroupSyncRead; then, with the bus paced
-    at 1 and 2 Mbps, deltoctl's rate against the wire's limit."""
     from deltoctl.benchmarks.dynamixel import measure
 
     if not 1 <= servos <= 252 or duration <= 0:
@@ -65,17 +55,12 @@ def bench_dynamixel(
     _report(options(ctx).json, measure(servos, duration), dynamixel_lines, servos)
 
 
-@app.command("feetech")
+@app.command("feetech", help=DESCRIPTIONS["bench feetech"])
 def bench_feetech(
     ctx: typer.Context,
     servos: Annotated[int, typer.Option(help="Servos on the bus.")] = 6,
     duration: Annotated[float, typer.Option(help="Seconds per measurement.")] = 3.0,
 ) -> None:
-    """Feetech sync reads side by side with scservo_sdk, and against the wire's limit.
-
-    Present position/velocity/load (56, 6) of N STS3215 (an SO-101 arm's bus) on an emulated
-    bus in another process: deltoctl's driver and scservo_sdk's GroupSyncRead paced at 1 Mbps
-    against the wire's limit, then unpaced, with the CPU each spends a read."""
     from deltoctl.benchmarks.feetech import measure
 
     if not 1 <= servos <= 253 or duration <= 0:
@@ -83,17 +68,12 @@ def bench_feetech(
     _report(options(ctx).json, measure(servos, duration), feetech_lines)
 
 
-@app.command("i2c")
+@app.command("i2c", help=DESCRIPTIONS["bench i2c"])
 def bench_i2c(
     ctx: typer.Context,
     cycles: Annotated[int, typer.Option(help="Read cycles per client.")] = 3000,
     clock: Annotated[int, typer.Option(help="I2C clock in Hz for the wire time.")] = 400_000,
 ) -> None:
-    """The Bioscara read cycle against the I2C wire time.
-
-    Position and velocity of bioscara-arm's four joints, each reply with its flags, on the
-    in-process emulator: deltoctl's own time per transaction, without the emulator's, against
-    the I2C wire time; beside it, the same transactions written straight against smbus2."""
     from deltoctl.benchmarks.i2c import measure
 
     if cycles < 1 or clock <= 0:

@@ -5,8 +5,6 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from deltoctl.errors import DeltoctlError
-
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable
 
@@ -20,21 +18,13 @@ def complete_profile(incomplete: str) -> list[str]:
 
 
 def _completion_profile(ctx: typer.Context) -> "Profile | None":
-    """The profile named on the command line being completed, or None.
-
-    Completion runs while a command line is typed, on a file nobody chose to load yet: it
-    reads YAML and plain URDF only, and never runs xacro (a ``.xacro`` file, or ``--xacro``
-    on the line, completes nothing)."""
-    from deltoctl.profile.catalog import load_profile
+    """The profile named on the command line being completed (its own or --profile), or
+    None."""
+    from deltoctl.profile.catalog import completion_profile
 
     root_params = ctx.find_root().params or {}
     spec = ctx.params.get("profile") or root_params.get("profile")
-    if not spec:
-        return None
-    try:
-        return load_profile(spec, xacro=bool(root_params.get("xacro")), expand=False)
-    except DeltoctlError:
-        return None
+    return completion_profile(spec, bool(root_params.get("xacro")))
 
 
 def _completer(names: "Callable[[Profile], Iterable[str]]") -> Any:

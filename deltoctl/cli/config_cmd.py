@@ -12,6 +12,7 @@ import typer
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.output import emit_json, info, say, show, table, warn
 from deltoctl.errors import WARNINGS
+from deltoctl.verb_help import DESCRIPTIONS, OPTION_HELP
 
 if TYPE_CHECKING:
     from deltoctl.app.config import Snapshot
@@ -20,9 +21,9 @@ if TYPE_CHECKING:
 def register(root: typer.Typer) -> None:
     config = typer.Typer(help="Snapshot every block's configuration, compare it, restore it.",
                          no_args_is_help=True)
-    config.command("snapshot")(snapshot)
+    config.command("snapshot", help=DESCRIPTIONS["config snapshot"])(snapshot)
     config.command("diff")(diff)
-    config.command("restore")(restore)
+    config.command("restore", help=DESCRIPTIONS["config restore"])(restore)
     root.add_typer(config, name="config")
 
 
@@ -36,9 +37,6 @@ def snapshot(
         help="Where to write it (a directory: the default name in it; -: stdout). Default: "
              "config-<profile>[-<address>]-<time>.yaml here.")] = None,
 ) -> None:
-    """Read every configurable value of every block (--hardware narrows) into one YAML file:
-    the whole control table of each servo, the Bioscara joints' parameters, the gripper's
-    firmware and sensors, the IMU's registers. --json prints the document."""
     from deltoctl.app import config
     from deltoctl.cli.device_cmd import finish, open_robot
     from deltoctl.render.config import snapshot_table
@@ -131,17 +129,8 @@ def restore(
                                                   help="The snapshot to restore.")],
     allow: Annotated[list[str] | None, typer.Option(
         "--allow", metavar="WHAT", autocompletion=_complete_allow,
-        help="Permit what a restore does not do unasked (repeatable): torque-off (switch a "
-             "servo's torque off for its EEPROM writes, on again after), home-offset (write "
-             "a joint's stored home offset), or a safety setting by its item name, e.g. "
-             "max-position-limit (limits, shutdown, homing offset and modes are written "
-             "only when named).")] = None,
+        help=OPTION_HELP["config restore --allow"])] = None,
 ) -> None:
-    """Write back what differs from a snapshot, in the order each device requires, after
-    confirmation (--yes skips it); each item is verified by reading it back. A value outside
-    its item's documented range is exit 2, before anything is written. Exit 1 when a
-    verification fails, 5 when refused for safety (EEPROM with torque on, a safety setting
-    not named by --allow), 3 when some items could not be written (read-only)."""
     from deltoctl.app import config
     from deltoctl.cli.confirm import confirm
     from deltoctl.cli.device_cmd import open_robot

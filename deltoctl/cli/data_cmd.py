@@ -11,14 +11,12 @@ import typer
 
 from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, info, show, stdout_is_terminal
+from deltoctl.verb_help import DESCRIPTIONS
 
 FileArg = Annotated[Path, typer.Argument(metavar="FILE.mcap", help="A recording (MCAP).")]
 
 
 def info_verb(ctx: typer.Context, file: FileArg) -> None:
-    """What a recording holds: its times, blocks and their identities, topics with counts and
-    rates, link losses and gaps with their times, the loop's lateness and jitter. Reads the
-    file's summary and index, not every message."""
     from deltoctl.record.reader import describe
     from deltoctl.render.recording import summary
 
@@ -47,8 +45,6 @@ def plot(
     end: Annotated[float | None, typer.Option(
         "--end", metavar="S", help="Up to S seconds after the recording's start.")] = None,
 ) -> None:
-    """Interfaces over time: in the terminal (plotext), or as a figure with --out
-    (matplotlib). Reads only the topics that carry them. Needs pip install 'deltoctl\\[plot]'."""
     from deltoctl.app.plot import DEFAULT_PLOT, read_plot
     from deltoctl.render.plot import png_plot, terminal_plot
 
@@ -67,5 +63,5 @@ def plot(
 
 
 def register(root: typer.Typer) -> None:
-    root.command("info")(info_verb)
-    root.command("plot")(plot)
+    root.command("info", help=DESCRIPTIONS["info"])(info_verb)
+    root.command("plot", help=DESCRIPTIONS["plot"])(plot)

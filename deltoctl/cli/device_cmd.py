@@ -1,7 +1,7 @@
 """The lifecycle verbs on every block of a robot: connect, identify, detect, gpio, stream."""
 
 import contextlib
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from typing import Annotated, Any
 
 import typer
@@ -12,6 +12,7 @@ from deltoctl.cli.context import Options, options
 from deltoctl.cli.output import emit_json, emit_json_line, info, show, stdout_is_terminal, warn
 from deltoctl.core.runner import check_loop
 from deltoctl.errors import WARNINGS, InvalidInput
+from deltoctl.verb_help import DESCRIPTIONS, OPTION_HELP
 
 AllowMismatch = Annotated[bool, typer.Option(
     "--allow-model-mismatch",
@@ -26,30 +27,16 @@ SERVED_SIMULATED: str | None = None
 SET_SAFE = False
 
 
-@contextlib.contextmanager
 def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any = None,
-               probe: bool = False) -> Iterator[Any]:
+               probe: bool = False) -> contextlib.AbstractContextManager[Any]:
     """The robot of the selected profile's blocks (``--hardware``), configured and active;
     with ``--sim``, on the ``sim serve`` of this profile running for the user, else on
     simulators started first. Pass ``profile`` when the verb loaded it already; ``probe`` for
     a verb that looks at a bus where nothing may answer."""
-    from deltoctl.app.robot import open_robot as open_app_robot
+    from deltoctl.app.robot import open_selected
 
-    prof = profile or opts.load_profile()
-    sim: Any = opts.sim
-    if opts.sim and opts.sim_options:
-        from deltoctl.sim.serve import options_given
-
-        sim = options_given(opts.sim_options, "--sim-option", prof, opts.hardware)
-    with open_app_robot(prof, opts.target, sim=sim, hardware=opts.hardware,
-                        allow_model_mismatch=allow_model_mismatch, probe=probe, notice=info,
-                        served_by=SERVED_SIMULATED, reuse=not opts.sim_fresh,
-                        warn=warn) as robot:
-        try:
-            yield robot
-        finally:
-            if SET_SAFE:
-                robot.make_safe()
+    return open_selected(opts, allow_model_mismatch, profile, probe, notice=info, warn=warn,
+                         served_by=SERVED_SIMULATED, make_safe=SET_SAFE)
 
 
 def finish(robot: Any, extra: list[str] | None = None,
@@ -70,7 +57,7 @@ def register(app: typer.Typer) -> None:
     app.command("connect")(connect)
     app.command("identify")(identify)
     app.command("detect")(detect)
-    app.command("stream")(stream)
+    app.command("stream", help=DESCRIPTIONS["stream"])(stream)
     gpio_app = typer.Typer(help="Read and set GPIOs (a Delto's outputs: motor on, grasp, "
                            "release; vacuum, digital and analog IOs).", no_args_is_help=True)
     gpio_app.command("get")(gpio_get)
@@ -173,10 +160,7 @@ FoxgloveHostOpt = Annotated[str, typer.Option(
     help="The address to serve Foxglove on; another than loopback serves the robot's data to "
          "other machines.")]
 FoxgloveOriginOpt = Annotated[list[str] | None, typer.Option(
-    "--foxglove-origin", metavar="ORIGIN",
-    help="Also let in browser pages of this origin (repeatable, e.g. http://localhost:8080 for "
-         "a self-hosted Foxglove); by default only Foxglove's own (https://app.foxglove.dev, "
-         "the desktop app) and clients that send no Origin.")]
+    "--foxglove-origin", metavar="ORIGIN", help=OPTION_HELP["record --foxglove-origin"])]
 StreamOriginOpt = Annotated[list[str] | None, typer.Option(
     "--foxglove-origin", metavar="ORIGIN", help="Also let in browser pages of this origin "
     "(repeatable); by default only Foxglove's own and clients that send no Origin.")]
@@ -195,10 +179,6 @@ def stream(
     foxglove_host: FoxgloveHostOpt = "127.0.0.1",
     foxglove_origin: StreamOriginOpt = None,
 ) -> None:
-    """Stream every block's state interfaces: a live table on a terminal (fitted to it; the
-    rows that do not fit are counted, -i picks fewer), NDJSON with --json or when piped; with
-    --foxglove, to Foxglove as well (every interface, whatever -i picks). Exit 4 when a link
-    is down at the end, 3 when one was lost and came back."""
     from deltoctl.app.live import foxglove_live, start_foxglove
     from deltoctl.app.sinks import LinesSink
     from deltoctl.render.stream import LiveSink

@@ -12,10 +12,11 @@ from deltoctl.app.doctor import diagnose, exit_code, install_udev_rule, udev_rul
 from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, info, say
 from deltoctl.render.doctor import doctor_lines
+from deltoctl.verb_help import DESCRIPTIONS
 
 
 def register(app: typer.Typer) -> None:
-    app.command("doctor")(doctor)
+    app.command("doctor", help=DESCRIPTIONS["doctor"])(doctor)
 
 
 def doctor(
@@ -29,10 +30,6 @@ def doctor(
         "--write-udev-rule", help="Install that rule (root), then udevadm reload and "
                                   "trigger.")] = False,
 ) -> None:
-    """Check the set-up before a bring-up: profile, ports, buses, routes, targets.
-
-    One line per check with the fix to type; exit 0 only when all pass. Without -p: the
-    -t URLs, or what each transport finds on this host (its ports and buses)."""
     opts = options(ctx)
     if udev_rule or write_udev_rule:
         text = udev_rule_text(opts.profile, opts.load_profile, opts.target, opts.hardware)

@@ -10,7 +10,8 @@ import typer
 
 from deltoctl import verbs
 from deltoctl.cli.confirm import confirmed_remotely
-from deltoctl.cli.context import Options, options
+from deltoctl.cli.context import ARGV, Options, options
+from deltoctl.cli.output import emit_error, emit_json, info, stdout_is_terminal, table, warn
 from deltoctl.errors import DeltoctlError, InvalidInput
 
 app = typer.Typer(help="The robots whose agents answer over Zenoh, and verbs on many at once.",
@@ -25,36 +26,18 @@ def register(root: typer.Typer) -> None:
 
 # -- --robot ---------------------------------------------------------------------------------
 
-def _write_out(data: bytes) -> None:
-    buffer = getattr(sys.stdout, "buffer", None)
-    if buffer is not None:
-        sys.stdout.flush()
-        buffer.write(data)
-        buffer.flush()
-    else:
-        sys.stdout.write(data.decode(errors="replace"))
-        sys.stdout.flush()
-
-
-def _write_err(text: str) -> None:
-    sys.stderr.write(text)
-    sys.stderr.flush()
-
-
 def forward(ctx: typer.Context) -> NoReturn:
     """Run the command line on ``--robot``'s agent: its stdout, stderr (errors naming the
     robot) and exit code, as if run there."""
-    from deltoctl.cli.context import ARGV
-    from deltoctl.cli.output import emit_error, stdout_is_terminal
     from deltoctl.fleet import ACTUATING, check_robot
     from deltoctl.fleet.fleet_run import record_file_dropped, strip_remote, verb_of
     from deltoctl.fleet.remote_call import ErrorLines, RemoteCall, caller_session
-    from deltoctl.render.stream import live_lines
+    from deltoctl.render.stream import live_lines, write_err, write_out
 
     opts = options(ctx)
     robot = check_robot(opts.robot or "")
     argv = strip_remote(list(ctx.find_root().meta.get(ARGV, [])))
-    errors = ErrorLines(robot, opts.json, _write_err)
+    errors = ErrorLines(robot, opts.json, write_err)
     try:
         verb = verb_of(record_file_dropped(argv, _value_options), robot)
         if verb == "record" and not {"--help", "-h"} & set(argv):
@@ -63,7 +46,7 @@ def forward(ctx: typer.Context) -> NoReturn:
             argv = ["--yes", *argv]
         drawn = verb == "stream" and not opts.json and not {"-h", "--help"} & set(argv)
         with caller_session(opts.zenoh_config, f"robot {robot}") as session, live_lines(
-                f"from robot {robot}", _write_out, drawn and stdout_is_terminal()) as out:
+                f"from robot {robot}", write_out, drawn and stdout_is_terminal()) as out:
             code = RemoteCall(session, robot, argv, out, errors.feed).run()
     except DeltoctlError as exc:  # this side failed (nothing answers): the robot named too
         if not opts.json:
@@ -99,17 +82,13 @@ def record_options(args: list[str]) -> dict[str, Any]:
     it checks them; those that make no sense remotely refused."""
     from typer._click import exceptions as click_exceptions
 
-    from deltoctl.core.runner import check_loop
-    from deltoctl.record.ros2_msgs import GPIO_TYPES
+    from deltoctl.app.recording import check_record_options
 
     try:
         params = _record_command().make_context("record", list(args)).params
     except click_exceptions.ClickException as exc:
         raise InvalidInput(f"record: {exc.format_message()}") from None
-    check_loop(params["rate"], params["duration"])
-    if params["gpio_type"] not in GPIO_TYPES:
-        raise InvalidInput(f"--gpio-type {params['gpio_type']!r}: one of "
-                           f"{', '.join(GPIO_TYPES)}")
+    check_record_options(params["rate"], params["duration"], params["gpio_type"])
     return params
 
 
@@ -131,25 +110,15 @@ def _remote_record(opts: Options, robot: str, argv: list[str], err: Any) -> int:
     (4 when its link was down at the end, 3 when lost and back), 3 when cycles it ran did not
     arrive, 4 when the robot was lost (the file finished), 130 when interrupted before the
     stream started."""
-    from pathlib import Path
-
-    from deltoctl.app.recording import identified_output, planned_output
-    from deltoctl.cli.output import emit_json, info, warn
+    from deltoctl.app.recording import record_from_robot
     from deltoctl.fleet.fleet_run import verb_args
-    from deltoctl.fleet.remote_record import record_remote
     from deltoctl.render.fleet import not_received_text
     from deltoctl.render.recording import recorded_lines
 
-    params = record_options(verb_args(argv))
-    output = planned_output(Path(params["output"]), params["force"])
-    done = record_remote(
-        opts.zenoh_config, robot, output, params["rate"], params["duration"],
-        [f"--hardware={h}" for h in opts.hardware], params["gpio_type"],
-        params["allow_model_mismatch"], err,
-        opened=lambda path: info(f"recording {path} from robot {robot} "
-                                 "(its cycle times; Ctrl-C ends it)"),
-        name=lambda template, identities: identified_output(template, identities,
-                                                            params["force"]))
+    done = record_from_robot(opts.zenoh_config, robot, record_options(verb_args(argv)),
+                             opts.hardware, err, lambda path: info(
+                                 f"recording {path} from robot {robot} (its cycle times; "
+                                 "Ctrl-C ends it)"))
     if done.result:
         if opts.json:
             emit_json(done.result, profile=done.profile)
@@ -172,7 +141,6 @@ def list_cmd(
 ) -> None:
     """The robots whose agents answer (their liveliness tokens), with profile, identity and
     state."""
-    from deltoctl.cli.output import emit_json, info, table
     from deltoctl.fleet.fleet_run import robots_found
     from deltoctl.fleet.remote_call import caller_session
     from deltoctl.render.fleet import list_rows
@@ -207,7 +175,6 @@ def run_cmd(
 ) -> None:
     """Run one verb (or a script's verbs) on many robots in parallel: a live table while they
     run, one report at the end; the exit code is the worst of the robots'."""
-    from deltoctl.cli.output import emit_json, info, table
     from deltoctl.fleet.fleet_run import (
         choose,
         command_lines,

@@ -7,11 +7,13 @@ import typer
 
 from deltoctl import verbs
 from deltoctl.cli.context import TEACH, options
+from deltoctl.cli.output import emit_json, info, stdout_is_terminal, table
 from deltoctl.errors import EXIT_CODES, InvalidInput
+from deltoctl.verb_help import DESCRIPTIONS
 
 
 def register(holder: typer.Typer) -> None:
-    holder.command("help")(help_cmd)
+    holder.command("help", help=DESCRIPTIONS["help"])(help_cmd)
 
 
 def _topics() -> list[str]:
@@ -33,9 +35,6 @@ def help_cmd(
     force: Annotated[bool, typer.Option(
         "--force", help="With examples --copy: overwrite examples already in DIR.")] = False,
 ) -> None:
-    """Show the help of deltoctl, of a verb, of a topic (targets, the trust model, security,
-    shell completion, exit codes …), the shipped examples, or the JSON Schema of a verb's
-    --json document."""
     words = list(topic or [])
     if (copy is not None or force) and words != ["examples"]:
         raise InvalidInput("--copy and --force go with `deltoctl help examples`")
@@ -54,8 +53,6 @@ def help_cmd(
 
 
 def _exit_codes(ctx: typer.Context) -> None:
-    from deltoctl.cli.output import emit_json, table
-
     if options(ctx).json:
         emit_json([{"code": c, "meaning": m} for c, m in EXIT_CODES])
     else:
@@ -63,7 +60,6 @@ def _exit_codes(ctx: typer.Context) -> None:
 
 
 def _topic(ctx: typer.Context, name: str) -> None:
-    from deltoctl.cli.output import emit_json, stdout_is_terminal
     from deltoctl.topics_lookup import topic_text
 
     text = topic_text(name)
@@ -79,7 +75,6 @@ def _topic(ctx: typer.Context, name: str) -> None:
 
 
 def _examples(ctx: typer.Context, copy: Path | None, force: bool) -> None:
-    from deltoctl.cli.output import emit_json, info, table
     from deltoctl.topics_lookup import copy_examples, examples, examples_dir
 
     listed = examples()

@@ -12,7 +12,9 @@ from deltoctl.cli.completions import complete_part as complete_joint
 from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
-from deltoctl.cli.output import advancing, emit_json, info, progress, say
+from deltoctl.cli.output import emit_json, info, progress, say
+from deltoctl.render.progress import advancing
+from deltoctl.verb_help import DESCRIPTIONS, OPTION_HELP
 
 VelocityOpt = Annotated[str | None, typer.Option(
     "--velocity", help="Setpoint speed: 20deg/s, 10mm/s, or a bare number in rad/s "
@@ -20,9 +22,10 @@ VelocityOpt = Annotated[str | None, typer.Option(
 
 
 def register(app: typer.Typer) -> None:
-    app.command("home")(home)
+    app.command("home", help=DESCRIPTIONS["home"])(home)
     # negative deltas (`jog J -5deg`) are arguments, not unknown options
-    app.command("jog", context_settings={"ignore_unknown_options": True})(jog)
+    app.command("jog", help=DESCRIPTIONS["jog"],
+                context_settings={"ignore_unknown_options": True})(jog)
 
 
 def _said(label: str, report: dict[str, Any]) -> None:
@@ -40,19 +43,16 @@ def home(
         help="Home again joints that are homed already (homing joints only).")] = False,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
-    """Drive every block's joints home: by their homing routine, or to the home pose.
-
-    Joints with a `home` command interface (the Bioscara arm) run into their hard stops one at
-    a time, in the profile's homing order; the others go to safety.home_pose (zero unless the
-    profile says otherwise). Blocks that cannot home are named."""
     from deltoctl.app.motion import fail_unsettled, joint_speed, plan_home
+    from deltoctl.render.progress import HomingBars
 
     opts = options(ctx)
     profile = opts.load_profile()
     plan = plan_home(profile, opts.hardware, joint or [])
     speed = joint_speed(profile, list(plan.targets), velocity)
     confirm(ctx, plan.describe())
-    bars = _Bars(opts, plan.routine)
+    bars = HomingBars(lambda transient: progress(opts, transient), plan.routine,
+                      None if opts.json else info)
     with open_robot(opts, allow_model_mismatch, profile) as robot:
         try:
             report = robot.home(force=force, velocity=speed, plan=plan, progress=bars.move,
@@ -68,44 +68,8 @@ def home(
     finish(robot)
 
 
-class _Bars:
-    """Homing on a terminal: a bar per joint that runs its routine (its steps on stderr
-    otherwise), then one for the way to the home pose, started when that begins."""
-
-    def __init__(self, opts: Options, joints: list[str]) -> None:
-        self.opts = opts
-        self.bar = progress(opts, transient=False) if joints else None
-        self.tasks = {j: self.bar.add_task(f"{j}: waiting", total=1.0)
-                      for j in joints} if self.bar else {}
-        self.posing = False
-
-    def show(self, name: str, status: str, fraction: float) -> None:
-        if self.bar is not None:
-            self.bar.update(self.tasks[name], completed=fraction,
-                            description=f"{name}: {status}")
-        elif not self.opts.json:
-            info(f"{name}: {status}")
-
-    def move(self, fraction: float) -> None:
-        if not self.posing:
-            self.stop()
-            self.posing = True
-            self.bar = progress(self.opts)
-            self.tasks = {"home": self.bar.add_task("home", total=1.0)} if self.bar else {}
-        if self.bar is not None:
-            self.bar.update(self.tasks["home"], completed=fraction)
-
-    def stop(self) -> None:
-        if self.bar is not None:
-            self.bar.stop()
-            self.bar = None
-
-
 JogRecordOpt = Annotated[Path | None, typer.Option(
-    "--record", metavar="FILE.mcap",
-    help="Record the motion to MCAP: every block's states and each cycle's commands "
-         "(/joint_commands), for `deltoctl replay`; {time} and {serial} in its name "
-         "are filled as record fills them.")]
+    "--record", metavar="FILE.mcap", help=OPTION_HELP["jog --record"])]
 JogForceOpt = Annotated[bool, typer.Option(
     "--force", help="Overwrite --record's file when it exists (without: exit 2).")]
 
@@ -128,13 +92,6 @@ def jog(
     allow_model_mismatch: AllowMismatch = False,
     force: JogForceOpt = False,
 ) -> None:
-    """Move one joint by DELTA (or --to POS), within its limits and the profile's jog step;
-    more JOINT DELTA pairs move at the same time (blocks on several links at once).
-
-    A bare number is in rad for a revolute joint, m for a prismatic one; 5deg, 2mm say
-    their unit, and a unit that is not the joint's (an angle on a prismatic joint) is
-    refused (exit 2). The confirmation shows the move in the unit typed (else degrees or
-    millimetres)."""
     from deltoctl.app.motion import fail_unsettled, jog_pairs, joint_speed
     from deltoctl.app.recording import planned_output
 

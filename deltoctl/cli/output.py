@@ -7,7 +7,7 @@ plain aligned text and pay no import cost for it.
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import typer
@@ -84,18 +84,10 @@ def emit_json_line(data: Any) -> None:
 
 def emit_error(message: str, hint: str | None, exit_code: int, as_json: bool,
                **more: str) -> None:
-    """An error on stderr: one line (and its hint) for people; with --json one object,
-    ``{"error": {"message", "hint", "exit_code"}}`` (and ``more``: the robot a remote verb
-    ran on), so stdout holds data only."""
-    if as_json:
-        import json
+    """An error on stderr (deltoctl.render.envelope.error_text), so stdout holds data only."""
+    from deltoctl.render.envelope import error_text
 
-        error = {"message": message, "hint": hint, "exit_code": exit_code, **more}
-        typer.echo(json.dumps({"error": error}), err=True)
-        return
-    typer.echo(f"deltoctl: error: {message}", err=True)
-    if hint:
-        typer.echo(f"  hint: {hint}", err=True)
+    typer.echo(error_text(message, hint, exit_code, as_json, **more), err=True)
 
 
 def say(message: str) -> None:
@@ -132,14 +124,6 @@ def progress(opts: Any, transient: bool = True, elapsed: bool = False) -> Progre
     from deltoctl.render.progress import started_bar
 
     return started_bar(transient, elapsed)
-
-
-def advancing(bar: Progress | None, label: str) -> Callable[[float], None] | None:
-    """A task named ``label`` on ``bar`` and what moves it to a fraction done; None without
-    a bar."""
-    from deltoctl.render.progress import advancing as task
-
-    return None if bar is None else task(bar, label)
 
 
 def show(parts: Sequence[str | tuple]) -> None:

@@ -1,7 +1,7 @@
 """``deltoctl profile list|show|validate|import|export|tests``."""
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import Annotated, Any
 
 import typer
 
@@ -9,10 +9,7 @@ from deltoctl.cli.completions import complete_part, complete_profile
 from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, info, say, table
 from deltoctl.errors import InvalidInput
-
-if TYPE_CHECKING:
-
-    pass
+from deltoctl.verb_help import DESCRIPTIONS
 
 app = typer.Typer(help="Browse, check and convert device profiles.", no_args_is_help=True)
 
@@ -156,7 +153,7 @@ def export_cmd(
     _written(ctx, prof, fmt, text, output)
 
 
-@app.command("tests")
+@app.command("tests", help=DESCRIPTIONS["profile tests"])
 def tests_cmd(
     ctx: typer.Context,
     profile: ProfileArg = None,
@@ -164,9 +161,6 @@ def tests_cmd(
         "--output", "-o", help="The folder of the tests (made if missing).")] = Path("tests"),
     force: Annotated[bool, typer.Option("--force", help="Overwrite the files.")] = False,
 ) -> None:
-    """Write a starting pytest suite for a robot: identify, detect, its configuration against
-    a golden snapshot (taken of the simulators), link quality and homing. It passes on the
-    simulators as written, and runs on the robot with --deltoctl-target (`deltoctl help pytest`)."""
     from deltoctl.app.suite import write_suite
 
     opts = options(ctx)

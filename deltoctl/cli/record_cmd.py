@@ -18,18 +18,13 @@ from deltoctl.cli.device_cmd import (
     open_robot,
 )
 from deltoctl.cli.output import emit_json, info, progress, warn
+from deltoctl.verb_help import DESCRIPTIONS, OPTION_HELP
 
 ForceOpt = Annotated[bool, typer.Option(
     "--force", help="Overwrite the file when it exists (without: exit 2).")]
-OutputArg = Annotated[Path, typer.Argument(
-    help="The .mcap file to write; {time} in its name becomes the start time (UTC, "
-         "20261125T211400Z), {serial} each block's device serial, or its target's "
-         "address where the device reports none (joined by +).")]
+OutputArg = Annotated[Path, typer.Argument(help=OPTION_HELP["record OUTPUT"])]
 GpioTypeOpt = Annotated[str, typer.Option(
-    "--gpio-type", metavar="TYPE",
-    help="/gpio's type: group-values (control_msgs/DynamicInterfaceGroupValues, control_msgs "
-         "4.7+ on Humble, 5.3+ on Jazzy) or joint-state (control_msgs/DynamicJointState, "
-         "every control_msgs).")]
+    "--gpio-type", metavar="TYPE", help=OPTION_HELP["record --gpio-type"])]
 
 
 def record(
@@ -45,9 +40,6 @@ def record(
     foxglove_origin: FoxgloveOriginOpt = None,
     force: ForceOpt = False,
 ) -> None:
-    """Record every block's state interfaces; Ctrl-C, SIGTERM, SIGHUP or --duration end with a
-    valid file. Exit 4 when a link is down at the end, 3 when one was lost and came back, 1 when
-    the file could not be written to the end (disk full, file too large, removed)."""
     from deltoctl.app.live import foxglove_live, start_foxglove
     from deltoctl.app.recording import check_record, planned_output
     from deltoctl.core.runner import interrupted_by_signals
@@ -84,4 +76,4 @@ def record(
 
 
 def register(root: typer.Typer) -> None:
-    root.command("record")(record)
+    root.command("record", help=DESCRIPTIONS["record"])(record)

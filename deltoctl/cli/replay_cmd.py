@@ -1,14 +1,6 @@
-"""``deltoctl replay FILE.mcap``: play a recording's commands back at their recorded timing.
-
-On the profile's simulators unless --device says otherwise (then confirmed as any motion, on
-the device -t names, under the limits of -p or of the catalog's profile: a recording is
-untrusted, its profile never relaxes a limit and its bus URLs never choose a device);
-every command is checked against the profile's limits before anything moves (exit 5); a safe
-move to the recorded start pose first; Ctrl-C, SIGTERM or SIGHUP stop every block, and so
-does a joint outside its limits or beyond --max-deviation from the recording (exit 5). The
-report: per joint, RMS and max of replayed against recorded position; --tolerance makes a
-larger difference exit 3.
-"""
+"""``deltoctl replay FILE.mcap``: play a recording's commands back at their recorded timing,
+on the profile's simulators unless --device (then confirmed as any motion); Ctrl-C, SIGTERM or
+SIGHUP stop every block. What is checked, before and while it moves: deltoctl.app.replay."""
 
 from pathlib import Path
 from typing import Annotated, Any
@@ -16,14 +8,17 @@ from typing import Annotated, Any
 import typer
 
 from deltoctl.app.replay import MAX_DEVIATION
+from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import Options, options
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
-from deltoctl.cli.output import advancing, emit_json, info, progress, show, warn
+from deltoctl.cli.output import emit_json, info, progress, show, warn
 from deltoctl.errors import WARNINGS
+from deltoctl.render.progress import advancing
+from deltoctl.verb_help import DESCRIPTIONS
 
 
 def register(app: typer.Typer) -> None:
-    app.command("replay")(replay)
+    app.command("replay", help=DESCRIPTIONS["replay"])(replay)
 
 
 RecordingArg = Annotated[Path, typer.Argument(
@@ -51,21 +46,9 @@ def replay(
     max_deviation: MaxDeviationOpt = None,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
-    """Play a recording's commands back at their recorded timing, then report per joint the
-    difference between recorded and replayed position (RMS, max).
-
-    The profile is the recording's own (its metadata), or -p PROFILE. Every command is
-    checked against the profile's limits and jog step before anything moves; then the
-    joints go to the recorded start pose; then the commands follow, and a joint that leaves
-    its limits or strays beyond --max-deviation from the recording stops every block
-    (exit 5). Runs on the profile's simulators unless --device (with --yes, or confirmed on
-    a terminal, --sim too): then on the device -t names, under the limits of -p PROFILE or of the
-    catalog's profile of the recorded name; a recorded profile looser than that is refused
-    (exit 5)."""
     import copy
 
     from deltoctl.app.replay import Deviated, plan_replay, replay_limits, where_to_replay
-    from deltoctl.cli.confirm import confirm
     from deltoctl.units import nonnegative
 
     opts = options(ctx)

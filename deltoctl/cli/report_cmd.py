@@ -10,10 +10,11 @@ from deltoctl.cli.context import options
 from deltoctl.cli.device_cmd import AllowMismatch, open_robot
 from deltoctl.cli.output import emit_json, info, progress, say, table, warn
 from deltoctl.errors import WARNINGS
+from deltoctl.verb_help import DESCRIPTIONS
 
 
 def register(root: typer.Typer) -> None:
-    root.command("report")(report)
+    root.command("report", help=DESCRIPTIONS["report"])(report)
 
 
 def report(
@@ -31,13 +32,6 @@ def report(
         help="Who ran the acceptance (default: the user).")] = "",
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
-    """Run the acceptance sequence and write one self-contained HTML report and its JSON
-    twin: identity of every block and the bus scan, the configuration's fingerprint (and with
-    --golden its differences), link quality per block, the sensors verified (IMU self-test
-    and gravity, F/T residuals after a tare), plots of a recording, a sign-off block and the
-    report's hash. With --yes, motion checks where the profile allows motion: returns home
-    and each joint to its soft limits and back. Limits come from the profile's `report:`
-    section. Exit 0 when every check passes, 1 when one fails (named), 3 with warnings."""
     from deltoctl.app.checks import fail_on
     from deltoctl.app.report import Plan, check_plan, report_paths, run_report, write_report
     from deltoctl.render.checks import check_rows, verdict_text
@@ -77,14 +71,13 @@ def fleet_summary(runs: list[dict[str, Any]], as_json: bool, code: int) -> None:
     robot, the worst first), fleet-report-<time>.html and its JSON twin; exits with the
     fleet's worst code."""
     from deltoctl.app.report import write_fleet_report
+    from deltoctl.render.fleet import report_rows
     from deltoctl.render.report_html import fleet_html
 
     doc, html = write_fleet_report(runs, fleet_html)
     if as_json:
         emit_json(doc)
     else:
-        table(None, ["robot", "verdict", "failed"],
-              [[r["robot"], r["verdict"], ", ".join(r["failed"]) or r["error"] or ""]
-               for r in doc["robots"]])
+        table(None, ["robot", "verdict", "failed"], report_rows(doc))
     info(f"fleet report: {html} and {html.with_suffix('.json').name}")
     raise typer.Exit(code)

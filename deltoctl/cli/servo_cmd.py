@@ -46,6 +46,8 @@ def register_get(
         help="Items to read (default: the whole table, in one read).")] = None,
 ) -> None:
     """Read control table items of one servo."""
+    from deltoctl.render.config import register_table
+
     opts = options(ctx)
     with open_robot(opts) as robot:
         result = robot.registers(joint, items or [])
@@ -53,8 +55,7 @@ def register_get(
         emit_json({"joint": joint, "id": result["id"],
                    "values": {i["item"]: i["value"] for i in result["items"]}})
     else:
-        table(f"{joint} (ID {result['id']})", ["address", "item", "value", "access"],
-              [[i["address"], i["item"], i["value"], i["access"]] for i in result["items"]])
+        table(*register_table(joint, result))
     finish(robot)
 
 

@@ -9,6 +9,7 @@ from deltoctl.cli.completions import complete_joints, complete_profile
 from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_error, say, warn
 from deltoctl.errors import USAGE, InvalidInput
+from deltoctl.verb_help import DESCRIPTIONS
 
 if TYPE_CHECKING:
     from deltoctl.registry import SimOption
@@ -31,17 +32,6 @@ def serve(
         "--private", help="Keep this simulator to -t: --sim does not use it.")] = False,
     **given: Any,
 ) -> None:
-    """Serve every block's simulated device until Ctrl-C or SIGTERM, printing one target per
-    bus (--target 'BUS=URL', quoted for a POSIX shell; --env: one export line).
-
-    Each family's emulator serves its blocks behind a real link, with the faults and settings
-    the family declares (below). --hardware serves some blocks only; --json prints one line.
-    A device that can be turned or moved from outside answers control lines on the standard
-    input, one a line (face -x, tilt 10 0 0 …); the line help lists them.
-
-    While it runs, --sim of the same profile (same content and faults) drives it instead of
-    starting a simulator of its own, so a robot homed by one command stays homed for the
-    next; --sim-fresh or --private keep them apart."""
     from deltoctl.sim.serve import ServeOptions, serve_until_stopped
 
     opts = options(ctx)
@@ -57,13 +47,8 @@ def serve(
 def _parameter(option: "SimOption") -> inspect.Parameter:
     """A family's declared option as a typer option of `sim serve`: given or not (None,
     False, no joints), converted and checked by its declaration when the profile is served."""
-    shown = option.default if option.default not in (None, (), False) else None
-    if isinstance(shown, tuple):
-        shown = ",".join(format(x, "g") for x in shown)
-    elif isinstance(shown, int) and option.kind == "int" and option.high == 0xFF:
-        shown = f"{shown:#04x}"
     info: dict[str, Any] = {
-        "help": option.help + (f" Default: {shown}." if shown is not None else ""),
+        "help": option.described(),
         "metavar": option.metavar or ("JOINT" if option.kind == "joints" else None),
         "show_default": False}
     if option.kind == "joints":
@@ -88,11 +73,11 @@ def _command() -> Any:
     def command(**kwargs: Any) -> None:
         serve(**kwargs)
 
-    command.__doc__ = serve.__doc__
     cast(Any, command).__signature__ = inspect.Signature(fixed + declared)  # what typer reads
     return command
 
 
 def register(root: typer.Typer) -> None:
-    app.command("serve")(_command())  # built now: the families installed are the options
+    # built now: the families installed are the options
+    app.command("serve", help=DESCRIPTIONS["sim serve"])(_command())
     root.add_typer(app, name="sim")

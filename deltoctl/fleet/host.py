@@ -16,11 +16,13 @@ from typing import TYPE_CHECKING, Any
 from deltoctl.errors import InvalidInput
 
 if TYPE_CHECKING:
+    from deltoctl.cmdline import Options
     from deltoctl.fleet.agent import Agent
 
 AGENT_RECORD_MAX = 3600.0  # s: the longest record an agent writes in its own directory
 # runs one command line (without ``deltoctl``) as ``deltoctl`` does; returns its exit code
 Run = Callable[[list[str]], int]
+SIMULATED = "simulated"  # after the profile on a verb process's command line: agent --sim
 
 
 def default_name() -> str:
@@ -155,6 +157,36 @@ def served_links(links: list[str], sim: bool) -> Iterator[list[str]]:
         yield links + [f"--target={bus}={url}" for bus, url in served["buses"].items()]
     finally:
         stop_process(simulator)
+
+
+def run_agent(opts: Options, name: str | None,
+              endpoints: tuple[list[str] | None, list[str] | None], deadline: float,
+              allow_unauthenticated: bool, given_workdir: str | None, runners: tuple[str, str],
+              check: Callable[[str, list[str]], None]) -> None:
+    """Serve the robot of the global options ``opts`` (profile, targets or --sim, Zenoh
+    configuration) as ``name`` until a signal stops the agent. ``endpoints``: listen and
+    connect, replacing the configuration's; ``runners``: the Python code of the zygote and of
+    a spare verb process; ``check``: what the agent checks in a remote command line."""
+    from deltoctl.fleet import check_robot
+    from deltoctl.fleet.agent import Agent
+    from deltoctl.profile.exporter import to_yaml
+
+    robot = check_robot(name or default_name())
+    check_deadline(deadline)
+    directory = workdir(given_workdir, robot)
+    profile = opts.load_profile()  # a bad profile stops here, with its file:line
+    own_files = profile_files(opts.profile, opts.xacro)
+    spec = profile_spec(opts.profile, profile.name)
+    config, config_files = zenoh_config(opts.zenoh_config, *endpoints)
+    motion, why_not = motion_rule(config, allow_unauthenticated)
+    links = verb_links(spec, opts.target, opts.xacro_args, opts.package_paths, opts.hardware,
+                       opts.xacro)
+    with served_links(links, opts.sim) as links:
+        marks = [SIMULATED] if opts.sim else []
+        zygote, spare = ([sys.executable, "-c", code, spec, *marks] for code in runners)
+        serve(Agent(robot, spec, profile.name, links, (zygote, spare), config, motion, why_not,
+                    deadline, directory, simulated=opts.sim, profile_yaml=to_yaml(profile),
+                    own_files=own_files + config_files, check=check))
 
 
 def serve(node: Agent) -> None:

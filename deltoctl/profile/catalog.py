@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 from deltoctl import entry_points
 from deltoctl.data_paths import cache_file as data_cache_file
 from deltoctl.data_paths import data_dir
-from deltoctl.errors import InvalidInput, ProfileError
+from deltoctl.errors import DeltoctlError, InvalidInput, ProfileError
 from deltoctl.profile.files import MAX_PROFILE_BYTES, check_profile_file
 
 if TYPE_CHECKING:
@@ -123,6 +123,20 @@ def load_profile(
 
         profile = load_urdf_profile(path, xacro_args, packages, xacro=xacro)
     return validate(merge_interface_limits(profile))
+
+
+def completion_profile(spec: str | None, xacro: bool) -> Profile | None:
+    """The profile ``spec`` names for a command line being completed, or None.
+
+    Completion runs while a command line is typed, on a file nobody chose to load yet: it
+    reads YAML and plain URDF only, and never runs xacro (a ``.xacro`` file, or ``--xacro``
+    on the line, completes nothing)."""
+    if not spec:
+        return None
+    try:
+        return load_profile(spec, xacro=xacro, expand=False)
+    except DeltoctlError:
+        return None
 
 
 def profile_from_text(text: str, source: str) -> Profile:

@@ -1,5 +1,5 @@
 """``config`` for people: what a snapshot holds per block, the items that differ, and what a
-restore did to each."""
+restore did to each; and a servo's control table items (``register get``)."""
 
 from __future__ import annotations
 
@@ -33,3 +33,9 @@ def restore_parts(rows: list[dict[str, Any]], counts: dict[str, int],
              [[r["block"], r["part"], r["item"], show(r["snapshot"]), show(r["live"]),
                r["status"], r["note"]] for r in rows]),
             ", ".join(f"{n} {status}" for status, n in counts.items())]
+
+
+def register_table(joint: str, result: dict[str, Any]) -> Table:
+    """The control table items read from a servo, with their addresses and access."""
+    return (f"{joint} (ID {result['id']})", ["address", "item", "value", "access"],
+            [[i["address"], i["item"], i["value"], i["access"]] for i in result["items"]])

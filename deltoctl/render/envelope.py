@@ -1,5 +1,5 @@
 """Every verb's JSON document in one shape: ``verb``, ``profile``, its data (``blocks`` and
-``result``), ``warnings`` and ``exit_code``."""
+``result``), ``warnings`` and ``exit_code``; and an error as stderr says it."""
 
 from __future__ import annotations
 
@@ -25,6 +25,17 @@ def envelope(verb: str, data: Any, warnings: list[str], exit_code: int,
         body = {"result": data}
     return {"verb": verb, "profile": profile, **body, "warnings": list(warnings),
             "exit_code": exit_code}
+
+
+def error_text(message: str, hint: str | None, exit_code: int, as_json: bool,
+               **more: str) -> str:
+    """An error: one line (and its hint) for people; with ``as_json`` one object,
+    ``{"error": {"message", "hint", "exit_code"}}`` (and ``more``: the robot a remote verb
+    ran on)."""
+    if as_json:
+        error = {"message": message, "hint": hint, "exit_code": exit_code, **more}
+        return json.dumps({"error": error})
+    return f"deltoctl: error: {message}" + (f"\n  hint: {hint}" if hint else "")
 
 
 def dumps(data: Any, compact: bool = False) -> str:

@@ -1,5 +1,5 @@
 """The fleet for people: the robots ``fleet list`` finds, a ``fleet run`` (its live table while
-the robots run, its outcome), and the file a remote ``record`` wrote."""
+the robots run, its outcome, its robots' reports), and the file a remote ``record`` wrote."""
 
 from __future__ import annotations
 
@@ -40,6 +40,12 @@ def run_rows(jobs: Sequence[Job]) -> list[list[Any]]:
     """A fleet run's outcome: robot, profile, exit code, seconds, lines run, result."""
     return [[j.robot, j.profile, j.code, f"{j.seconds():.2f}", f"{j.done}/{len(j.lines)}",
              "ok" if j.code == 0 else j.last_error()] for j in jobs]
+
+
+def report_rows(doc: dict[str, Any]) -> list[list[str]]:
+    """A fleet report's robots: each one's verdict and the checks it failed (or its error)."""
+    return [[r["robot"], r["verdict"], ", ".join(r["failed"]) or r["error"] or ""]
+            for r in doc["robots"]]
 
 
 def not_received_text(robot: str, result: dict[str, Any]) -> str:

@@ -22,8 +22,11 @@ def started_bar(transient: bool = True, elapsed: bool = False) -> Progress:
     return bar
 
 
-def advancing(bar: Progress, label: str) -> Callable[[float], None]:
-    """A task named ``label`` on ``bar`` and what moves it to a fraction done."""
+def advancing(bar: Progress | None, label: str) -> Callable[[float], None] | None:
+    """A task named ``label`` on ``bar`` and what moves it to a fraction done; None without
+    a bar."""
+    if bar is None:
+        return None
     task = bar.add_task(label, total=1.0)
     return lambda fraction: bar.update(task, completed=fraction)
 
@@ -57,3 +60,39 @@ def stages(bar: Progress | None, name: str,
             line(f"{name}: {label}")
 
     return said
+
+
+class HomingBars:
+    """Homing while a person watches: a bar per joint that runs its routine (else its steps
+    told to ``line``, unless that is None), then one for the way to the home pose, started
+    when that begins. ``started(transient)``: a started bar, or None when nobody watches."""
+
+    def __init__(self, started: Callable[[bool], Progress | None], joints: list[str],
+                 line: Callable[[str], None] | None) -> None:
+        self.started = started
+        self.line = line
+        self.bar = started(False) if joints else None
+        self.tasks = {j: self.bar.add_task(f"{j}: waiting", total=1.0)
+                      for j in joints} if self.bar else {}
+        self.posing = False
+
+    def show(self, name: str, status: str, fraction: float) -> None:
+        if self.bar is not None:
+            self.bar.update(self.tasks[name], completed=fraction,
+                            description=f"{name}: {status}")
+        elif self.line is not None:
+            self.line(f"{name}: {status}")
+
+    def move(self, fraction: float) -> None:
+        if not self.posing:
+            self.stop()
+            self.posing = True
+            self.bar = self.started(True)
+            self.tasks = {"home": self.bar.add_task("home", total=1.0)} if self.bar else {}
+        if self.bar is not None:
+            self.bar.update(self.tasks["home"], completed=fraction)
+
+    def stop(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+            self.bar = None

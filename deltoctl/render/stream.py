@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import sys
 import time
 from collections.abc import Callable, Iterator, Mapping
 from typing import Any
@@ -352,3 +353,21 @@ def live_lines(source: str, other: Callable[[bytes], None],
         yield view.feed
     finally:
         view.close()
+
+
+def write_out(data: bytes) -> None:
+    """Another process's stdout, as it came (bytes), on ours."""
+    buffer = getattr(sys.stdout, "buffer", None)
+    if buffer is not None:
+        sys.stdout.flush()
+        buffer.write(data)
+        buffer.flush()
+    else:
+        sys.stdout.write(data.decode(errors="replace"))
+        sys.stdout.flush()
+
+
+def write_err(text: str) -> None:
+    """Text on stderr, at once."""
+    sys.stderr.write(text)
+    sys.stderr.flush()
