@@ -36,6 +36,7 @@ class Bus:
     """A servo bus block: its target, its family's addressing, what each joint wants."""
 
     block: str
+    bus: str  # the profile's name of the bus
     family: registry.Family
     url: str
     addressing: Addressing
@@ -77,6 +78,10 @@ class Setup:
                                "(Dynamixel, Feetech)")
 
     # -- what the profile wants --------------------------------------------------------------
+    def targets(self) -> list[str]:
+        """``BUS=URL`` of each servo bus (open_robot's targets, once the servos are set)."""
+        return [f"{b.bus}={b.url}" for b in self.buses]
+
     def joints(self) -> list[Wanted]:
         return [w for bus in self.buses for w in bus.wanted]
 
@@ -91,6 +96,7 @@ class Setup:
 
     def connect_alone(self, joint: str) -> str | None:
         """On this process's simulators, ``connect JOINT``: its reply; None without them."""
+        self._bus_of(joint)  # one of the profile's servo joints, or InvalidInput
         if self.controls is None or "connect" not in self.controls.words():
             return None
         return str(self.controls.run(f"connect {joint}"))
@@ -165,6 +171,26 @@ class Setup:
         _verified(done.joints[0], w, model, row["from"]["model"])
         done.bus_seconds = self.bus_seconds
         return done
+
+    def wanted_plan(self) -> Outcome:
+        """What a walk of every joint will set, before any servo is found."""
+        return Outcome("one at a time", True, [_row(w, None, "planned") for w in self.joints()])
+
+    def walk(self, connect: Callable[[Wanted, str | None], None], reset: str | None = None,
+             done: Callable[[dict[str, Any]], None] | None = None) -> Outcome:
+        """Every joint in the profile's order: ``connect(wanted, reply)`` once its servo is to
+        be connected alone (``reply``: this process's simulators connected it, else None),
+        then set up and verified (``done`` told each joint's row)."""
+        outcome = Outcome("one at a time", False)
+        for w in self.joints():
+            connect(w, self.connect_alone(w.joint))
+            one = self.apply_one(w.joint, self.plan_one(w.joint, reset))
+            outcome.joints += one.joints
+            outcome.steps += one.steps
+            if done is not None:
+                done(one.joints[0])
+        outcome.bus_seconds = self.bus_seconds
+        return outcome
 
     def _addresser(self, bus: Bus, protocol: str) -> Addresser:
         addresser = bus.addressing.addresser(protocol)
@@ -261,7 +287,7 @@ def _servo_buses(profile: Any, buses: Mapping[str, str], hardware: Sequence[str]
             raise InvalidInput(f"{hw.name}: no target for bus {name!r}",
                                hint=f"give one: -t {name}=serial:///dev/ttyUSB0?baud=1000000")
         wanted = addressing.wanted(profile, hw, profile.buses.get(name) or url)
-        out.append(Bus(hw.name, family, url, addressing, wanted))
+        out.append(Bus(hw.name, name, family, url, addressing, wanted))
     return out
 
 

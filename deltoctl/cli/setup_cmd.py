@@ -10,7 +10,7 @@ import typer
 
 from deltoctl.cli.confirm import confirm, on_terminal
 from deltoctl.cli.context import options
-from deltoctl.cli.output import emit_json, info, show, table, warn
+from deltoctl.cli.output import emit_json, info, show, warn
 from deltoctl.errors import WARNINGS, InvalidInput
 
 
@@ -83,43 +83,33 @@ def _apply(ctx: typer.Context, plan: Any, apply: Any, dry_run: bool) -> dict[str
     return apply(plan).as_dict()
 
 
-def _connected(run: Any, joint: str) -> None:
-    if run.connect_alone(joint) is not None:
-        info(f"the simulator connected {joint} alone")
-
-
 def _one(ctx: typer.Context, run: Any, joint: str, reset: str | None,
          dry_run: bool) -> dict[str, Any]:
-    _connected(run, joint)
+    if run.connect_alone(joint) is not None:
+        info(f"the simulator connected {joint} alone")
     return _apply(ctx, run.plan_one(joint, reset), lambda p: run.apply_one(joint, p), dry_run)
 
 
 def _walk(ctx: typer.Context, run: Any, reset: str | None, dry_run: bool) -> dict[str, Any]:
     """Each joint in the profile's order: connected alone (asked, or by the simulator)."""
-    from deltoctl.render.setup import wanted_rows
+    from deltoctl.render.setup import joint_lines
 
-    joints = run.joints()
+    plan = run.wanted_plan()
     if dry_run:
-        table(None, ("joint", "id", "baud", "model", "protocol"), wanted_rows(joints))
-        return {"mode": "one at a time", "dry_run": True, "joints": [], "steps": [],
-                "bus_seconds": 0.0}
+        return plan.as_dict()
     if run.controls is None and not on_terminal():
         raise InvalidInput("setup asks for each servo to be connected alone: run it on a "
                            "terminal, or name the joint (setup JOINT) in a script")
-    table(None, ("joint", "id", "baud", "model", "protocol"), wanted_rows(joints))
-    confirm(ctx, f"give {len(joints)} servos these IDs and rates, one at a time")
-    rows, steps, seconds = [], [], 0.0
-    for w in joints:
-        if run.connect_alone(w.joint) is None:
-            sys.stderr.write(f"connect {w.joint} alone, then Enter: ")
-            sys.stderr.flush()
-            sys.stdin.readline()
-        else:
+    for line in joint_lines(plan.as_dict()):
+        info(line)
+    confirm(ctx, f"give these {len(plan.joints)} servos their IDs and rates, one at a time")
+
+    def ask(w: Any, simulated: str | None) -> None:
+        if simulated is not None:
             info(f"the simulator connected {w.joint} alone")
-        done = run.apply_one(w.joint, run.plan_one(w.joint, reset)).as_dict()
-        rows += done["joints"]
-        steps += done["steps"]
-        seconds = done["bus_seconds"]
-        info(f"{w.joint}: ID {w.id} at {w.baud} baud, verified")
-    return {"mode": "one at a time", "dry_run": False, "joints": rows, "steps": steps,
-            "bus_seconds": seconds}
+            return
+        sys.stderr.write(f"connect {w.joint} alone, then Enter: ")
+        sys.stderr.flush()
+        sys.stdin.readline()
+
+    return run.walk(ask, reset, lambda row: info(joint_lines({"joints": [row]})[0])).as_dict()

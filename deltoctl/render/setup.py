@@ -37,6 +37,8 @@ def setup_parts(result: dict[str, Any]) -> list[str | tuple]:
             f"setup {result['mode']}: {what}, {result['bus_seconds']:.3f} s of bus time"]
 
 
-def wanted_rows(joints: list[Any]) -> list[list[Any]]:
-    """The profile's plan for a one-at-a-time walk: joint, ID, rate, model."""
-    return [[w.joint, w.id, w.baud, w.model or "?", w.protocol] for w in joints]
+def joint_lines(result: dict[str, Any]) -> list[str]:
+    """A line a joint: ``elbow_flex: ID 3 at 1000000 baud (XL330-M288), set, verified``."""
+    return [f"{r['joint']}: ID {r['to']['id']} at {r['to']['baud']} baud "
+            f"({r['to']['model'] or r['to']['protocol']}), {r['status']}"
+            + (", verified" if r["verified"] else "") for r in result["joints"]]
