@@ -375,14 +375,7 @@ def _match(bus: Bus, found: list[dict[str, Any]], mapping: dict[int, str]
     ID with its model, then the only one of a model; ambiguity is InvalidInput (--map), a servo
     that is no joint's or of another model is Refused."""
     by_id = {s["id"]: s for s in found}
-    joints = {w.joint: w for w in bus.wanted}
-    pairs: dict[int, Wanted] = {}
-    for device_id, joint in mapping.items():
-        if joint in joints and device_id not in by_id:
-            raise InvalidInput(f"--map {device_id}={joint}: no servo answers at ID {device_id}"
-                               f" on {bus.url}")
-        if joint in joints:
-            pairs[device_id] = joints[joint]
+    pairs = _mapped(bus, by_id, mapping)
     left = [w for w in bus.wanted if w not in pairs.values()]
     for w in list(left):
         servo = by_id.get(w.id)
@@ -391,13 +384,32 @@ def _match(bus: Bus, found: list[dict[str, Any]], mapping: dict[int, str]
             left.remove(w)
     _by_model(bus, found, pairs, left)
     for device_id, w in pairs.items():
-        servo = by_id[device_id]
-        if (w.model and servo["model"] != w.model) or servo["protocol"] != w.protocol:
-            raise Refused(f"{w.joint}: the servo at ID {device_id} is a {servo['model']} "
-                          f"({servo['protocol']}); the profile says a {w.model or 'servo'} "
-                          f"({w.protocol}): nothing was written")
+        _same_model(w, by_id[device_id])
     return [(by_id[i], w) for i, w in pairs.items()], [w for w in bus.wanted
                                                         if w not in pairs.values()]
+
+
+def _mapped(bus: Bus, by_id: dict[int, dict[str, Any]], mapping: dict[int, str]
+            ) -> dict[int, Wanted]:
+    """The pairs ``--map`` gives for this block's joints; an ID where none answers is
+    InvalidInput."""
+    joints = {w.joint: w for w in bus.wanted}
+    pairs: dict[int, Wanted] = {}
+    for device_id, joint in mapping.items():
+        if joint not in joints:
+            continue
+        if device_id not in by_id:
+            raise InvalidInput(f"--map {device_id}={joint}: no servo answers at ID {device_id}"
+                               f" on {bus.url}")
+        pairs[device_id] = joints[joint]
+    return pairs
+
+
+def _same_model(w: Wanted, servo: dict[str, Any]) -> None:
+    if (w.model and servo["model"] != w.model) or servo["protocol"] != w.protocol:
+        raise Refused(f"{w.joint}: the servo at ID {servo['id']} is a {servo['model']} "
+                      f"({servo['protocol']}); the profile says a {w.model or 'servo'} "
+                      f"({w.protocol}): nothing was written")
 
 
 def _by_model(bus: Bus, found: list[dict[str, Any]], pairs: dict[int, Wanted],
@@ -477,7 +489,7 @@ def target_map(profile: Any, targets: Sequence[str]) -> dict[str, str]:
     out: dict[str, str] = {}
     for item in targets:
         bus, sep, url = item.partition("=")
-        if sep and bus in profile.buses or (sep and "://" not in bus):
+        if sep and (bus in profile.buses or "://" not in bus):
             out[bus] = url
         elif len(profile.buses) == 1:
             out[next(iter(profile.buses))] = item
