@@ -3,7 +3,7 @@ context's meta the verbs read."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import typer
 
@@ -62,6 +62,14 @@ class Options:
             raise InvalidInput("no profile given: pass --profile NAME|PATH (or set "
                                "DELTOCTL_PROFILE); 'deltoctl profile list' shows the catalog")
         return load_profile(spec, self.xacro_args, self.package_paths, xacro=self.xacro)
+
+    def sim_of(self, prof: Profile) -> Any:
+        """What ``open_robot(sim=…)`` takes: --sim, with its --sim-option faults checked."""
+        if not (self.sim and self.sim_options):
+            return self.sim
+        from deltoctl.sim.serve import options_given
+
+        return options_given(self.sim_options, "--sim-option", prof, self.hardware)
 
 
 def options(ctx: typer.Context) -> Options:

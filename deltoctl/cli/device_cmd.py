@@ -36,12 +36,7 @@ def open_robot(opts: Options, allow_model_mismatch: bool = False, profile: Any =
     from deltoctl.app.robot import open_robot as open_app_robot
 
     prof = profile or opts.load_profile()
-    sim: Any = opts.sim
-    if opts.sim and opts.sim_options:
-        from deltoctl.sim.serve import options_given
-
-        sim = options_given(opts.sim_options, "--sim-option", prof, opts.hardware)
-    with open_app_robot(prof, opts.target, sim=sim, hardware=opts.hardware,
+    with open_app_robot(prof, opts.target, sim=opts.sim_of(prof), hardware=opts.hardware,
                         allow_model_mismatch=allow_model_mismatch, probe=probe, notice=info,
                         served_by=SERVED_SIMULATED, reuse=not opts.sim_fresh,
                         warn=warn) as robot:

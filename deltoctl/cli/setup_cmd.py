@@ -31,6 +31,8 @@ def setup(ctx: typer.Context,
               help="Factory reset first (Dynamixel; with --allow factory-reset).")] = None,
           allow: Annotated[list[str] | None, typer.Option(
               "--allow", metavar="factory-reset", help="Permit a factory reset.")] = None,
+          wait: Annotated[float, typer.Option("--wait", min=0.001, max=1.0,
+                                              help="Seconds a probe waits.")] = 0.01,
           ) -> None:
     """Give each servo the profile's ID and baud rate: one at a time (new servos, all at one
     ID: each joint's connected alone, found at any rate and protocol, its model checked) or
@@ -44,9 +46,10 @@ def setup(ctx: typer.Context,
     mapping = app.parse_map(maps or [])
     if in_place and (joint or reset):
         raise InvalidInput("--in-place readdresses every servo: no JOINT, no --factory-reset")
-    with app.open_setup(opts.load_profile(), opts.target, sim=_sim(opts),
+    prof = opts.load_profile()
+    with app.open_setup(prof, opts.target, sim=opts.sim_of(prof),
                         hardware=opts.hardware, reuse=not opts.sim_fresh, notice=info,
-                        warn=warn) as run:
+                        warn=warn, wait=wait) as run:
         if in_place:
             result = _apply(ctx, run.plan_in_place(mapping), run.apply_in_place, dry_run)
         elif joint:
@@ -60,15 +63,6 @@ def setup(ctx: typer.Context,
     if any(r["status"] == "missing" for r in result["joints"]):
         warn("some joints' servos were not found: they were left alone")
         raise typer.Exit(WARNINGS)
-
-
-def _sim(opts: Any) -> Any:
-    if opts.sim and opts.sim_options:
-        from deltoctl.sim.serve import options_given
-
-        return options_given(opts.sim_options, "--sim-option", opts.load_profile(),
-                             opts.hardware)
-    return opts.sim
 
 
 def _apply(ctx: typer.Context, plan: Any, apply: Any, dry_run: bool) -> dict[str, Any]:

@@ -70,9 +70,10 @@ class Addressing:
 
 
 def ask(port: Any, session: Session, device_id: int, instruction: int, params: bytes,
-        what: str, timeout: float = 0.1) -> Reply | None:
+        what: str, timeout: float = 0.5) -> Reply | None:
     """One request and its status (None when none is expected); NoAnswer naming ``what``
-    when none comes within ``timeout``."""
+    when none comes within ``timeout`` (a servo answers within a millisecond: the time is
+    only spent when it does not)."""
     port.reset_input_buffer()
     port.write(session.send(device_id, instruction, params))
     port.flush()

@@ -18,6 +18,7 @@ from deltoctl.families.dynamixel.emulator1 import MixedBus, Protocol1Bus, Servo1
 from deltoctl.families.dynamixel.models import by_number
 from deltoctl.schemas_lookup import schema_file
 
+WAIT = ("--wait", "0.05")  # s a probe waits: generous, a loaded machine answers late
 ARM = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
 KOCH_MODELS = (1060, 1060, 1200, 1200, 1200, 1200)  # XL430-W250 ×2, XL330-M288 ×4
 
@@ -30,7 +31,8 @@ def _doc(result):
 
 
 def _confirmed_by_the_sdk(profile: str, path: str) -> None:
-    """dynamixel-sdk (koch-arm) or scservo_sdk (so101-follower) pings IDs 1–6 at 1 Mbps."""
+    """dynamixel-sdk (koch-arm) or scservo_sdk (so101-follower) pings IDs 1–6 at 1 Mbps,
+    each reply awaited 0.5 s (the SDKs' 34 ms is short on a loaded machine)."""
     if profile == "koch-arm":
         sdk = pytest.importorskip("dynamixel_sdk")
         port, ph, models = sdk.PortHandler(path), sdk.PacketHandler(2.0), KOCH_MODELS
@@ -38,6 +40,7 @@ def _confirmed_by_the_sdk(profile: str, path: str) -> None:
         sdk = pytest.importorskip("scservo_sdk")
         port, ph, models = sdk.PortHandler(path), sdk.PacketHandler(0), (777,) * 6
     assert port.openPort() and port.setBaudRate(1_000_000)
+    port.setPacketTimeout = lambda _length: port.setPacketTimeoutMillis(500)
     try:
         for device_id, model in enumerate(models, 1):
             assert ph.ping(port, device_id) == (model, sdk.COMM_SUCCESS, 0), device_id
@@ -50,7 +53,7 @@ def test_a_factory_new_arm_in_process_then_identify_clean(profile):
     from deltoctl.app.robot import open_robot
     from deltoctl.app.setup import open_setup
 
-    with open_setup(profile, sim={"factory_new": True}) as run:
+    with open_setup(profile, sim={"factory_new": True}, wait=0.05) as run:
         for w in run.joints():
             assert run.connect_alone(w.joint) == f"on the wire: {w.joint}"
             done = run.apply_one(w.joint, run.plan_one(w.joint))
@@ -68,7 +71,7 @@ def test_a_factory_new_arm_in_process_then_identify_clean(profile):
 @pytest.mark.parametrize("profile", ["koch-arm", "so101-follower"])
 def test_the_cli_sets_up_a_factory_new_arm_on_its_own_simulator(cli, profile):
     result = cli("-p", profile, "--sim", "--sim-fresh", "--sim-option", "factory_new",
-                 "--json", "setup", "--yes")
+                 "--json", "setup", "--yes", *WAIT)
     assert result.exit_code == 0, result.output
     doc = _doc(result)
     assert [r["joint"] for r in doc["joints"]] == list(ARM)
@@ -99,7 +102,7 @@ def test_setup_joint_by_joint_on_a_sim_serve_then_identify_clean(cli, profile):
     try:
         for joint in ARM:
             assert _control(proc, f"connect {joint}") == f"on the wire: {joint}"
-            result = cli("-p", profile, "-t", target, "--json", "setup", joint, "--yes")
+            result = cli("-p", profile, "-t", target, "--json", "setup", joint, "--yes", *WAIT)
             assert result.exit_code == 0, result.output
             [row] = _doc(result)["joints"]
             assert row["verified"] and row["from"]["id"] == 1
@@ -130,7 +133,7 @@ def test_colliding_parts_are_named_and_nothing_is_written(cli, monkeypatch):
                      for _ in range(2)))
     with DynamixelPtyServer(bus) as server:
         result = cli("-p", "koch-arm", "-t", f"dxl=serial://{server.port}?baud=1000000",
-                     "setup", "elbow_flex", "--yes")
+                     "setup", "elbow_flex", "--yes", *WAIT)
     assert result.exit_code == 5, result.output
     assert "several servos answer at ID 1" in result.stderr
     assert "collide" in result.stderr and "alone" in result.stderr
@@ -141,7 +144,7 @@ def test_a_servo_of_another_model_is_refused(cli, monkeypatch):
     writes = _count_writes(monkeypatch, Servo1)
     with DynamixelPtyServer(Protocol1Bus([Servo1(1)], baud=57_600)) as server:
         result = cli("-p", "koch-arm", "-t", f"dxl=serial://{server.port}?baud=1000000",
-                     "setup", "shoulder_pan", "--yes")
+                     "setup", "shoulder_pan", "--yes", *WAIT)
     assert result.exit_code == 5, result.output
     assert "AX-12A" in result.stderr and "XL430-W250" in result.stderr
     assert writes == []
@@ -156,12 +159,12 @@ def test_in_place_swap_through_a_temporary_id(cli):
     with DynamixelPtyServer(bus) as server:
         target = f"dxl=serial://{server.port}?baud=1000000"
         dry = cli("-p", "koch-arm", "-t", target, "--json", "setup", "--in-place",
-                  "--map", "2=shoulder_pan", "--map", "1=shoulder_lift", "--dry-run")
+                  "--map", "2=shoulder_pan", "--map", "1=shoulder_lift", "--dry-run", *WAIT)
         assert dry.exit_code == 0, dry.output
         steps = [(s["action"], s["at_id"], s["value"]) for s in _doc(dry)["steps"]]
         assert set(bus.servos) == {1, 2, 3, 4, 5, 6}  # a dry run writes nothing
         result = cli("-p", "koch-arm", "-t", target, "--json", "setup", "--in-place",
-                     "--map", "2=shoulder_pan", "--map", "1=shoulder_lift", "--yes")
+                     "--map", "2=shoulder_pan", "--map", "1=shoulder_lift", "--yes", *WAIT)
         assert result.exit_code == 0, result.output
         assert all(r["verified"] for r in _doc(result)["joints"])
     ids = [s for s in steps if s[0] == "id"]
@@ -175,7 +178,7 @@ def test_in_place_ambiguity_asks_for_a_map(cli):
     servos = [Servo(i, model=m) for i, m in zip((11, 12, 3, 4, 5, 6), models)]
     with DynamixelPtyServer(DynamixelBus(servos, baud=1_000_000)) as server:
         result = cli("-p", "koch-arm", "-t", f"dxl=serial://{server.port}?baud=1000000",
-                     "setup", "--in-place", "--yes")
+                     "setup", "--in-place", "--yes", *WAIT)
     assert result.exit_code == 2, result.output
     assert "--map" in result.stderr and "11, 12" in result.stderr
 
@@ -187,7 +190,7 @@ def test_a_factory_reset_needs_allow(cli):
     assert "--allow factory-reset" in result.stderr
     result = cli("-p", "koch-arm", "--sim", "--sim-fresh", "--sim-option", "factory_new",
                  "--json", "setup", "elbow_flex", "--factory-reset", "keep-id-baud",
-                 "--allow", "factory-reset", "--yes")
+                 "--allow", "factory-reset", "--yes", *WAIT)
     assert result.exit_code == 0, result.output
     assert [s["action"] for s in _doc(result)["steps"]][:1] == ["factory reset"]
 
@@ -215,6 +218,29 @@ def test_refusals_and_bad_input(cli, args, code, said):
 def test_a_script_names_the_joint_without_a_simulator_to_connect_it(cli):
     with DynamixelPtyServer(DynamixelBus([], baud=57_600)) as server:
         result = cli("-p", "koch-arm", "-t", f"dxl=serial://{server.port}?baud=1000000",
-                     "setup", "--yes")
+                     "setup", "--yes", *WAIT)
     assert result.exit_code == 2
     assert "setup JOINT" in result.stderr
+
+
+def test_in_place_on_a_feetech_bus_reversed_and_at_another_rate(cli):
+    from deltoctl.families.feetech.emulator import FeetechBus, FeetechPtyServer
+    from deltoctl.families.feetech.emulator import Servo as FeetechServo
+
+    servos = [FeetechServo(i) for i in range(6, 0, -1)]  # shoulder_pan's at ID 6 …
+    for k, servo in enumerate(servos):
+        servo.memory[0] = 10 + k  # a mark of each (its firmware's major), to follow it
+    bus = FeetechBus(servos, baud=500_000)
+    maps = [a for k, joint in enumerate(ARM) for a in ("--map", f"{6 - k}={joint}")]
+    with FeetechPtyServer(bus) as server:
+        result = cli("-p", "so101-follower", "-t",
+                     f"so_bus=serial://{server.port}?baud=1000000", "--json", "setup",
+                     "--in-place", *maps, "--yes", *WAIT)
+        assert result.exit_code == 0, result.output
+        doc = _doc(result)
+    assert all(r["verified"] for r in doc["joints"])
+    assert [s["value"] for s in doc["steps"] if s["action"] == "id"].count(252) == 3
+    for servo in servos:
+        servo.power_cycle()  # the EEPROM was locked again: it keeps them
+    assert [(s.id, s.baud, s.memory[0]) for s in servos] == \
+        [(k + 1, 1_000_000, 10 + k) for k in range(6)]

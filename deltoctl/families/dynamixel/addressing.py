@@ -40,7 +40,7 @@ class Protocol2:
 
     def identify(self, port: Any, device_id: int) -> str | None:
         try:
-            reply = ask(port, codec.session(), device_id, codec.PING, b"", "PING", 0.05)
+            reply = ask(port, codec.session(), device_id, codec.PING, b"", "PING", 0.2)
         except DeltoctlError:  # no answer, or bytes that break the protocol: not there
             return None
         if reply is None or len(reply[2]) < 3:
@@ -79,7 +79,7 @@ class Protocol1:
     def identify(self, port: Any, device_id: int) -> str | None:
         try:
             reply = ask(port, protocol1.session(), device_id, protocol1.READ, bytes([0, 3]),
-                        "model", 0.05)
+                        "model", 0.2)
         except DeltoctlError:  # no answer, or bytes that break the protocol: not there
             return None
         if reply is None or len(reply[2]) < 2:

@@ -33,7 +33,7 @@ class FeetechAddresser:
         if device_id not in self._models:
             try:
                 reply = ask(port, codec.session(), device_id, codec.READ,
-                            codec.read_params(3, 2), "model", 0.05)
+                            codec.read_params(3, 2), "model", 0.2)
             except DeltoctlError:  # no answer, or bytes that break the protocol
                 return None
             model = by_bytes(reply[2]) if reply is not None else None

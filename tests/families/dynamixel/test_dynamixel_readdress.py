@@ -18,11 +18,17 @@ sdk = pytest.importorskip("dynamixel_sdk")
 XL330 = by_number(1200)
 
 
+def patient(port) -> None:
+    """Each reply awaited 0.5 s: the SDK's 34 ms is short on a loaded machine."""
+    port.setPacketTimeout = lambda _length: port.setPacketTimeoutMillis(500)
+
+
 @contextlib.contextmanager
 def _sdk(bus, protocol: float, baud: int):
     with DynamixelPtyServer(bus) as server:
         port = sdk.PortHandler(server.port)
         assert port.openPort() and port.setBaudRate(baud)
+        patient(port)
         try:
             yield port, sdk.PacketHandler(protocol)
         finally:
@@ -72,6 +78,7 @@ def test_connect_plugs_factory_new_parts_one_at_a_time():
         assert {"connect", "disconnect"} <= set(info["controls"])
         port = sdk.PortHandler(info["endpoint"].split("?")[0].removeprefix("serial://"))
         assert port.openPort() and port.setBaudRate(57_600)
+        patient(port)
         ph = sdk.PacketHandler(2.0)
         try:
             assert ph.ping(port, 1)[0] == 1060  # six answer at once: an XL430's first

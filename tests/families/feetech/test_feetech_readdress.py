@@ -19,6 +19,8 @@ def test_id_and_baud_writes_answer_from_the_old_id_and_rate():
     with FeetechPtyServer(bus) as server:
         port = scs.PortHandler(server.port)
         assert port.openPort() and port.setBaudRate(1_000_000)
+        # each reply awaited 0.5 s: the SDK's 34 ms is short on a loaded machine
+        port.setPacketTimeout = lambda _length: port.setPacketTimeoutMillis(500)
         ph = scs.PacketHandler(0)
         try:
             assert ph.write1ByteTxRx(port, 1, 55, 0) == (scs.COMM_SUCCESS, 0)  # Lock 0
