@@ -266,8 +266,10 @@ class DynamixelBus:
 
     def _moved(self, servo: Servo, at: int) -> None:
         """A servo given another ID (a write, a factory reset) answered from the old one; it
-        is found at the new one from now on (at its new Baud Rate, its memory says)."""
-        if servo.id != at and self.servos.get(at) is servo:
+        is found at the new one from now on (at its new Baud Rate, its memory says). The bus
+        holds one servo per ID: onto an ID another holds, it stays where it was (servos
+        sharing an ID are buses sharing a wire, a MixedBus)."""
+        if servo.id != at and self.servos.get(at) is servo and servo.id not in self.servos:
             del self.servos[at]
             self.servos[servo.id] = servo
 

@@ -156,8 +156,9 @@ class Protocol1Bus:
 
     def _moved(self, servo: Servo1, at: int) -> None:
         """A servo given another ID (a write, a RESET) answered from the old one; it is
-        found at the new one from now on."""
-        if servo.id != at and self.servos.get(at) is servo:
+        found at the new one from now on (onto an ID another holds, it stays where it was:
+        the bus holds one servo per ID)."""
+        if servo.id != at and self.servos.get(at) is servo and servo.id not in self.servos:
             del self.servos[at]
             self.servos[servo.id] = servo
 
