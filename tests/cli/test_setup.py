@@ -244,3 +244,15 @@ def test_in_place_on_a_feetech_bus_reversed_and_at_another_rate(cli):
         servo.power_cycle()  # the EEPROM was locked again: it keeps them
     assert [(s.id, s.baud, s.memory[0]) for s in servos] == \
         [(k + 1, 1_000_000, 10 + k) for k in range(6)]
+
+
+def test_in_place_never_writes_a_servo_the_profile_lacks(cli, monkeypatch):
+    writes = _count_writes(monkeypatch, Servo)
+    models = [by_number(n) for n in (*KOCH_MODELS, 1200)]
+    servos = [Servo(i, model=m) for i, m in zip((1, 2, 3, 4, 5, 16, 9), models)]
+    with DynamixelPtyServer(DynamixelBus(servos, baud=1_000_000)) as server:
+        result = cli("-p", "koch-arm", "-t", f"dxl=serial://{server.port}?baud=1000000",
+                     "setup", "--in-place", "--map", "16=gripper", "--yes", *WAIT)
+    assert result.exit_code == 5, result.output
+    assert "ID 9 is no joint of the profile" in result.stderr
+    assert writes == []
