@@ -117,14 +117,16 @@ class Setup:
 
     # -- one at a time -----------------------------------------------------------------------
     def find(self, joint: str) -> dict[str, Any]:
-        """The one servo connected (the joint's, alone), at any rate and protocol; Refused
+        """The one servo connected (the joint's, alone), at any rate and protocol (the
+        joint's protocol tried first, in the scan's order); Refused
         when replies collide, several answer or its model is not the joint's; Unreachable
         when nothing answers."""
         from deltoctl.app.scan import all_probes, run_probes
 
         bus, w = self._bus_of(joint)
+        probes = sorted(all_probes(), key=lambda p: p.protocol != w.protocol)  # its own first
         with self._port(bus.url) as port:
-            found, _, ran = run_probes(port, all_probes(), self.wait, False)
+            found, _, ran = run_probes(port, probes, self.wait, False)
         if not found:
             raise Unreachable(f"{joint}: nothing answers on {bus.url} ({ran} probes)",
                               hint=f"connect {joint}'s servo alone, power it, and run setup "

@@ -256,3 +256,26 @@ def test_in_place_never_writes_a_servo_the_profile_lacks(cli, monkeypatch):
     assert result.exit_code == 5, result.output
     assert "ID 9 is no joint of the profile" in result.stderr
     assert writes == []
+
+
+def test_a_protocol_1_servo_is_set_up_and_reset(cli):
+    result = cli("-p", "phantomx-arm", "--sim", "--sim-fresh", "--sim-option", "factory_new",
+                 "--json", "setup", "elbow", "--factory-reset", "all", "--allow",
+                 "factory-reset", "--yes", *WAIT)
+    assert result.exit_code == 0, result.output
+    [row] = _doc(result)["joints"]
+    assert (row["from"]["protocol"], row["from"]["model"]) == ("Dynamixel 1.0", "AX-12A")
+    assert (row["to"]["id"], row["to"]["baud"], row["verified"]) == (3, 1_000_000, True)
+
+
+def test_a_robot_on_its_own_simulators_runs_their_control_lines():
+    from deltoctl.app.robot import open_robot
+    from deltoctl.errors import InvalidInput
+
+    with open_robot("mh5", sim=True, hardware=("i2c",)) as robot:
+        assert robot.simulator_control("face -z")
+        with pytest.raises(InvalidInput, match="unknown control"):
+            robot.simulator_control("spin")
+    with open_robot("koch-arm", sim=True) as robot, \
+            pytest.raises(InvalidInput, match="no simulator of this process"):
+        robot.simulator_control("connect gripper")  # its simulators answer no control line
