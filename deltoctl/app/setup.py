@@ -213,8 +213,10 @@ class Setup:
             for servo, w in matched:
                 outcome.joints.append(_row(w, servo, "planned"))
             for w in missing:
-                outcome.joints.append({**_row(w, None, "missing")})
+                outcome.joints.append(_row(w, None, "missing"))
             outcome.steps += _ordered_steps(bus, found, matched)
+        order = [w.joint for w in self.joints()]
+        outcome.joints.sort(key=lambda r: order.index(r["joint"]))  # the profile's order
         unknown = set(mapping.values()) - {r["joint"] for r in outcome.joints}
         if unknown:
             raise InvalidInput(f"--map names {', '.join(sorted(unknown))}: no such servo "

@@ -53,15 +53,19 @@ def setup(ctx: typer.Context,
         if in_place:
             result = _apply(ctx, run.plan_in_place(mapping), run.apply_in_place, dry_run)
         elif joint:
-            result = _one(ctx, run, joint, reset, dry_run)
+            if run.connect_alone(joint) is not None:
+                info(f"the simulator connected {joint} alone")
+            result = _apply(ctx, run.plan_one(joint, reset), lambda p: run.apply_one(joint, p),
+                            dry_run)
         else:
             result = _walk(ctx, run, reset, dry_run)
     if opts.json:
         emit_json(result)
     else:
         show(setup_parts(result))
-    if any(r["status"] == "missing" for r in result["joints"]):
-        warn("some joints' servos were not found: they were left alone")
+    missing = [r["joint"] for r in result["joints"] if r["status"] == "missing"]
+    if missing:
+        warn(f"not found, left alone: {', '.join(missing)}")
         raise typer.Exit(WARNINGS)
 
 
@@ -75,13 +79,6 @@ def _apply(ctx: typer.Context, plan: Any, apply: Any, dry_run: bool) -> dict[str
         info(line)
     confirm(ctx, f"write {len(plan.steps)} steps to the servos above")
     return apply(plan).as_dict()
-
-
-def _one(ctx: typer.Context, run: Any, joint: str, reset: str | None,
-         dry_run: bool) -> dict[str, Any]:
-    if run.connect_alone(joint) is not None:
-        info(f"the simulator connected {joint} alone")
-    return _apply(ctx, run.plan_one(joint, reset), lambda p: run.apply_one(joint, p), dry_run)
 
 
 def _walk(ctx: typer.Context, run: Any, reset: str | None, dry_run: bool) -> dict[str, Any]:

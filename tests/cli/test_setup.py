@@ -279,3 +279,14 @@ def test_a_robot_on_its_own_simulators_runs_their_control_lines():
     with open_robot("koch-arm", sim=True) as robot, \
             pytest.raises(InvalidInput, match="no simulator of this process"):
         robot.simulator_control("connect gripper")  # its simulators answer no control line
+
+
+def test_in_place_with_a_servo_missing_warns(cli):
+    servos = [Servo(i, model=by_number(n)) for i, n in zip(range(1, 6), KOCH_MODELS)]
+    with DynamixelPtyServer(DynamixelBus(servos, baud=1_000_000)) as server:
+        result = cli("-p", "koch-arm", "-t", f"dxl=serial://{server.port}?baud=1000000",
+                     "--json", "setup", "--in-place", "--yes", *WAIT)
+    assert result.exit_code == 3, result.output
+    rows = _doc(result)["joints"]
+    assert [r["status"] for r in rows] == ["already set"] * 5 + ["missing"]
+    assert "not found, left alone: gripper" in result.stderr
