@@ -118,9 +118,8 @@ class Setup:
     # -- one at a time -----------------------------------------------------------------------
     def find(self, joint: str) -> dict[str, Any]:
         """The one servo connected (the joint's, alone), at any rate and protocol (the
-        joint's protocol tried first, in the scan's order); Refused
-        when replies collide, several answer or its model is not the joint's; Unreachable
-        when nothing answers."""
+        joint's protocol first, in the scan's order); Refused when replies collide, several
+        answer or its model is not the joint's; Unreachable when nothing answers."""
         from deltoctl.app.scan import all_probes, run_probes
 
         bus, w = self._bus_of(joint)
