@@ -32,13 +32,13 @@ class Wiring:
     def _names(self, words: list[str], verb: str) -> set[str] | None:
         """The joints named (None: ``all``); a name the profile lacks is InvalidInput."""
         if not words:
-            raise InvalidInput(f"{verb}: which joints? ({verb} JOINT... or {verb} all)")
+            raise InvalidInput(f"which joints? ({verb} JOINT... or {verb} all)")
         if words == ["all"]:
             return None
         unknown = [w for w in words if w not in self.known]
         if unknown:
-            raise InvalidInput(f"{verb}: no joint {', '.join(map(repr, unknown))} in the "
-                               f"profile (joints: {', '.join(sorted(self.known))})")
+            raise InvalidInput(f"no joint {', '.join(map(repr, unknown))} in the profile "
+                               f"(joints: {', '.join(sorted(self.known))})")
         return set(words)
 
     def connect(self, words: list[str]) -> str:
