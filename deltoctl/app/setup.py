@@ -137,7 +137,23 @@ class Setup:
                           f"({servo['protocol']}) at ID {servo['id']}; the profile says "
                           f"{joint} is a {w.model or 'servo'} ({w.protocol}): nothing was "
                           "written", f"connect {joint}'s own servo alone")
+        self._not_another(w, servo)
         return servo
+
+    def _not_another(self, w: Wanted, servo: dict[str, Any]) -> None:
+        """Refused when the servo found answers where another joint's is set up (not where a
+        new one answers): that joint's servo, left connected."""
+        at = (servo["id"], servo["baud"])
+        bus, _ = self._bus_of(w.joint)
+        if at in self._addresser(bus, servo["protocol"]).factory:
+            return
+        other = next((o for o in self.joints() if o.joint != w.joint and (o.id, o.baud) == at
+                      and o.protocol == servo["protocol"]), None)
+        if other is not None:
+            raise Refused(f"{w.joint}: the servo connected answers at ID {at[0]}, {at[1]} baud: "
+                          f"{other.joint}'s, set up already: nothing was written",
+                          f"unplug {other.joint}'s servo and connect {w.joint}'s alone (a "
+                          "servo given the wrong joint's ID: setup --in-place --map ID=JOINT)")
 
     def plan_one(self, joint: str, reset: str | None = None) -> Outcome:
         """What setting up ``joint``'s servo (connected alone) writes; nothing is written."""

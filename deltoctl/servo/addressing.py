@@ -38,6 +38,7 @@ class Addresser(Protocol):
 
     protocol: str
     reset_options: tuple[str, ...]  # the factory resets it has, by name; () none
+    factory: frozenset[tuple[int, int]]  # (ID, baud) a new servo answers at
 
     def identify(self, port: Any, device_id: int) -> str | None:
         """The model name of the servo at ``device_id`` (None: no answer)."""

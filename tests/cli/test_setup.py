@@ -290,3 +290,16 @@ def test_in_place_with_a_servo_missing_warns(cli):
     rows = _doc(result)["joints"]
     assert [r["status"] for r in rows] == ["already set"] * 5 + ["missing"]
     assert "not found, left alone: gripper" in result.stderr
+
+
+def test_a_joint_set_up_already_and_left_connected_is_not_taken_for_the_next():
+    from deltoctl.app.setup import open_setup
+    from deltoctl.errors import Refused
+
+    with open_setup("koch-arm", sim={"factory_new": True}, wait=0.05) as run:
+        run.connect_alone("shoulder_pan")
+        run.apply_one("shoulder_pan", run.plan_one("shoulder_pan"))  # ID 1, 1 Mbps now
+        with pytest.raises(Refused, match="shoulder_pan's, set up already"):
+            run.plan_one("shoulder_lift")  # shoulder_lift's servo not plugged in
+        run.controls.run("connect shoulder_lift")
+        assert run.plan_one("shoulder_lift").steps  # its own, at the factory's ID and rate

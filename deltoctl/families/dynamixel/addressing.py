@@ -32,6 +32,7 @@ def _error_2(error: int) -> str:
 class Protocol2:
     protocol = PROTOCOL_2
     reset_options = tuple(RESETS_2)
+    factory = frozenset({(1, 57_600)})
 
     def _write(self, port: Any, device_id: int, address: int, data: bytes, what: str) -> None:
         reply = ask(port, codec.session(), device_id, codec.WRITE,
@@ -70,6 +71,7 @@ class Protocol2:
 class Protocol1:
     protocol = PROTOCOL_1
     reset_options = ("all",)
+    factory = frozenset({(1, 1_000_000), (1, 57_600)})  # AX, MX
 
     def _write(self, port: Any, device_id: int, address: int, data: bytes, what: str) -> None:
         reply = ask(port, protocol1.session(), device_id, protocol1.WRITE,

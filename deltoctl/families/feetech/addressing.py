@@ -21,6 +21,7 @@ NO_RESET = ("Feetech documents no factory reset (instruction 0x06 is in none of 
 class FeetechAddresser:
     protocol = PROTOCOL
     reset_options: tuple[str, ...] = ()
+    factory = frozenset({(1, 1_000_000)})
 
     def __init__(self) -> None:
         self._models: dict[int, Model] = {}  # by the ID it answers at
