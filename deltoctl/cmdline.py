@@ -167,6 +167,14 @@ class Options:
                                "DELTOCTL_PROFILE); 'deltoctl profile list' shows the catalog")
         return load_profile(spec, self.xacro_args, self.package_paths, xacro=self.xacro)
 
+    def sim_of(self, prof: Profile) -> Any:
+        """What ``open_robot(sim=…)`` takes: --sim, with its --sim-option faults checked."""
+        if not (self.sim and self.sim_options):
+            return self.sim
+        from deltoctl.sim.serve import options_given
+
+        return options_given(self.sim_options, "--sim-option", prof, self.hardware)
+
 
 def parse_pairs(items: list[str], sep: str, what: str, example: str) -> dict[str, str]:
     pairs: dict[str, str] = {}

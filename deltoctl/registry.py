@@ -246,6 +246,9 @@ class Family:
     # "module:function" () → its deltoctl.servo.scan.Probe's: how `deltoctl scan` finds its
     # devices on a serial link at an unknown rate and protocol
     scan: str | None = None
+    # "module:function" () → its deltoctl.servo.addressing.Addressing: how `deltoctl setup`
+    # gives its servos the profile's IDs and rates (what each joint wants, and the writes)
+    setup: str | None = None
 
     def __post_init__(self) -> None:
         unknown = self.capabilities - CAPABILITIES.keys()
@@ -287,6 +290,9 @@ class Family:
 
     def scan_probes(self) -> list[Any]:
         return list(_load(self.scan)()) if self.scan else []
+
+    def addressing(self) -> Any:
+        return _load(self.setup)() if self.setup else None
 
     def show_address(self, address: int) -> str:
         return format(address, self.address_format)

@@ -133,6 +133,9 @@ TABLE: dict[str, Verb] = {
     }),
     "ports": Verb(READS, "deltoctl ports --json", "ports_cmd", stage=TOOLS),
     "scan": Verb(READS, "deltoctl scan /dev/ttyUSB0 --json", "scan_cmd", stage=TOOLS),
+    # writes each servo's ID and baud rate (asks for each part to be connected alone)
+    "setup": Verb(ACTUATES, "deltoctl -p koch-arm setup shoulder_pan --yes", "setup_cmd",
+                  stage=CONFIGURATION),
     "doctor": Verb(READS, "deltoctl -p dg-5f-right -t tcp://169.254.186.72:502 doctor",
                    "doctor_cmd", stage=TOOLS,
                    when={("--write-udev-rule",): ACTUATES}),  # the host's udev

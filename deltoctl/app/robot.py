@@ -110,13 +110,15 @@ def _opened(prof: Profile, urls: list[str], sim: bool | Mapping[str, Any],
             notice: Callable[[str], None] | None, served_by: str | None,
             allow_motion: bool = True) -> Iterator[Robot]:
     from deltoctl.core.system import System, mock_blocks, select_blocks
+    from deltoctl.sim.controls import Controls
 
+    controls = Controls()
     with contextlib.ExitStack() as stack:
         simulated = (dict.fromkeys(hardware or [hw.name for hw in prof.hardware], "--sim")
                      if sim else mock_blocks(prof, hardware))
         if simulated:
             served = serve_simulators(stack, prof, list(simulated),
-                                      sim if isinstance(sim, Mapping) else None)
+                                      sim if isinstance(sim, Mapping) else None, controls)
             urls += [f"{bus}={url}" for bus, url in served.items()]
             for name, why in simulated.items():
                 if why != "--sim" and notice is not None:
@@ -126,20 +128,23 @@ def _opened(prof: Profile, urls: list[str], sim: bool | Mapping[str, Any],
                          for hw in select_blocks(prof, hardware)}
         with System(prof, urls, hardware, probe=probe, allow_model_mismatch=allow_model_mismatch,
                     simulated=simulated, allow_motion=allow_motion) as system:
-            yield Robot(system)
+            yield Robot(system, controls if controls.words() else None)
 
 
 def serve_simulators(stack: contextlib.ExitStack, profile: Profile, blocks: Sequence[str] = (),
-                     faults: Mapping[str, Any] | None = None) -> dict[str, str]:
+                     faults: Mapping[str, Any] | None = None,
+                     controls: Any = None) -> dict[str, str]:
     """Start the simulated devices of ``blocks`` (every block without), with ``faults`` (those
-    of ``deltoctl sim serve``), closed with ``stack``; returns ``{bus: target URL}``."""
+    of ``deltoctl sim serve``), closed with ``stack``; returns ``{bus: target URL}``. The
+    control lines they answer (``connect JOINT``, ``face -x``) are added to ``controls`` (a
+    deltoctl.sim.controls.Controls)."""
     from deltoctl.sim.serve import ServeOptions, serve_profile
 
     try:
         options = ServeOptions(**dict(faults or {}))
     except TypeError as exc:
         raise InvalidInput(f"sim: {exc}") from None
-    return dict(serve_profile(stack, profile, options, list(blocks))["buses"])
+    return dict(serve_profile(stack, profile, options, list(blocks), controls)["buses"])
 
 
 def block_entry(m: Member, **data: Any) -> dict[str, Any]:
@@ -220,8 +225,17 @@ def _cannot(system: System, capability: str, what: str) -> None:
 class Robot:
     """An open robot: one System of blocks, and the procedures run on it."""
 
-    def __init__(self, system: System) -> None:
+    def __init__(self, system: System, controls: Any = None) -> None:
         self.system = system
+        self.controls = controls  # the simulators' control lines, when this process serves them
+
+    def simulator_control(self, line: str) -> str:
+        """Run a control line (``connect shoulder_pan``, ``face -x``) on the simulators this
+        robot runs on; InvalidInput when it runs on none of its own."""
+        if self.controls is None:
+            raise InvalidInput("no simulator of this process answers control lines (--sim "
+                               "starts one; a 'sim serve' reads them on its standard input)")
+        return str(self.controls.run(line))
 
     @property
     def profile(self) -> Profile:
@@ -707,12 +721,7 @@ def open_selected(opts: Options, allow_model_mismatch: bool = False,
     --hardware's blocks. ``make_safe``: every block set safe on the way out, whatever was
     sent."""
     prof = profile or opts.load_profile()
-    sim: bool | Mapping[str, Any] = opts.sim
-    if opts.sim and opts.sim_options:
-        from deltoctl.sim.serve import options_given
-
-        sim = options_given(opts.sim_options, "--sim-option", prof, opts.hardware)
-    with open_robot(prof, opts.target, sim=sim, hardware=opts.hardware,
+    with open_robot(prof, opts.target, sim=opts.sim_of(prof), hardware=opts.hardware,
                     allow_model_mismatch=allow_model_mismatch, probe=probe, notice=notice,
                     served_by=served_by, reuse=not opts.sim_fresh, warn=warn) as robot:
         try:

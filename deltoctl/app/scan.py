@@ -43,26 +43,11 @@ def scan(port_or_url: str, wait: float = 0.01, every: bool = False) -> dict[str,
     from deltoctl.transport.serial_port import open_serial
 
     url = target_of(port_or_url)
-    probes = ordered([p for f in registry.families().values() for p in f.scan_probes()])
-    if not probes:
-        raise InvalidInput("no installed family scans a serial link")
+    probes = all_probes()
     port = open_serial(url, timeout=0.002)
-    found: list[dict[str, Any]] = []
-    refused: list[int] = []
-    ran = 0
     start = time.perf_counter()
     try:
-        for probe in probes:
-            if found and not every:
-                break
-            try:
-                port.baudrate = probe.baud
-            except (OSError, ValueError):
-                refused.append(probe.baud)
-                continue
-            ran += 1
-            found += [f for f in (s.as_dict() for s in probe.run(port, wait, not every))
-                      if f["id"] is None or f not in found]
+        found, refused, ran = run_probes(port, probes, wait, every)
     finally:
         port.close()
     seconds = time.perf_counter() - start
@@ -73,3 +58,32 @@ def scan(port_or_url: str, wait: float = 0.01, every: bool = False) -> dict[str,
             "refused_bauds": sorted(set(refused)), "bus_seconds": round(seconds, 3),
             "colliding": sorted({f["id"] for f in found if f["colliding"] and
                                  f["id"] is not None})}
+
+
+def all_probes() -> list[Any]:
+    """Every installed family's probes, in the order they run."""
+    probes = ordered([p for f in registry.families().values() for p in f.scan_probes()])
+    if not probes:
+        raise InvalidInput("no installed family scans a serial link")
+    return probes
+
+
+def run_probes(port: Any, probes: list[Any], wait: float,
+               every: bool) -> tuple[list[dict[str, Any]], list[int], int]:
+    """The probes on an open port (its rate set for each): what answered, the rates the
+    adapter refused, how many probes ran. Unless ``every``, up to the first that answers."""
+    found: list[dict[str, Any]] = []
+    refused: list[int] = []
+    ran = 0
+    for probe in probes:
+        if found and not every:
+            break
+        try:
+            port.baudrate = probe.baud
+        except (OSError, ValueError):
+            refused.append(probe.baud)
+            continue
+        ran += 1
+        found += [f for f in (s.as_dict() for s in probe.run(port, wait, not every))
+                  if f["id"] is None or f not in found]
+    return found, refused, ran

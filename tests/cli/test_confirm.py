@@ -161,6 +161,8 @@ CASES = {
                                 "head_y"],
     "register set": lambda cli, tmp: ["-p", "mh5", "--sim", "--hardware", "upper_body",
                                       "register", "set", "head_y", "led", "1"],
+    "setup": lambda cli, tmp: ["-p", "koch-arm", "--sim", "--sim-fresh", "--sim-option",
+                               "factory_new", "setup", "elbow_flex", "--wait", "0.05"],
 }
 # the robots' agents run each line of a fleet run, and ask by this rule there (and the
 # caller once for them all: tests/cli/test_verbs.py); doctor actuates the host, not the robot,

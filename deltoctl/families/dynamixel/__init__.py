@@ -12,6 +12,7 @@ FAMILY = Family(
     frame_names="deltoctl.families.dynamixel.codec:frame_name",
     emulator="deltoctl.families.dynamixel.emulator:serve",
     scan="deltoctl.families.dynamixel.scan:probes",
+    setup="deltoctl.families.dynamixel.addressing:addressing",
     plugins=("mh5_hardware/MH5DynamixelInterface", "dynamixel_hardware/DynamixelHardware",
              "dynamixel_hardware_interface/DynamixelHardware"),
     import_block="deltoctl.families.dynamixel.ros2_control:import_block",

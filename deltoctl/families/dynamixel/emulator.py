@@ -66,6 +66,7 @@ class Servo:
         self._move: tuple[float, float, float, float] | None = None  # start, goal, t0, duration
         self._turned_at = time.monotonic()  # velocity mode: when the position was last moved
         self.stalled = False  # fault: held where it is, its goal never reached (Moving stays 1)
+        self.connected = True  # on the wire (the ``connect`` control line unplugs it)
 
     # -- the table ---------------------------------------------------------------------------
     def get(self, name: str) -> int:
@@ -221,15 +222,17 @@ class DynamixelBus:
 
     def _present(self, device_id: int) -> Servo | None:
         servo = self.servos.get(device_id)
-        if servo is None or device_id in self.faults.missing:
+        if servo is None or device_id in self.faults.missing or not servo.connected:
             return None
         if self.baud is not None and BAUD_RATES.get(servo.memory[8]) != self.line_baud:
             return None  # it hears only noise
         return servo
 
-    def _status(self, servo: Servo, error: int = 0, params: bytes = b"") -> tuple[float, bytes]:
-        """A servo's status, and its Return Delay Time (2 µs a step) before it."""
-        data = self.session.reply(servo.memory[7], error, params)
+    def _status(self, servo: Servo, error: int = 0, params: bytes = b"",
+                at: int | None = None) -> tuple[float, bytes]:
+        """A servo's status (from ``at``, the ID it was addressed at, when a write just gave
+        it another), and its Return Delay Time (2 µs a step) before it."""
+        data = self.session.reply(servo.memory[7] if at is None else at, error, params)
         if self.faults.corrupt_crc and servo.id in self.faults.corrupt_crc:
             data = data[:-1] + bytes([data[-1] ^ 0xFF])
         return servo.memory[9] * 2e-6, data
@@ -254,10 +257,21 @@ class DynamixelBus:
             servo = self._present(i)
             if servo is None:
                 continue
+            at = servo.id
             error, data = self._single(servo, instruction, params)
-            if self.session.answers(request, servo.id, servo.memory[68]):
-                replies.append(self._status(servo, error, data))
+            if self.session.answers(request, at, servo.memory[68]):
+                replies.append(self._status(servo, error, data, at))
+            self._moved(servo, at)
         return replies
+
+    def _moved(self, servo: Servo, at: int) -> None:
+        """A servo given another ID (a write, a factory reset) answered from the old one; it
+        is found at the new one from now on (at its new Baud Rate, its memory says). The bus
+        holds one servo per ID: onto an ID another holds, it stays where it was (servos
+        sharing an ID are buses sharing a wire, a MixedBus)."""
+        if servo.id != at and self.servos.get(at) is servo and servo.id not in self.servos:
+            del self.servos[at]
+            self.servos[servo.id] = servo
 
     def _reads(self, request: Request) -> Replies:
         """A PING's and a Sync, Fast Sync or Bulk Read's: data from the servos the session
@@ -359,13 +373,14 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
 
     o = ctx.options
     buses = {}
+    parts: dict[str, Any] = {}  # a factory-new bus's servos by joint: the connect control's
     for hw in blocks:
         url = ctx.profile.buses.get(hw.bus or "", "serial:///dev/ttyUSB0?baud=1000000")
         protocol = protocol_of(hw.params, hw.name)
         _, baud, _ = parse_bus_url(url, protocol)
         joints = servo_ids(ctx.profile, hw)
         if o.factory_new:
-            bus = _factory_new(ctx, hw, joints)
+            bus = _factory_new(ctx, hw, joints, parts)
             server = ctx.stack.enter_context(DynamixelPtyServer(bus, pace=o.pace))
             buses[hw.bus or hw.name] = f"serial://{server.port}?baud={baud}"
             continue
@@ -397,18 +412,28 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
         server = ctx.stack.enter_context(DynamixelPtyServer(bus, pace=o.pace))
         query = url.split("?", 1)[1] if "?" in url else f"baud={baud}"
         buses[hw.bus or hw.name] = f"serial://{server.port}?{query}"
+    if parts:
+        from deltoctl.servo.wiring import add_controls
+
+        add_controls(ctx, parts)
     return buses
 
 
-def _factory_new(ctx: ServeContext, hw: Hardware, joints: dict[int, Component]) -> Any:
+def _factory_new(ctx: ServeContext, hw: Hardware, joints: dict[int, Component],
+                 parts: dict[str, Any]) -> Any:
     """Servos as they leave the factory: each at ID 1 and 57,600 bps, an X-series in
-    Protocol 2.0, an AX or MX in 1.0; all on one wire, so several answer at ID 1."""
+    Protocol 2.0, an AX or MX in 1.0; all on one wire, so several answer at ID 1 (each
+    servo added to ``parts`` by joint, all connected)."""
     from deltoctl.families.dynamixel.emulator1 import MixedBus
     from deltoctl.families.dynamixel.models1 import Model1
 
     missing = {j.name for j in ctx.named("missing", hw)}
-    buses = [_bus(hw, {1: j}, 57_600, 1.0 if isinstance(_listed_model(hw, j), Model1) else 2.0)
-             for j in joints.values() if j.name not in missing]
+    buses = []
+    for j in joints.values():
+        if j.name not in missing:
+            buses.append(_bus(hw, {1: j}, 57_600,
+                              1.0 if isinstance(_listed_model(hw, j), Model1) else 2.0))
+            parts[j.name] = buses[-1].servos[1]
     return MixedBus(*buses) if buses else DynamixelBus([], 57_600)
 
 

@@ -40,6 +40,7 @@ class Servo1:
         self.set("Present Temperature", 30)
         self.registered: tuple[int, bytes] | None = None
         self._move: tuple[float, float, float, float] | None = None  # start, goal, t0, s
+        self.connected = True  # on the wire (the ``connect`` control line unplugs it)
 
     @property
     def id(self) -> int:
@@ -140,15 +141,26 @@ class Protocol1Bus:
 
     def _present(self, device_id: int) -> Servo1 | None:
         servo = self.servos.get(device_id)
-        if servo is None or device_id in self.missing:
+        if servo is None or device_id in self.missing or not servo.connected:
             return None
         if self.baud is not None and self.line_baud and abs(
                 baud_of(servo.memory[4]) - self.line_baud) > 0.03 * self.line_baud:
             return None  # it hears only noise
         return servo
 
-    def _status(self, servo: Servo1, error: int = 0, data: bytes = b"") -> tuple[float, bytes]:
-        return servo.memory[5] * 2e-6, self.session.reply(servo.id, error, data)
+    def _status(self, servo: Servo1, error: int = 0, data: bytes = b"",
+                at: int | None = None) -> tuple[float, bytes]:
+        """A servo's status, from ``at`` (the ID it was addressed at) when given."""
+        return servo.memory[5] * 2e-6, self.session.reply(servo.id if at is None else at,
+                                                          error, data)
+
+    def _moved(self, servo: Servo1, at: int) -> None:
+        """A servo given another ID (a write, a RESET) answered from the old one; it is
+        found at the new one from now on (onto an ID another holds, it stays where it was:
+        the bus holds one servo per ID)."""
+        if servo.id != at and self.servos.get(at) is servo and servo.id not in self.servos:
+            del self.servos[at]
+            self.servos[servo.id] = servo
 
     def serve(self, data: bytes) -> list[tuple[int, Replies]]:
         return [(r.size, self.handle(r)) for r in self.session.receive_requests(data)]
@@ -166,14 +178,16 @@ class Protocol1Bus:
                     servo = self._present(device_id)
                     if servo is not None:
                         self._single(servo, instruction, params)
+                        self._moved(servo, device_id)
             return []  # no status to a broadcast, a PING's neither
         servo = self._present(request.id)
         if servo is None:
             return []
         error, data = self._single(servo, instruction, params)
-        if not self.session.answers(request, servo.id, servo.memory[16]):
+        self._moved(servo, request.id)
+        if not self.session.answers(request, request.id, servo.memory[16]):
             return []
-        return [self._status(servo, error, data)]
+        return [self._status(servo, error, data, request.id)]
 
     def _single(self, servo: Servo1, instruction: int, params: bytes) -> tuple[int, bytes]:
         if instruction == p1.PING:

@@ -12,6 +12,7 @@ FAMILY = Family(
     frame_names="deltoctl.families.feetech.codec:frame_name",
     emulator="deltoctl.families.feetech.emulator:serve",
     scan="deltoctl.families.feetech.scan:probes",
+    setup="deltoctl.families.feetech.addressing:addressing",
     plugins=("feetech_ros2_driver/FeetechHardwareInterface",
              "so_arm101_ros2_control/SoArm101HardwareInterface",
              "sts_hardware_interface/STSHardwareInterface",

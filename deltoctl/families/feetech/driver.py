@@ -159,8 +159,8 @@ class FeetechDriver(Driver):
 
     def _write_bus_item(self, device_id: int, item: Item, value: int, data: bytes,
                         lock: int) -> None:
-        """A new ID or baud rate: the servo answers at it from this write on (its status
-        too), so the EEPROM is locked again there."""
+        """A new ID or baud rate: the servo answers this write from its old ID and rate, and
+        at the new ones from then on, so the EEPROM is locked again there."""
         self.link.exchange(self.session, device_id, codec.WRITE,
                            codec.write_params(item.address, data), 0.05)
         baud = BAUD_RATES.get(value) if item.name == "Baud_Rate" else None

@@ -46,6 +46,7 @@ class Servo:
         self.registered: tuple[int, bytes] | None = None
         self.actual = model.resolution / 2  # the shaft's angle, steps
         self._move: tuple[float, float, float, float] | None = None  # from, to, t0, seconds
+        self.connected = True  # on the wire (the ``connect`` control line unplugs it)
         self.power_cycle()
 
     # -- the table -------------------------------------------------------------------------------
@@ -213,16 +214,18 @@ class FeetechBus:
         """The servos that hear a request to ``device_id`` (every one for broadcast)."""
         return [s for s in self.servos
                 if (device_id == codec.BROADCAST_ID or s.id == device_id)
-                and s.id not in self.missing
+                and s.id not in self.missing and s.connected
                 and (self.baud is None or s.baud == self.line_baud)]
 
     def serve(self, data: bytes) -> list[tuple[int, Replies]]:
         return [(r.size, self.handle(r)) for r in self.session.receive_requests(data)]
 
-    def _status(self, servos: list[Servo], data: list[bytes | None]) -> Replies:
-        """The statuses of servos that answer at once (one ID): collided when several."""
-        packets = [self.session.reply(s.id, s.error(), d) for s, d in zip(servos, data)
-                   if d is not None]
+    def _status(self, servos: list[Servo], data: list[bytes | None],
+                at: int | None = None) -> Replies:
+        """The statuses of servos that answer at once (one ID): collided when several; from
+        ``at``, the ID they were addressed at (a write of ID answers from the old one)."""
+        packets = [self.session.reply(s.id if at is None else at, s.error(), d)
+                   for s, d in zip(servos, data) if d is not None]
         if not packets:
             return []
         return [(servos[0].memory[7] * 2e-6, collide(packets))]
@@ -254,8 +257,8 @@ class FeetechBus:
         present = self.at(request.id)
         data = [self._single(s, inst, params) for s in present]
         answering = [(s, d) for s, d in zip(present, data)
-                     if self.session.answers(request, s.id, s.memory[8])]
-        return self._status([s for s, _ in answering], [d for _, d in answering])
+                     if self.session.answers(request, request.id, s.memory[8])]
+        return self._status([s for s, _ in answering], [d for _, d in answering], request.id)
 
     @staticmethod
     def _single(servo: Servo, inst: int, params: bytes) -> bytes | None:
@@ -286,8 +289,10 @@ def _model_of(hw: Hardware, joint: Component) -> Model:
     return (BY_NUMBER.get(number) if number is not None else None) or STS3215
 
 
-def bus_of(ctx: ServeContext, hw: Hardware, baud: int) -> FeetechBus:
-    """A block's servos at their joints' IDs, with the faults ``ctx`` names."""
+def bus_of(ctx: ServeContext, hw: Hardware, baud: int,
+           parts: dict[str, Servo] | None = None) -> FeetechBus:
+    """A block's servos at their joints' IDs, with the faults ``ctx`` names (factory-new,
+    each servo added to ``parts`` by joint)."""
     from deltoctl.families.feetech.ros2_control import servo_ids
 
     joints = servo_ids(ctx.profile, hw)
@@ -302,6 +307,8 @@ def bus_of(ctx: ServeContext, hw: Hardware, baud: int) -> FeetechBus:
         for k, servo in enumerate(present):
             servo.set("ID", 1)
             servo.actual += 300 * k  # poses of their own: their replies differ
+        if parts is not None:
+            parts.update({j.name: s for s, j in zip(servos, joints.values()) if s in present})
         return FeetechBus(present, baud=1_000_000)
     bus = FeetechBus(servos, baud=baud)
     by_id = {s.id: s for s in servos}
@@ -327,11 +334,16 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
     from deltoctl.families.feetech import parse_bus_url
 
     buses = {}
+    parts: dict[str, Servo] = {}  # a factory-new bus's servos by joint: the connect control's
     for hw in blocks:
         url = ctx.profile.buses.get(hw.bus or "", "serial:///dev/ttyACM0?baud=1000000")
         _, baud, _ = parse_bus_url(url)
-        server = ctx.stack.enter_context(FeetechPtyServer(bus_of(ctx, hw, baud),
+        server = ctx.stack.enter_context(FeetechPtyServer(bus_of(ctx, hw, baud, parts),
                                                           pace=ctx.options.pace))
         query = url.split("?", 1)[1] if "?" in url else f"baud={baud}"
         buses[hw.bus or hw.name] = f"serial://{server.port}?{query}"
+    if parts:
+        from deltoctl.servo.wiring import add_controls
+
+        add_controls(ctx, parts)
     return buses

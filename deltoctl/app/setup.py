@@ -1,0 +1,574 @@
+"""``deltoctl setup``: the servos of a profile's buses given the IDs and rates the profile
+says, as a procedure — planned, confirmed by the caller, applied, verified at the new
+settings. Bus-level: no System is opened (a box of new servos answers at no joint's ID).
+
+- *One at a time* (new servos, all at the factory's ID): the part connected alone is found at
+  any rate and protocol (the scan's probes), its model checked against the joint's, then torque
+  off, ID, rate (the family's exchanges, deltoctl.servo.addressing), verified by a PING and a
+  model read at the new ID and rate. Colliding replies or two servos answering: refused, named,
+  nothing written.
+- *In place* (IDs unique but not the profile's): the servos found on the bus matched to joints
+  (same ID and model, one of a model, or as the caller maps them), the ID changes ordered so no
+  two servos ever share an ID (a temporary free ID where two swap or a chain closes), then the
+  rates, then verified.
+
+A servo no joint of the profile is, or an ID no joint has, is never written. The bus time is
+the time spent on the links."""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from deltoctl import registry
+from deltoctl.errors import DeviceError, InvalidInput, Refused, Unreachable
+from deltoctl.servo.addressing import Addresser, Addressing, Wanted
+
+WAIT = 0.01  # s a probe waits for a reply
+FACTORY_RESET = "factory-reset"  # the --allow a factory reset needs
+
+
+@dataclass
+class Bus:
+    """A servo bus block: its target, its family's addressing, what each joint wants."""
+
+    block: str
+    bus: str  # the profile's name of the bus
+    family: registry.Family
+    url: str
+    addressing: Addressing
+    wanted: list[Wanted]
+
+
+@dataclass
+class Outcome:
+    """What setup did (or, dry, would do): each joint's row, the writes in order."""
+
+    mode: str
+    dry_run: bool
+    joints: list[dict[str, Any]] = field(default_factory=list)
+    steps: list[dict[str, Any]] = field(default_factory=list)
+    bus_seconds: float = 0.0
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"mode": self.mode, "dry_run": self.dry_run, "joints": self.joints,
+                "steps": self.steps, "bus_seconds": round(self.bus_seconds, 3)}
+
+
+def _step(joint: str, action: str, at_id: int, at_baud: int, value: Any = None) -> dict[str, Any]:
+    return {"joint": joint, "action": action, "at_id": at_id, "at_baud": at_baud,
+            "value": value}
+
+
+class Setup:
+    """The servo buses of a profile (``buses``: bus → target URL), and the procedures on
+    them; ``controls``: the control lines of simulators this process serves (a rehearsal
+    connects each part itself)."""
+
+    def __init__(self, profile: Any, buses: Mapping[str, str], hardware: Sequence[str] = (),
+                 controls: Any = None, wait: float = WAIT) -> None:
+        self.profile, self.controls, self.wait = profile, controls, wait
+        self.buses = _servo_buses(profile, buses, hardware)
+        self.bus_seconds = 0.0
+        if not self.buses:
+            raise InvalidInput(f"{profile.name} has no servo bus that setup addresses "
+                               "(Dynamixel, Feetech)")
+
+    # -- what the profile wants --------------------------------------------------------------
+    def targets(self) -> list[str]:
+        """``BUS=URL`` of each servo bus (open_robot's targets, once the servos are set)."""
+        return [f"{b.bus}={b.url}" for b in self.buses]
+
+    def joints(self) -> list[Wanted]:
+        return [w for bus in self.buses for w in bus.wanted]
+
+    def _bus_of(self, joint: str) -> tuple[Bus, Wanted]:
+        for bus in self.buses:
+            for w in bus.wanted:
+                if w.joint == joint:
+                    return bus, w
+        names = ", ".join(w.joint for w in self.joints())
+        raise InvalidInput(f"no servo joint {joint!r} in {self.profile.name} (its servo joints: "
+                           f"{names}); setup writes only where the profile says")
+
+    def connect_alone(self, joint: str) -> str | None:
+        """On this process's simulators, ``connect JOINT``: its reply; None without them."""
+        self._bus_of(joint)  # one of the profile's servo joints, or InvalidInput
+        if self.controls is None or "connect" not in self.controls.words():
+            return None
+        return str(self.controls.run(f"connect {joint}"))
+
+    @contextlib.contextmanager
+    def _port(self, url: str, baud: int | None = None) -> Iterator[Any]:
+        from deltoctl.transport.serial_port import open_serial
+
+        port = open_serial(url, timeout=0.002)
+        start = time.perf_counter()
+        try:
+            if baud is not None:
+                port.baudrate = baud
+            yield port
+        finally:
+            self.bus_seconds += time.perf_counter() - start
+            port.close()
+
+    # -- one at a time -----------------------------------------------------------------------
+    def find(self, joint: str) -> dict[str, Any]:
+        """The one servo connected (the joint's, alone), at any rate and protocol (the
+        joint's protocol first, in the scan's order); Refused when replies collide, several
+        answer or its model is not the joint's; Unreachable when nothing answers."""
+        from deltoctl.app.scan import all_probes, run_probes
+
+        bus, w = self._bus_of(joint)
+        probes = sorted(all_probes(), key=lambda p: p.protocol != w.protocol)  # its own first
+        with self._port(bus.url) as port:
+            found, _, ran = run_probes(port, probes, self.wait, False)
+        if not found:
+            raise Unreachable(f"{joint}: nothing answers on {bus.url} ({ran} probes)",
+                              hint=f"connect {joint}'s servo alone, power it, and run setup "
+                                   f"{joint} again")
+        _alone(joint, found)
+        servo = found[0]
+        if servo["protocol"] != w.protocol or (w.model and servo["model"] != w.model):
+            raise Refused(f"{joint}: the servo connected is a {servo['model'] or 'servo'} "
+                          f"({servo['protocol']}) at ID {servo['id']}; the profile says "
+                          f"{joint} is a {w.model or 'servo'} ({w.protocol}): nothing was "
+                          "written", f"connect {joint}'s own servo alone")
+        self._not_another(w, servo)
+        return servo
+
+    def _not_another(self, w: Wanted, servo: dict[str, Any]) -> None:
+        """Refused when the servo found answers where another joint's is set up (not where a
+        new one answers): that joint's servo, left connected."""
+        at = (servo["id"], servo["baud"])
+        bus, _ = self._bus_of(w.joint)
+        if at in self._addresser(bus, servo["protocol"]).factory:
+            return
+        other = next((o for o in self.joints() if o.joint != w.joint and (o.id, o.baud) == at
+                      and o.protocol == servo["protocol"]), None)
+        if other is not None:
+            raise Refused(f"{w.joint}: the servo connected answers at ID {at[0]}, {at[1]} baud: "
+                          f"{other.joint}'s, set up already: nothing was written",
+                          f"unplug {other.joint}'s servo and connect {w.joint}'s alone (a "
+                          "servo given the wrong joint's ID: setup --in-place --map ID=JOINT)")
+
+    def plan_one(self, joint: str, reset: str | None = None) -> Outcome:
+        """What setting up ``joint``'s servo (connected alone) writes; nothing is written."""
+        bus, w = self._bus_of(joint)
+        addresser = self._addresser(bus, w.protocol)
+        if reset is not None:
+            _check_reset(bus, addresser, reset)
+        servo = self.find(joint)
+        outcome = Outcome("one at a time", True)
+        outcome.joints.append(_row(w, servo, "planned"))
+        outcome.steps += _one_steps(w, servo, reset)
+        outcome.bus_seconds = self.bus_seconds
+        return outcome
+
+    def apply_one(self, joint: str, plan: Outcome) -> Outcome:
+        """Write the plan of ``plan_one`` and verify; the outcome with each joint's status."""
+        bus, w = self._bus_of(joint)
+        addresser = self._addresser(bus, w.protocol)
+        row = plan.joints[0]
+        at_id, at_baud = row["from"]["id"], row["from"]["baud"]
+        reset = next((s["value"] for s in plan.steps if s["action"] == "factory reset"), None)
+        if reset is not None:
+            with self._port(bus.url, at_baud) as port:
+                addresser.factory_reset(port, at_id, reset)
+            time.sleep(0.05)  # the servo restarts with its factory settings
+            servo = self.find(joint)
+            at_id, at_baud = servo["id"], servo["baud"]
+        with self._port(bus.url, at_baud) as port:
+            _address(port, addresser, at_id, at_baud, w)
+            model = addresser.identify(port, w.id)
+        done = Outcome("one at a time", False, [dict(row)], plan.steps)
+        _verified(done.joints[0], w, model, row["from"]["model"])
+        done.bus_seconds = self.bus_seconds
+        return done
+
+    def wanted_plan(self) -> Outcome:
+        """What a walk of every joint will set, before any servo is found."""
+        return Outcome("one at a time", True, [_row(w, None, "planned") for w in self.joints()])
+
+    def walk(self, connect: Callable[[Wanted, str | None], None], reset: str | None = None,
+             done: Callable[[dict[str, Any]], None] | None = None) -> Outcome:
+        """Every joint in the profile's order: ``connect(wanted, reply)`` once its servo is to
+        be connected alone (``reply``: this process's simulators connected it, else None),
+        then set up and verified (``done`` told each joint's row)."""
+        outcome = Outcome("one at a time", False)
+        for w in self.joints():
+            connect(w, self.connect_alone(w.joint))
+            one = self.apply_one(w.joint, self.plan_one(w.joint, reset))
+            outcome.joints += one.joints
+            outcome.steps += one.steps
+            if done is not None:
+                done(one.joints[0])
+        outcome.bus_seconds = self.bus_seconds
+        return outcome
+
+    def _addresser(self, bus: Bus, protocol: str) -> Addresser:
+        addresser = bus.addressing.addresser(protocol)
+        if addresser is None:
+            raise InvalidInput(f"{bus.block}: {bus.family.name} servos do not speak {protocol}")
+        return addresser
+
+    # -- in place ----------------------------------------------------------------------------
+    def plan_in_place(self, mapping: Mapping[int, str] = ()) -> Outcome:
+        """Every servo bus scanned, its servos matched to joints (``mapping``: ID → joint
+        where the match is ambiguous), and the ID and rate changes ordered without two servos
+        ever at one ID; nothing is written."""
+        mapping = dict(mapping)
+        outcome = Outcome("in place", True)
+        for bus in self.buses:
+            found = self._scan_bus(bus)
+            matched, missing = _match(bus, found, mapping)
+            for servo, w in matched:
+                outcome.joints.append(_row(w, servo, "planned"))
+            for w in missing:
+                outcome.joints.append(_row(w, None, "missing"))
+            outcome.steps += _ordered_steps(bus, found, matched)
+        order = [w.joint for w in self.joints()]
+        outcome.joints.sort(key=lambda r: order.index(r["joint"]))  # the profile's order
+        unknown = set(mapping.values()) - {r["joint"] for r in outcome.joints}
+        if unknown:
+            raise InvalidInput(f"--map names {', '.join(sorted(unknown))}: no such servo "
+                               "joint in the profile")
+        outcome.bus_seconds = self.bus_seconds
+        return outcome
+
+    def _scan_bus(self, bus: Bus) -> list[dict[str, Any]]:
+        """Every servo of the block's protocols on its bus: a broadcast at every rate, a
+        sweep (where there is no broadcast) at the profile's rate only."""
+        from deltoctl.app.scan import run_probes
+        from deltoctl.servo.scan import BROADCAST, SWEEP
+
+        wanted = {(w.protocol, w.baud) for w in bus.wanted}
+        protocols = {p for p, _ in wanted}
+        probes = [p for p in bus.family.scan_probes() if p.protocol in protocols and (
+            p.stage == BROADCAST or (p.stage == SWEEP and (p.protocol, p.baud) in wanted))]
+        with self._port(bus.url) as port:
+            found, _, _ = run_probes(port, probes, self.wait, True)
+        if not found:
+            raise Unreachable(f"{bus.block}: nothing answers on {bus.url}",
+                              hint="check the power and the wiring, then run setup again")
+        colliding = [s for s in found if s["colliding"]]
+        if colliding:
+            raise Refused(_collision(bus.block, colliding) + ": nothing was written",
+                          "give them IDs of their own one at a time first (setup JOINT, "
+                          "each servo connected alone)")
+        return found
+
+    def apply_in_place(self, plan: Outcome) -> Outcome:
+        """Write the plan of ``plan_in_place`` (torque off first, IDs, then rates, the EEPROM
+        locked again last), then verify every joint at its new ID and rate."""
+        done = Outcome("in place", False, [dict(r) for r in plan.joints], plan.steps)
+        for bus in self.buses:
+            rows = [r for r in done.joints if r["block"] == bus.block and r["from"]]
+            steps = [s for s in plan.steps if s["joint"] in {r["joint"] for r in rows}]
+            self._apply_bus(bus, rows, steps)
+        done.bus_seconds = self.bus_seconds
+        return done
+
+    def _apply_bus(self, bus: Bus, rows: list[dict[str, Any]],
+                   steps: list[dict[str, Any]]) -> None:
+        by_joint = {w.joint: w for w in bus.wanted}
+        addressers = {r["joint"]: self._addresser(bus, r["from"]["protocol"]) for r in rows}
+        with self._port(bus.url) as port:
+            for step in steps:
+                port.baudrate = step["at_baud"]
+                _run_step(port, addressers[step["joint"]], step)
+            for row in rows:
+                w = by_joint[row["joint"]]
+                port.baudrate = w.baud
+                if any(s["joint"] == w.joint for s in steps):
+                    addressers[w.joint].finish(port, w.id)
+                model = addressers[w.joint].identify(port, w.id)
+                _verified(row, w, model, row["from"]["model"])
+
+
+# -- helpers: the buses ----------------------------------------------------------------------
+
+def _servo_buses(profile: Any, buses: Mapping[str, str], hardware: Sequence[str]) -> list[Bus]:
+    from deltoctl.core.system import select_blocks
+
+    out = []
+    for hw in select_blocks(profile, list(hardware)):
+        family = registry.of_block(profile.family_of(hw), hw.plugin)
+        addressing = family.addressing() if family is not None else None
+        if addressing is None:
+            continue
+        name = hw.bus or hw.name
+        url = buses.get(name) or profile.buses.get(name)
+        if not url:
+            raise InvalidInput(f"{hw.name}: no target for bus {name!r}",
+                               hint=f"give one: -t {name}=serial:///dev/ttyUSB0?baud=1000000")
+        wanted = addressing.wanted(profile, hw, profile.buses.get(name) or url)
+        out.append(Bus(hw.name, name, family, url, addressing, wanted))
+    return out
+
+
+def _alone(joint: str, found: list[dict[str, Any]]) -> None:
+    """Refused (nothing written) unless one servo answered, cleanly."""
+    colliding = [s for s in found if s["colliding"]]
+    if colliding:
+        raise Refused(_collision(joint, colliding) + ": nothing was written",
+                      f"connect {joint}'s servo alone (the others unplugged), then run setup "
+                      f"{joint} again")
+    if len(found) > 1:
+        ids = ", ".join(f"ID {s['id']} ({s['model']})" for s in found)
+        raise Refused(f"{joint}: several servos answer ({ids}): nothing was written",
+                      f"connect {joint}'s servo alone, then run setup {joint} again")
+
+
+def _collision(where: str, colliding: list[dict[str, Any]]) -> str:
+    at = sorted({f"ID {s['id']}" if s["id"] is not None else "an unknown ID" for s in colliding})
+    first = colliding[0]
+    return (f"{where}: several servos answer at {', '.join(at)} ({first['protocol']}, "
+            f"{first['baud']} baud): their replies collide")
+
+
+def _check_reset(bus: Bus, addresser: Addresser, option: str) -> None:
+    if not addresser.reset_options:
+        raise InvalidInput(f"{bus.block}: {bus.addressing.no_reset or 'no factory reset'}")
+    if option not in addresser.reset_options:
+        raise InvalidInput(f"{bus.block}: {addresser.protocol} factory reset takes "
+                           f"{', '.join(addresser.reset_options)}, not {option!r}")
+
+
+def _row(w: Wanted, servo: dict[str, Any] | None, status: str) -> dict[str, Any]:
+    found = None if servo is None else {k: servo[k] for k in ("id", "baud", "protocol",
+                                                                "model")}
+    return {"joint": w.joint, "block": w.block, "from": found,
+            "to": {"id": w.id, "baud": w.baud, "protocol": w.protocol, "model": w.model},
+            "status": status, "verified": False}
+
+
+def _one_steps(w: Wanted, servo: dict[str, Any], reset: str | None) -> list[dict[str, Any]]:
+    at_id, at_baud = servo["id"], servo["baud"]
+    steps = [_step(w.joint, "factory reset", at_id, at_baud, reset)] if reset else []
+    if reset or servo["id"] != w.id or servo["baud"] != w.baud:
+        steps.append(_step(w.joint, "torque off", at_id, at_baud))
+    if reset or servo["id"] != w.id:
+        steps.append(_step(w.joint, "id", at_id, at_baud, w.id))
+    if reset or servo["baud"] != w.baud:
+        steps.append(_step(w.joint, "baud", w.id, at_baud, w.baud))
+    return steps
+
+
+def _address(port: Any, addresser: Addresser, at_id: int, at_baud: int, w: Wanted) -> None:
+    """Torque off, ID, rate, EEPROM locked: the servo at (at_id, at_baud) to (w.id, w.baud)."""
+    if (at_id, at_baud) == (w.id, w.baud):
+        return
+    addresser.prepare(port, at_id)
+    if at_id != w.id:
+        addresser.write_id(port, at_id, w.id)
+    if at_baud != w.baud:
+        addresser.write_baud(port, w.id, w.baud)
+        port.baudrate = w.baud
+    addresser.finish(port, w.id)
+
+
+def _verified(row: dict[str, Any], w: Wanted, model: str | None, was: str) -> None:
+    """The row marked verified, or DeviceError when the servo does not answer at its new ID
+    and rate as the model it was."""
+    if model is None:
+        raise DeviceError(f"{w.joint}: no answer at ID {w.id}, {w.baud} baud after the writes",
+                          hint=f"scan the bus (deltoctl scan) to see where it went, then run "
+                               f"setup {w.joint} again with it alone")
+    if model != was:
+        raise DeviceError(f"{w.joint}: a {model} answers at ID {w.id}, {w.baud} baud, not "
+                          f"the {was} written to")
+    row["status"] = "set" if (row["from"]["id"], row["from"]["baud"]) != (w.id, w.baud) \
+        else "already set"
+    row["verified"] = True
+
+
+# -- helpers: in place -----------------------------------------------------------------------
+
+def _match(bus: Bus, found: list[dict[str, Any]], mapping: dict[int, str]
+           ) -> tuple[list[tuple[dict[str, Any], Wanted]], list[Wanted]]:
+    """Found servos paired with the block's joints: as ``mapping`` says, then at the joint's
+    ID with its model, then the only one of a model; ambiguity is InvalidInput (--map), a servo
+    that is no joint's or of another model is Refused."""
+    by_id = {s["id"]: s for s in found}
+    pairs = _mapped(bus, by_id, mapping)
+    left = [w for w in bus.wanted if w not in pairs.values()]
+    for w in list(left):
+        servo = by_id.get(w.id)
+        if servo is not None and w.id not in pairs and servo["model"] == w.model:
+            pairs[w.id] = w
+            left.remove(w)
+    _by_model(bus, found, pairs, left)
+    for device_id, w in pairs.items():
+        _same_model(w, by_id[device_id])
+    return [(by_id[i], w) for i, w in pairs.items()], [w for w in bus.wanted
+                                                        if w not in pairs.values()]
+
+
+def _mapped(bus: Bus, by_id: dict[int, dict[str, Any]], mapping: dict[int, str]
+            ) -> dict[int, Wanted]:
+    """The pairs ``--map`` gives for this block's joints; an ID where none answers is
+    InvalidInput."""
+    joints = {w.joint: w for w in bus.wanted}
+    pairs: dict[int, Wanted] = {}
+    for device_id, joint in mapping.items():
+        if joint not in joints:
+            continue
+        if device_id not in by_id:
+            raise InvalidInput(f"--map {device_id}={joint}: no servo answers at ID {device_id}"
+                               f" on {bus.url}")
+        pairs[device_id] = joints[joint]
+    return pairs
+
+
+def _same_model(w: Wanted, servo: dict[str, Any]) -> None:
+    if (w.model and servo["model"] != w.model) or servo["protocol"] != w.protocol:
+        raise Refused(f"{w.joint}: the servo at ID {servo['id']} is a {servo['model']} "
+                      f"({servo['protocol']}); the profile says a {w.model or 'servo'} "
+                      f"({w.protocol}): nothing was written")
+
+
+def _by_model(bus: Bus, found: list[dict[str, Any]], pairs: dict[int, Wanted],
+              left: list[Wanted]) -> None:
+    """The rest paired by model: one servo and one joint of a model go together."""
+    loose = [s for s in found if s["id"] not in pairs]
+    for model in sorted({s["model"] for s in loose}):
+        servos = [s for s in loose if s["model"] == model]
+        joints = [w for w in left if w.model in (model, "")]
+        if len(servos) == 1 and len(joints) == 1:
+            pairs[servos[0]["id"]] = joints[0]
+            left.remove(joints[0])
+        elif servos and joints:
+            ids = ", ".join(str(s["id"]) for s in servos)
+            raise InvalidInput(f"{bus.block}: {model} servos at IDs {ids} could be any of "
+                               f"{', '.join(w.joint for w in joints)}",
+                               hint="say which with --map ID=JOINT (repeatable)")
+        else:
+            ids = ", ".join(str(s["id"]) for s in servos)
+            raise Refused(f"{bus.block}: the {model} at ID {ids} is no joint of the profile: "
+                          "setup does not write to it; nothing was written",
+                          "disconnect it, or --map ID=JOINT if it is one")
+
+
+def _ordered_steps(bus: Bus, found: list[dict[str, Any]],
+                   matched: list[tuple[dict[str, Any], Wanted]]) -> list[dict[str, Any]]:
+    """Torque off, then the ID changes in an order where no two servos share an ID (a
+    temporary free ID breaks a cycle), then the rates at the new IDs."""
+    occupied = {s["id"] for s in found}
+    moving = {s["id"]: (s, w) for s, w in matched if (s["id"], s["baud"]) != (w.id, w.baud)}
+    pending = {i: w.id for i, (s, w) in moving.items() if i != w.id}
+    for i, target in pending.items():
+        if target in occupied and target not in pending:
+            raise Refused(f"{bus.block}: ID {target}, {moving[i][1].joint}'s, is held by a "
+                          "servo that stays: nothing was written")
+    steps = [_step(w.joint, "torque off", i, s["baud"]) for i, (s, w) in moving.items()]
+    baud_of = {i: s["baud"] for i, (s, _) in moving.items()}
+    joint_of = {i: w.joint for i, (_, w) in moving.items()}
+    while pending:
+        ready = [i for i, t in pending.items() if t not in occupied]
+        start = ready[0] if ready else next(iter(pending))
+        target = pending[start] if ready else _free_id(bus, occupied)
+        steps.append(_step(joint_of[start], "id", start, baud_of[start], target))
+        occupied.discard(start)
+        occupied.add(target)
+        baud_of[target], joint_of[target] = baud_of.pop(start), joint_of.pop(start)
+        final = pending.pop(start)
+        if target != final:
+            pending[target] = final
+    steps += [_step(w.joint, "baud", w.id, s["baud"], w.baud) for s, w in moving.values()
+              if s["baud"] != w.baud]
+    return steps
+
+
+def _free_id(bus: Bus, occupied: set[int]) -> int:
+    """A temporary ID no servo holds and no joint wants: the highest of the family's range."""
+    low, high = bus.family.address_range or (0, 252)
+    wanted = {w.id for w in bus.wanted}
+    return next(i for i in range(min(high, 252), low, -1)
+                if i not in occupied and i not in wanted)
+
+
+def _run_step(port: Any, addresser: Addresser, step: dict[str, Any]) -> None:
+    action, at = step["action"], step["at_id"]
+    if action == "torque off":
+        addresser.prepare(port, at)
+    elif action == "id":
+        addresser.write_id(port, at, step["value"])
+    elif action == "baud":
+        addresser.write_baud(port, at, step["value"])
+
+
+# -- opening ---------------------------------------------------------------------------------
+
+def target_map(profile: Any, targets: Sequence[str]) -> dict[str, str]:
+    """``BUS=URL`` items (or one URL, for a profile of one bus) → {bus: URL}."""
+    out: dict[str, str] = {}
+    for item in targets:
+        bus, sep, url = item.partition("=")
+        if sep and (bus in profile.buses or "://" not in bus):
+            out[bus] = url
+        elif len(profile.buses) == 1:
+            out[next(iter(profile.buses))] = item
+        else:
+            raise InvalidInput(f"target {item!r}: name its bus, BUS=URL (buses: "
+                               f"{', '.join(profile.buses)})")
+    return out
+
+
+@contextlib.contextmanager
+def open_setup(profile: Any, targets: Sequence[str] = (), *,
+               sim: bool | Mapping[str, Any] = False, hardware: Sequence[str] = (),
+               reuse: bool = False, notice: Callable[[str], None] | None = None,
+               warn: Callable[[str], None] | None = None, wait: float = WAIT) -> Iterator[Setup]:
+    """The profile's servo buses ready for setup: at ``targets``, or with ``sim`` on
+    simulators this process serves (their control lines then connect each part) or, with
+    ``reuse``, on the ``sim serve`` of this profile running for the user."""
+    from deltoctl.app.robot import load, serve_simulators
+    from deltoctl.sim import running
+    from deltoctl.sim.controls import Controls
+
+    prof = load(profile)
+    buses = target_map(prof, targets)
+    faults = sim if isinstance(sim, Mapping) else {}
+    found = running.find(prof, faults, hardware, warn or _quiet) if sim and reuse else None
+    controls = None
+    with contextlib.ExitStack() as stack:
+        if found is not None:
+            (notice or _quiet)(f"using {found.name} of {found.profile}; --sim-fresh starts "
+                               "one of its own")
+            buses.update(target_map(prof, found.targets))
+        elif sim:
+            controls = Controls()
+            blocks = [hw.name for hw in prof.hardware if not hardware or hw.name in hardware]
+            buses.update(serve_simulators(stack, prof, blocks, faults, controls))
+        yield Setup(prof, buses, hardware, controls, wait)
+
+
+def _quiet(message: str) -> None:
+    pass
+
+
+def reset_allowed(option: str | None, allow: Sequence[str]) -> None:
+    """A factory reset is written only with --allow factory-reset (Refused else)."""
+    if option is not None and FACTORY_RESET not in allow:
+        raise Refused(f"a factory reset ({option}) erases the servo's settings: not without "
+                      f"--allow {FACTORY_RESET}", f"pass --allow {FACTORY_RESET} to reset it")
+    unknown = [a for a in allow if a != FACTORY_RESET]
+    if unknown:
+        raise InvalidInput(f"--allow {unknown[0]!r}: setup permits only {FACTORY_RESET}")
+
+
+def parse_map(items: Sequence[str]) -> dict[int, str]:
+    """``ID=JOINT`` items → {ID: joint}; another form is InvalidInput naming it."""
+    out: dict[int, str] = {}
+    for item in items:
+        text, sep, joint = item.partition("=")
+        if not sep or not text.strip().isdigit() or not joint.strip():
+            raise InvalidInput(f"--map {item!r}: expected ID=JOINT, e.g. --map 3=elbow_flex")
+        if int(text) in out:
+            raise InvalidInput(f"--map: ID {int(text)} is mapped twice")
+        out[int(text)] = joint.strip()
+    return out
