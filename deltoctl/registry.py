@@ -236,6 +236,9 @@ class Family:
     # "module:function" () → its deltoctl.servo.scan.Probe's: how `deltoctl scan` finds its
     # devices on a serial link at an unknown rate and protocol
     scan: str | None = None
+    # "module:function" (url, wait, every) → a `deltoctl scan` result: how it finds its devices
+    # on a link of one of its schemes (a CAN bus), as deltoctl.app.scan.scan reports them
+    link_scan: str | None = None
 
     def __post_init__(self) -> None:
         unknown = self.capabilities - CAPABILITIES.keys()
@@ -277,6 +280,10 @@ class Family:
 
     def scan_probes(self) -> list[Any]:
         return list(_load(self.scan)()) if self.scan else []
+
+    def link_scanner(self, scheme: str) -> Callable[..., dict[str, Any]] | None:
+        """Its scan of a link of this scheme, if it has one."""
+        return _load(self.link_scan) if self.link_scan and scheme in self.schemes else None
 
     def show_address(self, address: int) -> str:
         return format(address, self.address_format)

@@ -16,6 +16,7 @@ FAMILY = Family(
     driver="deltoctl_canopen.driver:CanopenDriver",
     frame_names="deltoctl_canopen.codec:frame_name",
     emulator="deltoctl_canopen.emulator:serve",
+    link_scan="deltoctl_canopen.scan:scan_link",
     plugins=("canopen_ros2_control/Cia402System",),
     schemes=("can",),
     address_range=(1, 127),

@@ -505,7 +505,7 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
     """Every CANopen block's drives on one hub per bus: ``{bus: can://localhub/…}``; with
     ``factory_new``, each drive unconfigured (LSS gives it its node ID). The control lines
     ``connect`` and ``disconnect`` power a joint's drive on and off."""
-    from deltoctl_canopen.nodes import block_nodes, joint_serial
+    from deltoctl_canopen.nodes import block_nodes, bus_bitrate, joint_serial
 
     o = ctx.options
     named = {option: {j.name for hw in blocks for j in ctx.named(option, hw)}
@@ -529,21 +529,11 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
     buses, served = {}, []
     for name, parts in by_bus.items():
         bus = ctx.stack.enter_context(start_bus({}, host=_loopback(o.host), parts=parts,
-                                                bitrate=_bus_rate(ctx, name)))
+                                                bitrate=bus_bitrate(ctx.profile, name)))
         buses[name] = bus.url
         served.append(bus)
     _controls(ctx, served)
     return buses
-
-
-def _bus_rate(ctx: ServeContext, bus: str) -> int:
-    from deltoctl.errors import DeltoctlError
-
-    from deltoctl_canopen.transport import DEFAULT_BITRATE, parse_can_url
-
-    with contextlib.suppress(DeltoctlError):
-        return parse_can_url(ctx.profile.buses.get(bus, "")).bitrate
-    return DEFAULT_BITRATE
 
 
 def _controls(ctx: ServeContext, buses: list[EmulatedBus]) -> None:

@@ -226,7 +226,7 @@ def _select_the_only_one(lss: Any) -> None:
     drives, and nothing is configured."""
     lss.send_switch_state_global(lss.CONFIGURATION_STATE)
     lss.inquire_lss_address(_INQUIRE_SERIAL)
-    time.sleep(0.05)  # a second drive's reply, if any
+    time.sleep(0.1)  # a second drive's reply, if any
     if not lss.responses.empty():
         lss.send_switch_state_global(lss.WAITING_STATE)
         raise DeviceError("several LSS drives answer: a node ID is given to one drive at a "
@@ -259,18 +259,9 @@ class Step:
 
 def plan(profile: Profile, hw: Hardware) -> list[Step]:
     """The steps of a CANopen block, in the profile's order of its joints."""
-    from deltoctl.errors import DeltoctlError
+    from deltoctl_canopen.nodes import block_nodes, bus_bitrate, joint_serial
 
-    from deltoctl_canopen.nodes import block_nodes, joint_serial
-    from deltoctl_canopen.transport import DEFAULT_BITRATE, parse_can_url
-
-    bitrate = DEFAULT_BITRATE
-    url = profile.buses.get(hw.bus or "")
-    if url:
-        try:
-            bitrate = parse_can_url(url).bitrate
-        except DeltoctlError:
-            pass  # a bus the command line points elsewhere: the default rate
+    bitrate = bus_bitrate(profile, hw.bus or hw.name)
     joints = {j.name: j for j in hw.joints}
     return [Step(joint, node.node_id, bitrate, joint_serial(profile, joints[joint]))
             for joint, node in block_nodes(profile, hw).items()]

@@ -167,3 +167,16 @@ def joint_serial(profile: Profile, joint: Component) -> int | None:
         raise ProfileError(f"{joint.name}: {SERIAL_PARAM} must be a 32-bit serial number "
                            f"(1234 or 0x4D2), got {text!r}", profile.source, joint.line)
     return value
+
+
+def bus_bitrate(profile: Profile, bus: str) -> int:
+    """The bit rate of the profile's bus (its URL's), the default one when it gives none."""
+    import contextlib
+
+    from deltoctl.errors import DeltoctlError
+
+    from deltoctl_canopen.transport import DEFAULT_BITRATE, parse_can_url
+
+    with contextlib.suppress(DeltoctlError):
+        return parse_can_url(profile.buses.get(bus, "")).bitrate
+    return DEFAULT_BITRATE
