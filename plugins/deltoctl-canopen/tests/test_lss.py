@@ -175,3 +175,28 @@ def test_scan_of_an_empty_bus_is_unreachable(cli):
     assert result.exit_code == 4 and "nothing answers on can://localhub/" in result.stderr
     result = cli("scan", "can://localhub/10.0.0.1:5")
     assert result.exit_code == 2 and "loopback" in result.stderr
+
+
+def test_sim_serve_factory_new_and_its_control_lines(cli):
+    import subprocess
+
+    from conftest import DELTOCTL
+
+    proc = subprocess.Popen([*DELTOCTL, "sim", "serve", str(PROFILE), "--factory-new", "--json"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        served = json.loads(proc.stdout.readline())
+        assert served["controls"] == ["connect", "disconnect"]
+        proc.stdin.write("disconnect axis_2\n")
+        proc.stdin.flush()
+        assert json.loads(proc.stdout.readline())["reply"] == "canopen: axis_2 disconnected"
+        result = cli("--json", "scan", served["endpoint"])
+        assert result.exit_code == 0, result.output + result.stderr
+        [drive] = json.loads(result.stdout)["result"]["servos"]
+        assert drive["id"] is None and drive["identity"]["serial"] == \
+            served["blocks"]["axes"]["lss_serials"]["axis_1"]
+    finally:
+        proc.terminate()
+        proc.wait(5)
+    result = cli("-p", PROFILE, "--sim", "--sim-option", "factory_new", "identify")
+    assert result.exit_code == 4  # no node ID yet: nothing answers SDO
