@@ -10,6 +10,11 @@ change (254/255), in OPERATIONAL only. A node can be missing, report another pro
 (its following error faults it: EMCY 0x8611) or fall silent after a while (no heartbeat,
 no reply).
 
+Each drive is an LSS slave too (``session.LssSlave``, CiA 305), its LSS address its EDS's
+identity with a serial of its own: served factory-new it has no node ID, and is a CANopen node
+only once LSS gives it one. A drive can be connected and disconnected while served (power on:
+it comes up at the node ID it stored).
+
 The nodes of a bus and deltoctl meet on a ``HubServer`` (loopback only): ``--sim`` serves it in
 the command's process, ``deltoctl sim serve`` in a process of its own.
 """
@@ -19,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -478,7 +484,8 @@ def _bit_timing(bitrate: int) -> int:
 
 
 def start_bus(nodes: dict[int, tuple[Path, NodeFaults]], host: str = "127.0.0.1",
-              port: int = 0, parts: list[Part] = (), bitrate: int = 1_000_000) -> EmulatedBus:
+              port: int = 0, parts: Sequence[Part] = (),
+              bitrate: int = 1_000_000) -> EmulatedBus:
     """A hub on loopback, a drive for each node ID (EDS file, faults) and each of ``parts``;
     started."""
     import canopen
@@ -512,7 +519,7 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
              for option in ("missing", "stall", "drive_fault", "heartbeat_stops")}
     by_bus: dict[str, list[Part]] = {}
     for hw in blocks:
-        parts = by_bus.setdefault(hw.bus or hw.name, [])
+        parts: list[Part] = []
         joints = {j.name: j for j in hw.joints}
         for joint, node in block_nodes(ctx.profile, hw).items():
             if joint in named["missing"]:
@@ -526,9 +533,10 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
                                  joint_serial(ctx.profile, joints[joint])))
         ctx.blocks[hw.name] = {"nodes": sorted(p.node for p in parts if p.node != UNCONFIGURED),
                                "lss_serials": {p.name: p.identity[3] for p in parts}}
+        by_bus.setdefault(hw.bus or hw.name, []).extend(parts)
     buses, served = {}, []
-    for name, parts in by_bus.items():
-        bus = ctx.stack.enter_context(start_bus({}, host=_loopback(o.host), parts=parts,
+    for name, on_bus in by_bus.items():
+        bus = ctx.stack.enter_context(start_bus({}, host=_loopback(o.host), parts=on_bus,
                                                 bitrate=bus_bitrate(ctx.profile, name)))
         buses[name] = bus.url
         served.append(bus)

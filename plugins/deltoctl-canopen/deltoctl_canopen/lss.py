@@ -1,7 +1,8 @@
 """Layer setting services (CiA 305) on a CAN bus, through canopen's ``LssMaster``: the drives
 that have no node ID yet (``find_unconfigured``), a node ID and bit rate given to one and stored
 (``assign``), what answers at node IDs (``configured_nodes``), and the plan a profile makes of
-them (``plan``, ``apply``). Each takes a connected ``canopen.Network``; none prompts or prints.
+them (``plan``, ``apply``). Each takes a connected ``canopen.Network`` (``network_at(url)``);
+none prompts or prints.
 
 canopen's ``fast_scan`` finds the unconfigured drive of lowest LSS address and leaves it in the
 configuration state, where a fast scan no longer reaches it: scanning again finds the next one,
@@ -13,8 +14,10 @@ comes back empty-handed (a reply missed under load is told from no drive left).
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -51,6 +54,22 @@ class Identity:
     def __str__(self) -> str:
         return (f"vendor {self.vendor:#010x} product {self.product:#010x} "
                 f"revision {self.revision:#010x} serial {self.serial:#010x}")
+
+
+@contextlib.contextmanager
+def network_at(url: str) -> Iterator[Any]:
+    """canopen's network on the CAN target ``url`` (``can://INTERFACE/CHANNEL``), connected;
+    a bus that does not open is Unreachable."""
+    import canopen
+
+    from deltoctl_canopen.transport import open_bus, parse_can_url
+
+    network = canopen.Network(open_bus(parse_can_url(url)))
+    network.connect()
+    try:
+        yield network
+    finally:
+        network.disconnect()
 
 
 def bit_timing(bitrate: int) -> int:

@@ -18,22 +18,17 @@ MIN_WAIT = 0.05  # s: what an SDO reply takes on any bus, at least, to be waited
 
 
 def scan_link(url: str, wait: float = MIN_WAIT, every: bool = False) -> dict[str, Any]:
-    """What answers on the CAN bus ``url``, as ``deltoctl scan`` reports it."""
-    import canopen
-
+    """What answers on the CAN bus ``url``, as ``deltoctl scan`` reports it (both searches
+    run whatever ``every`` says: neither stops at a first node)."""
     from deltoctl_canopen import lss
-    from deltoctl_canopen.transport import open_bus, parse_can_url
+    from deltoctl_canopen.transport import parse_can_url
 
     target = parse_can_url(url)
-    network = canopen.Network(open_bus(target))
-    network.connect()
-    start = time.perf_counter()
-    try:
+    with lss.network_at(url) as network:
+        start = time.perf_counter()
         nodes = lss.configured_nodes(network, max(wait, MIN_WAIT), target.bitrate)
         unconfigured = lss.find_unconfigured(network, wait=max(wait, lss.FIND_WAIT))
-    finally:
         seconds = time.perf_counter() - start
-        network.disconnect()
     found = [_node(n, info, target.bitrate) for n, info in nodes.items()] + \
         [_unconfigured(i, target.bitrate) for i in unconfigured]
     if not found:

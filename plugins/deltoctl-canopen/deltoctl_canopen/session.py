@@ -6,8 +6,10 @@ time, each reply matched to its node's open request by index and subindex, segme
 toggle bit. A node's abort is a ``DeviceFault`` carrying the abort code; a reply nobody asked
 for, one about another object or a segment out of turn is a ``ProtocolError``. NMT commands,
 boot-up and heartbeat, node guarding, SYNC and PDO frames are named here too, so the driver
-and the emulator read the bus alike. No sockets, no clocks: the caller sends what an event
-says to send and keeps its own time.
+and the emulator read the bus alike. A node's LSS slave (CiA 305: switch state, node ID and
+bit timing configured and stored, inquiries, identify, fast scan) answers the LSS master, which
+is canopen's ``LssMaster``. No sockets, no clocks: the caller sends what an event says to send
+and keeps its own time.
 """
 
 from __future__ import annotations
