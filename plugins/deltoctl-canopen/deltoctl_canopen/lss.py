@@ -311,3 +311,16 @@ def apply(network: Any, step: Step) -> dict[str, Any]:
                                "drive's serial (lss_serial param)")
     done = assign(network, chosen[0], step.node_id, step.bitrate)
     return {"joint": step.joint, "done": "assigned", **done}
+
+
+def setup(url: str, profile: Profile, hw: Hardware,
+          joints: tuple[str, ...] | list[str] = ()) -> list[dict[str, Any]]:
+    """The plan's steps (of ``joints`` only, when given) applied on the CAN bus ``url``, in
+    the profile's order; what each did."""
+    steps = plan(profile, hw)
+    unknown = sorted(set(joints) - {s.joint for s in steps})
+    if unknown:
+        raise InvalidInput(f"{', '.join(unknown)}: no CANopen drive of {hw.name} "
+                           f"(its joints: {', '.join(s.joint for s in steps)})")
+    with network_at(url) as network:
+        return [apply(network, s) for s in steps if not joints or s.joint in joints]

@@ -69,7 +69,7 @@ def test_from_the_box_to_identify_one_drive_at_a_time(box, cli):
     done = []
     for step in served.steps():
         served.controls.run(f"connect {step.joint}")
-        done.append(lss.apply(served.network, step))
+        done += lss.setup(served.url, served.profile, served.profile.hardware[0], [step.joint])
     assert [(d["joint"], d["node_id"], d["done"]) for d in done] == \
         [("axis_1", 2, "assigned"), ("axis_2", 3, "assigned")]
     assert serial_at(served.network, 2) == served.serials["axis_1"]
@@ -149,6 +149,8 @@ def test_bad_serial_param_and_bad_control_lines(box, variant):
         served.controls.run("connect axis_9")
     with pytest.raises(InvalidInput, match="LSS sets no bit rate"):
         lss.assign(served.network, None, 5, bitrate=33_000)
+    with pytest.raises(InvalidInput, match="axis_9: no CANopen drive of axes"):
+        lss.setup(served.url, served.profile, served.profile.hardware[0], ["axis_9"])
 
 
 def test_scan_lists_nodes_and_drives_without_a_node_id(box, cli):
