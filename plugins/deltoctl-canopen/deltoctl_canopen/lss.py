@@ -121,7 +121,7 @@ def find_unconfigured(network: Any, timeout: float = FAST_TIMEOUT,
             if not ok and timeout < own:
                 lss.RESPONSE_TIMEOUT = own
                 ok, parts = lss.fast_scan()
-            if not ok:
+            if not ok or Identity(*parts) in found:
                 break
             found.append(Identity(*parts))
     finally:
@@ -233,11 +233,13 @@ def _select(lss: Any, identity: Identity) -> None:
     from canopen.lss import LssError
 
     try:
-        lss.send_switch_state_selective(*identity.parts)
+        selected = lss.send_switch_state_selective(*identity.parts)
     except LssError:
+        selected = False
+    if not selected:
         raise NoAnswer(f"no drive answers at LSS address {identity}",
                        hint="check that it is connected and powered (deltoctl scan lists "
-                            "the drives without a node ID)") from None
+                            "the drives without a node ID)")
 
 
 def _select_the_only_one(lss: Any) -> None:

@@ -111,6 +111,8 @@ def test_no_drive_connected_and_a_node_id_taken(box):
     lss.apply(served.network, served.steps()[0])
     with pytest.raises(NoAnswer, match="axis_2: no drive without a node ID answers"):
         lss.apply(served.network, served.steps()[1])
+    with pytest.raises(NoAnswer, match="no drive answers at LSS address"):
+        lss.assign(served.network, lss.Identity(0xDE7, 0x40201, 0x10002, 0x1234), 5)
     taken = lss.Step("axis_2", 2, 1_000_000, serial=0x1234)
     with pytest.raises(DeviceError, match="node 2 is taken"):
         lss.apply(served.network, taken)
