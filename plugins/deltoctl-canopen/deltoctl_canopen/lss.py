@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from deltoctl.profile.model import Hardware, Profile
 
 FAST_TIMEOUT = 0.05  # s a fast scan's query waits for a reply, before canopen's own 0.5 s
-FIND_WAIT = 0.2  # s to wait for any drive without a node ID to say so
+FIND_WAIT = 0.5  # s to wait for any drive without a node ID to say so (LssMaster's own wait)
 BOOT_WAIT = 2.0  # s a drive given a node ID has to answer an SDO read there
 MAX_DRIVES = 127
 _INQUIRE_SERIAL, _NON_CONFIGURED = 0x5D, 0x50

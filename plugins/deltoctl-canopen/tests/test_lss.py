@@ -160,14 +160,14 @@ def test_scan_lists_nodes_and_drives_without_a_node_id(box, cli):
     served.controls.run("disconnect axis_2")
     lss.apply(served.network, served.steps()[0])
     served.controls.run("connect axis_2")
-    result = cli("--json", "scan", served.url)
+    result = cli("--json", "scan", served.url, "--wait", "0.5")
     assert result.exit_code == 0, result.output + result.stderr
     found = json.loads(result.stdout)["result"]["servos"]
     assert [(f["id"], f["protocol"]) for f in found] == \
         [(2, "CANopen"), (None, "CANopen LSS (no node ID)")]
     assert found[0]["model"] == "deltoctl generic CiA 402 drive"
     assert found[1]["identity"]["serial"] == served.serials["axis_2"]
-    result = cli("scan", served.url)
+    result = cli("scan", served.url, "--wait", "0.5")
     assert "none  " in result.stdout and "2 answered on can://localhub/" in result.stdout
 
 
@@ -194,7 +194,7 @@ def test_sim_serve_factory_new_and_its_control_lines(cli):
         proc.stdin.write("disconnect axis_2\n")
         proc.stdin.flush()
         assert json.loads(proc.stdout.readline())["reply"] == "canopen: axis_2 disconnected"
-        result = cli("--json", "scan", served["endpoint"])
+        result = cli("--json", "scan", served["endpoint"], "--wait", "0.5")
         assert result.exit_code == 0, result.output + result.stderr
         [drive] = json.loads(result.stdout)["result"]["servos"]
         assert drive["id"] is None and drive["identity"]["serial"] == \
