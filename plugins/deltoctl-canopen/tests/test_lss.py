@@ -204,3 +204,15 @@ def test_sim_serve_factory_new_and_its_control_lines(cli):
         proc.wait(5)
     result = cli("-p", PROFILE, "--sim", "--sim-option", "factory_new", "identify")
     assert result.exit_code == 4  # no node ID yet: nothing answers SDO
+
+
+def test_a_stored_bit_rate_is_taken_at_the_next_power_on(box):
+    served = box()
+    served.controls.run("disconnect axis_2")
+    identity = lss.Identity(**lss.assign(served.network, None, 4, bitrate=500_000)["identity"])
+    assert serial_at(served.network, 4) == served.serials["axis_1"]  # still at 1 Mbit/s
+    served.controls.run("disconnect axis_1")
+    served.controls.run("connect axis_1")  # at 500 kbit/s now, on a bus at 1 Mbit/s
+    assert serial_at(served.network, 4) is None
+    with pytest.raises(NoAnswer):  # nor does it hear LSS
+        lss.assign(served.network, identity, 5)
