@@ -249,6 +249,9 @@ class Family:
     # "module:function" () → its deltoctl.servo.addressing.Addressing: how `deltoctl setup`
     # gives its servos the profile's IDs and rates (what each joint wants, and the writes)
     setup: str | None = None
+    # "module:function" (url, wait, every) → a `deltoctl scan` result: how it finds its devices
+    # on a link of one of its schemes (a CAN bus), as deltoctl.app.scan.scan reports them
+    link_scan: str | None = None
 
     def __post_init__(self) -> None:
         unknown = self.capabilities - CAPABILITIES.keys()
@@ -293,6 +296,9 @@ class Family:
 
     def addressing(self) -> Any:
         return _load(self.setup)() if self.setup else None
+    def link_scanner(self, scheme: str) -> Callable[..., dict[str, Any]] | None:
+        """Its scan of a link of this scheme, if it has one."""
+        return _load(self.link_scan) if self.link_scan and scheme in self.schemes else None
 
     def show_address(self, address: int) -> str:
         return format(address, self.address_format)

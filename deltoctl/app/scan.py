@@ -3,7 +3,9 @@ installed servo families speak, with no profile. Each family declares its probes
 descriptor's ``scan``); they run in one order: the common rates first (1 Mbps, 57,600), every
 broadcast before any per-ID sweep. Unless ``every`` is asked, the scan stops at the first
 servo found, a sweep's too (a box of parts is one servo at a time, at the factory's ID first) —
-a sweep runs only once no broadcast found one. The bus time is the time spent on the link."""
+a sweep runs only once no broadcast found one. The bus time is the time spent on the link.
+A link of another kind (a URL whose scheme a family's ``link_scan`` takes: a CAN bus) is
+that family's to scan, reported alike."""
 
 from __future__ import annotations
 
@@ -24,8 +26,22 @@ def target_of(port_or_url: str) -> str:
     if url.startswith("usb:") or url.startswith("serial:"):
         parse_serial_url(url)
         return url
-    raise InvalidInput(f"{port_or_url!r} is not a serial link: scan takes a port "
-                       "(/dev/ttyUSB0) or a serial:// or usb: target")
+    others = sorted({f"{scheme}://" for f in registry.families().values() if f.link_scan
+                     for scheme in f.schemes})
+    raise InvalidInput(f"{port_or_url!r} is not a link scan takes: a port (/dev/ttyUSB0), a "
+                       f"serial:// or usb: target{''.join(', ' + o for o in others)}")
+
+
+def link_scanner(port_or_url: str) -> Any:
+    """The scan of the family whose link the URL names (its scheme), or None."""
+    scheme, sep, _ = port_or_url.partition("://")
+    if not sep:
+        return None
+    for family in registry.families().values():
+        found = family.link_scanner(scheme)
+        if found is not None:
+            return found
+    return None
 
 
 def ordered(probes: list[Any]) -> list[Any]:
@@ -42,6 +58,9 @@ def scan(port_or_url: str, wait: float = 0.01, every: bool = False) -> dict[str,
     run, the rates the adapter refused, the bus time (s)."""
     from deltoctl.transport.serial_port import open_serial
 
+    other = link_scanner(port_or_url)
+    if other is not None:
+        return other(port_or_url, wait, every)
     url = target_of(port_or_url)
     probes = all_probes()
     port = open_serial(url, timeout=0.002)

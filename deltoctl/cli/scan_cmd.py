@@ -16,7 +16,8 @@ def register(app: typer.Typer) -> None:
 
 
 def scan(ctx: typer.Context, link: Annotated[str, typer.Argument(
-             help="A serial port or serial:// / usb: target.")],
+             help="A serial port, a serial:// / usb: target, or a link URL "
+                  "an installed family scans (its scheme).")],
          wait: Annotated[float, typer.Option("--wait", min=0.001, max=1.0,
                                              help="Seconds to wait for a reply.")] = 0.01,
          every: Annotated[bool, typer.Option(
@@ -25,7 +26,8 @@ def scan(ctx: typer.Context, link: Annotated[str, typer.Argument(
     """Find the servos on a link at any baud rate and protocol the installed families speak.
 
     Broadcasts at the common rates first, then per-ID sweeps; a table of what answers (ID,
-    model, firmware, baud, protocol) and the bus time the scan took."""
+    model, firmware, baud, protocol) and the bus time the scan took. A link of another kind
+    (a CAN bus) is scanned by its family: its nodes, and its parts that have no ID yet."""
     from deltoctl.app.scan import scan as run
     from deltoctl.render.scan import collision_lines, scan_parts
 

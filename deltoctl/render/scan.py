@@ -14,8 +14,7 @@ def scan_parts(result: dict[str, Any]) -> list[str | tuple]:
     servos = result["servos"]
     parts: list[str | tuple] = []
     if servos:
-        rows = [["?" if s["id"] is None else s["id"], _model(s), s["firmware"], s["baud"],
-                 s["protocol"]] for s in servos]
+        rows = [[_id(s), _model(s), s["firmware"], s["baud"], s["protocol"]] for s in servos]
         parts.append((None, COLUMNS, rows))
     tried = f"{result['probes']} of {result['of']} probes"
     parts.append(f"{len(servos) or 'nothing'} answered on {result['target']} ({tried}, "
@@ -24,6 +23,13 @@ def scan_parts(result: dict[str, Any]) -> list[str | tuple]:
         parts.append("the adapter refused " + ", ".join(map(str, result["refused_bauds"]))
                      + " baud: not scanned")
     return parts
+
+
+def _id(part: dict[str, Any]) -> Any:
+    """A part's ID; "?" for garbled replies, "none" for a part that has none yet."""
+    if part["id"] is None:
+        return "?" if part["colliding"] else "none"
+    return part["id"]
 
 
 def _model(servo: dict[str, Any]) -> str:

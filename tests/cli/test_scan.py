@@ -120,3 +120,25 @@ def test_a_port_that_is_not_there_is_unreachable(cli, tmp_path):
     result = cli("scan", str(tmp_path / "ttyUSB9"))
     assert result.exit_code == 4
     assert "cannot open" in result.stderr
+
+
+def link_scan(url, wait, every):
+    """A family's scan of a link of its own scheme (test_a_family_scans_a_link_of_its_scheme)."""
+    part = {"id": None, "model": "part", "firmware": "", "baud": 0, "protocol": "toy",
+            "colliding": False}
+    return {"target": url, "servos": [part], "probes": 1, "of": 1, "refused_bauds": [],
+            "bus_seconds": 0.0, "colliding": []}
+
+
+def test_a_family_scans_a_link_of_its_scheme(cli, monkeypatch):
+    from deltoctl import registry
+
+    known = registry.families()
+    toy = registry.Family("toylink", driver="tests.toyfamily.driver:ToyDriver",
+                          schemes=("toylink",), link_scan="tests.cli.test_scan:link_scan")
+    monkeypatch.setattr(registry, "families", lambda: {**known, "toylink": toy})
+    result = cli("scan", "toylink://bus0")
+    assert result.exit_code == 0, result.output
+    assert "none  part" in result.stdout and "1 answered on toylink://bus0" in result.stdout
+    result = cli("scan", "tcp://169.254.186.72:502")
+    assert result.exit_code == 2 and "toylink://" in result.stderr

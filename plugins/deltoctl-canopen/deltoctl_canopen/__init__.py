@@ -16,6 +16,7 @@ FAMILY = Family(
     driver="deltoctl_canopen.driver:CanopenDriver",
     frame_names="deltoctl_canopen.codec:frame_name",
     emulator="deltoctl_canopen.emulator:serve",
+    link_scan="deltoctl_canopen.scan:scan_link",
     plugins=("canopen_ros2_control/Cia402System",),
     schemes=("can",),
     address_range=(1, 127),
@@ -36,6 +37,8 @@ FAMILY = Family(
                   "heartbeat, no reply) --heartbeat-stops-after seconds after start."),
         SimOption("heartbeat_stops_after", "number", "When the nodes --heartbeat-stops names "
                   "fall silent, seconds after start.", 2.0, 0, 3600),
+        SimOption("factory_new", "flag", "Drives as they leave the factory: no node ID (LSS, "
+                  "CiA 305, gives them one), each with a serial of its own.", False),
     ),
     permissions=(Permission(
         "limits", why="software position limits (0x607D) bound every move of the drive"),

@@ -5,7 +5,8 @@ its flags (extended, remote, error), the data length, three pad bytes and eight 
 ``decode`` refuses any record a CAN controller could not have sent (one ``ProtocolError``).
 
 ``describe`` names a CANopen frame by its COB-ID (CiA 301's predefined connection set) and
-decodes its payload: NMT commands, SYNC, EMCY, PDOs, SDO requests and replies, heartbeats.
+decodes its payload: NMT commands, SYNC, EMCY, PDOs, SDO requests and replies, heartbeats,
+LSS services.
 The CiA 402 statusword and controlword facts live here too, shared by driver and emulator.
 """
 
@@ -107,7 +108,7 @@ def describe(frame: Frame) -> str:
         state = NMT_STATES.get(data[0] & 0x7F, f"state {data[0]:#x}") if data else "empty"
         return f"heartbeat node {node}: {state}" if state != "boot-up" else f"boot-up node {node}"
     if cid in (0x7E4, 0x7E5):
-        return "LSS"
+        return _lss(data, reply=cid == 0x7E4)
     return f"frame {cid:#05x}"
 
 
@@ -117,6 +118,32 @@ def frame_name(record: bytes) -> str | None:
         return describe(decode(record))
     except ProtocolError:
         return None
+
+
+LSS_SERVICES = {
+    0x04: "switch state global", 0x11: "configure node ID", 0x13: "configure bit timing",
+    0x15: "activate bit timing", 0x17: "store configuration", 0x40: "switch selective vendor",
+    0x41: "switch selective product", 0x42: "switch selective revision",
+    0x43: "switch selective serial", 0x44: "switch selective done",
+    **{cs: "identify remote slave" for cs in range(0x46, 0x4C)},
+    0x4C: "identify non-configured remote slave", 0x4F: "identify slave",
+    0x50: "identify non-configured slave", 0x51: "fast scan", 0x5A: "inquire vendor",
+    0x5B: "inquire product", 0x5C: "inquire revision", 0x5D: "inquire serial",
+    0x5E: "inquire node ID"}
+
+
+def _lss(data: bytes, reply: bool) -> str:
+    """An LSS frame (CiA 305): its service, and the node ID or error a reply carries."""
+    if not data:
+        return "LSS (empty)"
+    name = LSS_SERVICES.get(data[0], f"command {data[0]:#04x}")
+    if not reply:
+        return f"LSS {name}"
+    if data[0] == 0x5E and len(data) > 1:
+        return f"LSS reply {name}: " + (f"{data[1]}" if data[1] != 0xFF else "none")
+    if data[0] in (0x11, 0x13, 0x17) and len(data) > 1:
+        return f"LSS reply {name}: " + ("ok" if data[1] == 0 else f"error {data[1]}")
+    return f"LSS reply {name}"
 
 
 def _nmt(data: bytes) -> str:

@@ -10,6 +10,11 @@ change (254/255), in OPERATIONAL only. A node can be missing, report another pro
 (its following error faults it: EMCY 0x8611) or fall silent after a while (no heartbeat,
 no reply).
 
+Each drive is an LSS slave too (``session.LssSlave``, CiA 305), its LSS address its EDS's
+identity with a serial of its own: served factory-new it has no node ID, and is a CANopen node
+only once LSS gives it one. A drive can be connected and disconnected while served (power on:
+it comes up at the node ID it stored).
+
 The nodes of a bus and deltoctl meet on a ``HubServer`` (loopback only): ``--sim`` serves it in
 the command's process, ``deltoctl sim serve`` in a process of its own.
 """
@@ -19,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -29,7 +35,7 @@ from deltoctl_canopen import (
 )
 from deltoctl_canopen.codec import Frame
 from deltoctl_canopen.drive import Drive402
-from deltoctl_canopen.session import Abort
+from deltoctl_canopen.session import UNCONFIGURED, Abort
 
 if TYPE_CHECKING:
     from deltoctl.core.emulator_contract import ServeContext
@@ -50,10 +56,12 @@ class NodeFaults:
 
 
 class EmulatedDrive:
-    def __init__(self, network: Any, node_id: int, od: Any, faults: NodeFaults) -> None:
+    def __init__(self, network: Any, node_id: int, od: Any, faults: NodeFaults,
+                 serial: int | None = None) -> None:
         from canopen import LocalNode
 
-        self.network, self.faults = network, faults
+        self.network, self.faults, self.serial = network, faults, serial
+        self.on_reset: Any = None  # called after an NMT reset communication or node
         self.lock = threading.RLock()
         self.node = LocalNode(node_id, od)
         self.silent = False
@@ -74,9 +82,23 @@ class EmulatedDrive:
         network.unsubscribe(0x000, self.node.nmt.on_command)
         for can_id in (0x000, 0x080, 0x600 + node_id):
             network.subscribe(can_id, self._on_frame)
-        if faults.product_code is not None:
-            self.node.data_store.setdefault(0x1018, {})[2] = \
-                faults.product_code.to_bytes(4, "little")
+        self._set_identity()
+
+    def _set_identity(self) -> None:
+        """0x1018 as this drive reports it: another product code (a fault), its own serial."""
+        for sub, value in ((2, self.faults.product_code), (4, self.serial)):
+            if value is not None:
+                self.node.data_store.setdefault(0x1018, {})[sub] = value.to_bytes(4, "little")
+
+    def detach(self) -> None:
+        """Off the bus for good (powered off, or restarted at another node ID)."""
+        self.silent = True
+        node_id = self.node.id
+        for can_id in (0x000, 0x080, 0x600 + node_id):
+            with contextlib.suppress(KeyError, ValueError):
+                self.network.unsubscribe(can_id, self._on_frame)
+        if self.network.nodes.get(node_id) is self.node:
+            del self.network.nodes[node_id]
 
     def _new_drive(self) -> Drive402:
         drive = Drive402(time.monotonic(), on_fault=self._emcy)
@@ -189,14 +211,14 @@ class EmulatedDrive:
     def _after_nmt(self, command: int) -> None:
         if command == 0x81:  # reset node: the application's values too
             self.node.data_store.clear()
-            if self.faults.product_code is not None:
-                self.node.data_store[0x1018] = {2: self.faults.product_code.to_bytes(4,
-                                                                                  "little")}
+            self._set_identity()
             with self.lock:
                 self.drive = self._new_drive()
         if command in session.RESETS:
             self._pdo_dirty = True
             self._heartbeat_from_od()
+            if self.on_reset is not None:
+                self.on_reset(self)
         if command == 0x01:
             self._sent.clear()
             self.send_event_pdos()
@@ -297,12 +319,56 @@ def _number_types() -> set[int]:
 
 
 @dataclass
+class Part:
+    """One drive as it sits on a bus: its joint, EDS, faults and LSS address (vendor, product
+    and revision its EDS's, its own serial), the node ID it stored (``UNCONFIGURED``: as it
+    leaves the factory), whether it is connected (powered, on the wire), and while it is, its
+    LSS slave and, once it has a node ID, its CANopen node."""
+
+    name: str
+    eds: Path
+    faults: NodeFaults
+    identity: tuple[int, int, int, int]
+    node: int = UNCONFIGURED
+    bit_timing: int = 0
+    connected: bool = True
+    lss: session.LssSlave | None = None
+    drive: EmulatedDrive | None = None
+
+
+def part_of(name: str, eds_path: Path, faults: NodeFaults, node: int = UNCONFIGURED,
+            serial: int | None = None) -> Part:
+    """A part whose LSS address is its EDS's 0x1018 (the product code a fault gives), with
+    ``serial`` (default: one of its own, from its name)."""
+    import zlib
+
+    from deltoctl_canopen import eds
+
+    od = eds.load(eds_path, 1)
+    vendor, product, revision = (_default(od, sub) for sub in (1, 2, 3))
+    if faults.product_code is not None:
+        product = faults.product_code
+    serial = zlib.crc32(name.encode()) if serial is None else serial
+    return Part(name, eds_path, faults, (vendor, product, revision, serial), node)
+
+
+def _default(od: Any, sub: int) -> int:
+    with contextlib.suppress(KeyError, TypeError, ValueError):
+        return int(od[0x1018][sub].default)
+    return 0
+
+
+@dataclass
 class EmulatedBus:
-    """One CAN bus: its hub, a network for its nodes, and their drives."""
+    """One CAN bus at ``bitrate``: its hub, a network for its nodes, and the drives on it.
+    A drive answers LSS (CiA 305) from power-on; a CANopen node once it has a node ID. The
+    LSS replies of several drives that are the same frame are one frame, as on a CAN bus."""
 
     hub: Any
     network: Any
-    drives: dict[int, EmulatedDrive] = field(default_factory=dict)
+    bitrate: int = 1_000_000
+    parts: dict[str, Part] = field(default_factory=dict)
+    lock: threading.RLock = field(default_factory=threading.RLock)
     _stop: threading.Event = field(default_factory=threading.Event)
     _thread: threading.Thread | None = None
 
@@ -310,16 +376,83 @@ class EmulatedBus:
     def url(self) -> str:
         return f"can://localhub/{self.hub.channel}"
 
+    @property
+    def drives(self) -> dict[int, EmulatedDrive]:
+        """The CANopen nodes on the bus now, by node ID."""
+        with self.lock:
+            return {p.drive.node.id: p.drive for p in self.parts.values() if p.drive}
+
+    def add(self, part: Part) -> None:
+        part.bit_timing = _bit_timing(self.bitrate)
+        self.parts[part.name] = part
+
     def _on_remote(self, msg: Any) -> None:
         """A remote frame, as python-can's notifier hands it: a node guarding request."""
         drive = self.drives.get(msg.arbitration_id - 0x700)
         if msg.is_remote_frame and not msg.is_extended_id and drive is not None:
             drive._on_frame(msg.arbitration_id, b"", remote=True)
 
+    def _on_lss(self, can_id: int, data: bytes, timestamp: float = 0.0) -> None:
+        replies: list[Frame] = []
+        with self.lock:
+            for part in self.parts.values():
+                if part.lss is None or not self._hears(part):
+                    continue
+                for event in part.lss.receive(Frame(can_id, bytes(data))):
+                    if isinstance(event, session.Send) and event.frame not in replies:
+                        replies.append(event.frame)
+                    elif isinstance(event, session.LssStart):
+                        self._start_node(part, event.node)
+                    elif isinstance(event, session.LssBitRate) and part.drive is not None:
+                        part.drive.silent = not self._hears(part)
+        for frame in replies:
+            with contextlib.suppress(Exception):  # a hub gone: the bus is closing
+                self.network.send_message(frame.can_id, frame.data)
+
+    def _hears(self, part: Part) -> bool:
+        """A drive at another bit rate than the bus's neither hears nor is heard."""
+        return part.lss is not None and \
+            session.LSS_BITRATES[part.lss.bit_timing] == self.bitrate
+
+    def _start_node(self, part: Part, node_id: int) -> None:
+        from deltoctl_canopen import eds
+
+        if part.drive is not None:
+            part.drive.detach()
+            part.drive = None
+        if node_id == UNCONFIGURED or not self._hears(part):
+            return
+        drive = EmulatedDrive(self.network, node_id, eds.load(part.eds, node_id), part.faults,
+                              serial=part.identity[3])
+        drive.on_reset = lambda d, part=part: self._after_reset(part, d)
+        part.drive = drive
+        drive.boot()
+
+    def _after_reset(self, part: Part, drive: EmulatedDrive) -> None:
+        """An NMT reset: the node ID LSS gave it (pending) becomes its own."""
+        with self.lock:
+            if part.lss is not None and part.drive is drive and \
+                    part.lss.pending != part.lss.node:
+                self._start_node(part, part.lss.reset_communication())
+
+    def connect(self, part: Part, on: bool = True) -> None:
+        """Power a drive on (it comes up at the node ID and bit timing it stored) or off."""
+        with self.lock:
+            if part.lss is not None:  # what it stored survives the power cycle
+                part.node, part.bit_timing = part.lss.stored, part.lss.stored_bit_timing
+            if part.drive is not None:
+                part.drive.detach()
+            part.lss = part.drive = None
+            part.connected = on
+            if on:
+                part.lss = session.LssSlave(part.identity, part.node, part.bit_timing)
+                self._start_node(part, part.node)
+
     def start(self) -> EmulatedBus:
         self.network.notifier.add_listener(self._on_remote)
-        for drive in self.drives.values():
-            drive.boot()
+        self.network.subscribe(session.LSS_FROM_MASTER, self._on_lss)
+        for part in self.parts.values():
+            self.connect(part, part.connected)
         self._thread = threading.Thread(target=self._run, name="canopen-drives", daemon=True)
         self._thread.start()
         return self
@@ -345,12 +478,18 @@ class EmulatedBus:
         self.close()
 
 
+def _bit_timing(bitrate: int) -> int:
+    """The LSS bit timing index of a rate (1 Mbit/s's when the table has no such rate)."""
+    return next((i for i, rate in session.LSS_BITRATES.items() if rate == bitrate), 0)
+
+
 def start_bus(nodes: dict[int, tuple[Path, NodeFaults]], host: str = "127.0.0.1",
-              port: int = 0) -> EmulatedBus:
-    """A hub on loopback and a drive for each node ID (EDS file, faults); started."""
+              port: int = 0, parts: Sequence[Part] = (),
+              bitrate: int = 1_000_000) -> EmulatedBus:
+    """A hub on loopback, a drive for each node ID (EDS file, faults) and each of ``parts``;
+    started."""
     import canopen
 
-    from deltoctl_canopen import eds
     from deltoctl_canopen.hub import HubBus, HubServer
 
     _NUMBERS.update(_number_types())
@@ -358,10 +497,11 @@ def start_bus(nodes: dict[int, tuple[Path, NodeFaults]], host: str = "127.0.0.1"
     try:
         network = canopen.Network(HubBus(channel=hub.channel))
         network.connect()
-        bus = EmulatedBus(hub, network)
+        bus = EmulatedBus(hub, network, bitrate)
         for node_id, (eds_path, faults) in nodes.items():
-            od = eds.load(eds_path, node_id)
-            bus.drives[node_id] = EmulatedDrive(network, node_id, od, faults)
+            bus.add(part_of(f"node {node_id}", eds_path, faults, node_id))
+        for part in parts:
+            bus.add(part)
         return bus.start()
     except BaseException:
         hub.close()
@@ -369,15 +509,18 @@ def start_bus(nodes: dict[int, tuple[Path, NodeFaults]], host: str = "127.0.0.1"
 
 
 def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
-    """Every CANopen block's drives on one hub per bus: ``{bus: can://localhub/…}``."""
-    from deltoctl_canopen.nodes import block_nodes
+    """Every CANopen block's drives on one hub per bus: ``{bus: can://localhub/…}``; with
+    ``factory_new``, each drive unconfigured (LSS gives it its node ID). The control lines
+    ``connect`` and ``disconnect`` power a joint's drive on and off."""
+    from deltoctl_canopen.nodes import block_nodes, bus_bitrate, joint_serial
 
     o = ctx.options
     named = {option: {j.name for hw in blocks for j in ctx.named(option, hw)}
              for option in ("missing", "stall", "drive_fault", "heartbeat_stops")}
-    by_bus: dict[str, dict[int, tuple[Path, NodeFaults]]] = {}
+    by_bus: dict[str, list[Part]] = {}
     for hw in blocks:
-        nodes = by_bus.setdefault(hw.bus or hw.name, {})
+        parts: list[Part] = []
+        joints = {j.name: j for j in hw.joints}
         for joint, node in block_nodes(ctx.profile, hw).items():
             if joint in named["missing"]:
                 continue
@@ -385,13 +528,46 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
                 product_code=o.wrong_identity, stall=joint in named["stall"],
                 silent_after=o.heartbeat_stops_after if joint in named["heartbeat_stops"]
                 else None, fault_at_start=OVER_CURRENT if joint in named["drive_fault"] else None)
-            nodes[node.node_id] = (node.dcf, faults)
-        ctx.blocks[hw.name] = {"nodes": sorted(nodes)}
-    buses = {}
-    for name, nodes in by_bus.items():
-        bus = ctx.stack.enter_context(start_bus(nodes, host=_loopback(o.host)))
+            parts.append(part_of(joint, node.dcf, faults,
+                                 UNCONFIGURED if o.factory_new else node.node_id,
+                                 joint_serial(ctx.profile, joints[joint])))
+        ctx.blocks[hw.name] = {"nodes": sorted(p.node for p in parts if p.node != UNCONFIGURED),
+                               "lss_serials": {p.name: p.identity[3] for p in parts}}
+        by_bus.setdefault(hw.bus or hw.name, []).extend(parts)
+    buses, served = {}, []
+    for name, on_bus in by_bus.items():
+        bus = ctx.stack.enter_context(start_bus({}, host=_loopback(o.host), parts=on_bus,
+                                                bitrate=bus_bitrate(ctx.profile, name)))
         buses[name] = bus.url
+        served.append(bus)
+    _controls(ctx, served)
     return buses
+
+
+def _controls(ctx: ServeContext, buses: list[EmulatedBus]) -> None:
+    """``connect JOINT|all`` and ``disconnect JOINT|all``: a drive plugged in (it powers on
+    at the node ID it stored) or pulled out, as a technician does one drive at a time."""
+    from deltoctl.errors import InvalidInput
+
+    parts = {p.name: (bus, p) for bus in buses for p in bus.parts.values()}
+
+    def switch(on: bool) -> Any:
+        def handler(words: list[str]) -> str:
+            if len(words) != 1 or (words[0] != "all" and words[0] not in parts):
+                raise InvalidInput(f"takes one joint of a CANopen drive or all "
+                                   f"({', '.join(parts)}), got {' '.join(words)!r}")
+            chosen = list(parts) if words[0] == "all" else words
+            for name in chosen:
+                bus, part = parts[name]
+                bus.connect(part, on)
+            return f"canopen: {', '.join(chosen)} {'connected' if on else 'disconnected'}"
+        return handler
+
+    if parts:
+        ctx.control("connect", "connect JOINT|all: that CANopen drive plugged in (powered on)",
+                    switch(True))
+        ctx.control("disconnect", "disconnect JOINT|all: that CANopen drive pulled out",
+                    switch(False))
 
 
 def _loopback(host: str) -> str:

@@ -147,3 +147,36 @@ def import_block(profile: Profile, hw: Hardware) -> None:
             node = _from_bus(profile, hw, joint, bus)
             if node is not None and joint.address is None:
                 joint.address = node.node_id
+
+
+SERIAL_PARAM = "lss_serial"
+
+
+def joint_serial(profile: Profile, joint: Component) -> int | None:
+    """The serial number (0x1018:4, the last part of its LSS address) of the drive the
+    joint's ``lss_serial`` param names, to tell two drives of one model apart; None without
+    one."""
+    text = joint.params.get(SERIAL_PARAM)
+    if text is None:
+        return None
+    try:
+        value = int(str(text).strip(), 0)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= 0xFFFFFFFF:
+        raise ProfileError(f"{joint.name}: {SERIAL_PARAM} must be a 32-bit serial number "
+                           f"(1234 or 0x4D2), got {text!r}", profile.source, joint.line)
+    return value
+
+
+def bus_bitrate(profile: Profile, bus: str) -> int:
+    """The bit rate of the profile's bus (its URL's), the default one when it gives none."""
+    import contextlib
+
+    from deltoctl.errors import DeltoctlError
+
+    from deltoctl_canopen.transport import DEFAULT_BITRATE, parse_can_url
+
+    with contextlib.suppress(DeltoctlError):
+        return parse_can_url(profile.buses.get(bus, "")).bitrate
+    return DEFAULT_BITRATE

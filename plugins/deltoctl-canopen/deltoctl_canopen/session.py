@@ -6,8 +6,10 @@ time, each reply matched to its node's open request by index and subindex, segme
 toggle bit. A node's abort is a ``DeviceFault`` carrying the abort code; a reply nobody asked
 for, one about another object or a segment out of turn is a ``ProtocolError``. NMT commands,
 boot-up and heartbeat, node guarding, SYNC and PDO frames are named here too, so the driver
-and the emulator read the bus alike. No sockets, no clocks: the caller sends what an event
-says to send and keeps its own time.
+and the emulator read the bus alike. A node's LSS slave (CiA 305: switch state, node ID and
+bit timing configured and stored, inquiries, identify, fast scan) answers the LSS master, which
+is canopen's ``LssMaster``. No sockets, no clocks: the caller sends what an event says to send
+and keeps its own time.
 """
 
 from __future__ import annotations
@@ -427,3 +429,158 @@ class Device:
                 raise Abort(ABORT_LENGTH)
             self._write(t.index, t.sub, bytes(t.got))
         return reply
+
+
+# -- LSS, a node's side (CiA 305) --------------------------------------------------------------
+
+LSS_FROM_MASTER, LSS_FROM_SLAVE = 0x7E5, 0x7E4
+LSS_WAITING, LSS_CONFIGURATION = 0x00, 0x01
+UNCONFIGURED = 0xFF  # the node ID of a node LSS has not configured
+# the bit timing table (CiA 305, table 0): index → bit/s, as canopen's LssMaster lists it
+LSS_BITRATES = {0: 1_000_000, 1: 800_000, 2: 500_000, 3: 250_000, 4: 125_000, 5: 100_000,
+                6: 50_000, 7: 20_000, 8: 10_000}
+FAST_SCAN_RESET = 0x80  # a fast scan's bit check that opens it: every candidate answers
+(_SWITCH_GLOBAL, _CONFIGURE_NODE_ID, _CONFIGURE_BIT_TIMING, _ACTIVATE_BIT_TIMING,
+ _STORE) = 0x04, 0x11, 0x13, 0x15, 0x17
+_SELECTIVE, _SELECTIVE_DONE = range(0x40, 0x44), 0x44
+_IDENTIFY_REMOTE, _IDENTIFY_NON_CONFIGURED = range(0x46, 0x4C), 0x4C
+_IDENTIFY_SLAVE, _NON_CONFIGURED_SLAVE, _FAST_SCAN = 0x4F, 0x50, 0x51
+_INQUIRE_IDENTITY, _INQUIRE_NODE_ID = range(0x5A, 0x5E), 0x5E
+
+
+@dataclass(frozen=True)
+class LssStart:
+    """The node takes this node ID now: it boots (boot-up message) and runs NMT at it."""
+    node: int
+
+
+@dataclass(frozen=True)
+class LssBitRate:
+    """The node switches to this bit rate after ``delay_ms`` (activate bit timing)."""
+    bitrate: int
+    delay_ms: int
+
+
+class LssSlave:
+    """A node's LSS slave: its LSS address (0x1018:1-4, ``identity``), its node ID and bit
+    timing (active, pending, stored), its LSS state and its fast scan position. ``receive``
+    gives the events an LSS request brings: a reply to send (``Send``), the node starting at
+    a node ID it was given (``LssStart``), a bit rate to take (``LssBitRate``). Requests
+    other than the switch and identify services are answered in the configuration state
+    only; a fast scan, by a node in the waiting state that has no node ID."""
+
+    def __init__(self, identity: tuple[int, int, int, int], node: int = UNCONFIGURED,
+                 bit_timing: int = 0) -> None:
+        if not (1 <= node <= 127 or node == UNCONFIGURED) or bit_timing not in LSS_BITRATES:
+            raise ValueError(f"an LSS node starts at node ID 1-127 or {UNCONFIGURED:#x} and a "
+                             f"bit timing index 0-8, got {node}, {bit_timing}")
+        self.identity = tuple(identity)
+        self.node = self.pending = self.stored = node
+        self.bit_timing = self.pending_bit_timing = self.stored_bit_timing = bit_timing
+        self.state = LSS_WAITING
+        self._selective = 0  # how many parts of the address a selective switch matched
+        self._remote = 0  # the same for an identify remote slave
+        self._scan_at = 0  # the address part a fast scan checks next
+
+    @property
+    def configured(self) -> bool:
+        return self.pending != UNCONFIGURED
+
+    def reset_communication(self) -> int:
+        """An NMT reset communication: the pending node ID becomes the active one."""
+        self.node = self.pending
+        return self.node
+
+    def receive(self, frame: Frame) -> list[Event | LssStart | LssBitRate]:
+        data = frame.data
+        if frame.can_id != LSS_FROM_MASTER or frame.extended or frame.remote or len(data) != 8:
+            return []
+        cs, value = data[0], int.from_bytes(data[1:5], "little")
+        if cs == _SWITCH_GLOBAL:
+            return self._switch(data[1])
+        if cs in _SELECTIVE:
+            return self._match_selective(cs - _SELECTIVE.start, value)
+        if cs in _IDENTIFY_REMOTE:
+            return self._match_remote(cs - _IDENTIFY_REMOTE.start, value)
+        if cs == _IDENTIFY_NON_CONFIGURED:
+            return [] if self.configured else [self._reply(_NON_CONFIGURED_SLAVE)]
+        if cs == _FAST_SCAN:
+            return self._fast_scan(value, data[5], data[6], data[7])
+        if self.state != LSS_CONFIGURATION:
+            return []
+        return self._configure(cs, data)
+
+    def _configure(self, cs: int, data: bytes) -> list[Event | LssStart | LssBitRate]:
+        if cs == _CONFIGURE_NODE_ID:
+            ok = 1 <= data[1] <= 127 or data[1] == UNCONFIGURED
+            if ok:
+                self.pending = data[1]
+            return [self._reply(cs, bytes([0 if ok else 1]))]
+        if cs == _CONFIGURE_BIT_TIMING:
+            ok = data[1] == 0 and data[2] in LSS_BITRATES
+            if ok:
+                self.pending_bit_timing = data[2]
+            return [self._reply(cs, bytes([0 if ok else 1]))]
+        if cs == _ACTIVATE_BIT_TIMING:
+            self.bit_timing = self.pending_bit_timing
+            return [LssBitRate(LSS_BITRATES[self.bit_timing],
+                               int.from_bytes(data[1:3], "little"))]
+        if cs == _STORE:
+            self.stored, self.stored_bit_timing = self.pending, self.pending_bit_timing
+            return [self._reply(cs, b"\0")]
+        if cs in _INQUIRE_IDENTITY:
+            part = self.identity[cs - _INQUIRE_IDENTITY.start]
+            return [self._reply(cs, part.to_bytes(4, "little"))]
+        if cs == _INQUIRE_NODE_ID:
+            return [self._reply(cs, bytes([self.node]))]
+        return []
+
+    def _switch(self, mode: int) -> list[Event | LssStart | LssBitRate]:
+        self._selective = 0
+        if mode == LSS_CONFIGURATION:
+            self.state = LSS_CONFIGURATION
+        elif mode == LSS_WAITING and self.state == LSS_CONFIGURATION:
+            self.state = LSS_WAITING
+            if self.node == UNCONFIGURED and self.pending != UNCONFIGURED:
+                return [LssStart(self.reset_communication())]
+        return []
+
+    def _match_selective(self, part: int, value: int) -> list[Event | LssStart | LssBitRate]:
+        self._selective = self._selective + 1 if part == self._selective and \
+            value == self.identity[part] else 0
+        if self._selective < 4:
+            return []
+        self._selective, self.state = 0, LSS_CONFIGURATION
+        return [self._reply(_SELECTIVE_DONE)]
+
+    def _match_remote(self, step: int, value: int) -> list[Event | LssStart | LssBitRate]:
+        """Vendor and product equal, revision and serial within [low, high] (six steps)."""
+        vendor, product, revision, serial = self.identity
+        ok = (vendor == value, product == value, revision >= value, revision <= value,
+              serial >= value, serial <= value)[step]
+        self._remote = self._remote + 1 if step == self._remote and ok else 0
+        if self._remote < 6:
+            return []
+        self._remote = 0
+        return [self._reply(_IDENTIFY_SLAVE)]
+
+    def _fast_scan(self, value: int, bit: int, part: int,
+                   following: int) -> list[Event | LssStart | LssBitRate]:
+        if self.state != LSS_WAITING or self.configured:
+            return []
+        if bit == FAST_SCAN_RESET:
+            self._scan_at = 0
+            return [self._reply(_IDENTIFY_SLAVE)]
+        if bit > 31 or part > 3 or following > 3 or part != self._scan_at:
+            return []
+        mask = (0xFFFFFFFF << bit) & 0xFFFFFFFF
+        if (self.identity[part] ^ value) & mask:
+            return []
+        self._scan_at = following
+        if bit == 0 and following < part:  # the whole address matched: this node is chosen
+            self.state = LSS_CONFIGURATION
+        return [self._reply(_IDENTIFY_SLAVE)]
+
+    @staticmethod
+    def _reply(cs: int, body: bytes = b"") -> Send:
+        return Send(Frame(LSS_FROM_SLAVE, (bytes([cs]) + body).ljust(8, b"\0")))

@@ -58,6 +58,10 @@ def test_bad_records(record):
     (Frame(0x582, bytes.fromhex("8000200000000206")), "SDO reply from node 2: abort 0x2000:00 0x06020000 (object does not exist)"),
     (Frame(0x702, bytes([0x05])), "heartbeat node 2: OPERATIONAL"),
     (Frame(0x702, bytes([0x00])), "boot-up node 2"),
+    (Frame(0x7E5, bytes.fromhex("5100000000800000")), "LSS fast scan"),
+    (Frame(0x7E4, bytes.fromhex("5eff000000000000")), "LSS reply inquire node ID: none"),
+    (Frame(0x7E4, bytes.fromhex("1101000000000000")), "LSS reply configure node ID: error 1"),
+    (Frame(0x7E4, bytes.fromhex("4f00000000000000")), "LSS reply identify slave"),
 ])
 def test_describe(frame, text):
     assert codec.describe(frame) == text
