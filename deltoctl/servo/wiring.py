@@ -43,6 +43,8 @@ class Wiring:
 
     def connect(self, words: list[str]) -> str:
         names = self._names(words, "connect")
+        if names is not None and not names & self.parts.keys():
+            return ""  # another family's parts: this bus stays as it is
         for name, part in self.parts.items():
             part.connected = names is None or name in names
         return self._state()

@@ -45,7 +45,8 @@ class Controls:
         if not found:
             raise InvalidInput(f"unknown control {words[0]!r} (controls: "
                                f"{', '.join([*self.words(), 'help'])})")
-        return "\n".join(handler(words[1:]) for _, handler in found)
+        # each family answers for its own parts: a reply of nothing is another's line
+        return "\n".join(r for _, handler in found if (r := handler(words[1:])))
 
     def follow(self, fd: int, stop: threading.Event, reply: Callable[[str, str], None],
                complain: Callable[[str], None]) -> None:

@@ -550,9 +550,12 @@ def _controls(ctx: ServeContext, buses: list[EmulatedBus]) -> None:
     from deltoctl.errors import InvalidInput
 
     parts = {p.name: (bus, p) for bus in buses for p in bus.parts.values()}
+    others = {j.name for hw in ctx.profile.hardware for j in hw.joints} - parts.keys()
 
     def switch(on: bool) -> Any:
         def handler(words: list[str]) -> str:
+            if len(words) == 1 and words[0] in others:
+                return ""  # another family's part: it answers for it
             if len(words) != 1 or (words[0] != "all" and words[0] not in parts):
                 raise InvalidInput(f"takes one joint of a CANopen drive or all "
                                    f"({', '.join(parts)}), got {' '.join(words)!r}")
