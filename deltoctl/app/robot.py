@@ -108,14 +108,17 @@ def _opened(prof: Profile, urls: list[str], sim: bool | Mapping[str, Any],
             hardware: Sequence[str], allow_model_mismatch: bool, probe: bool,
             notice: Callable[[str], None] | None, served_by: str | None,
             allow_motion: bool = True) -> Iterator[Robot]:
+    from deltoctl.app.joint_calibration import compare_on_open
     from deltoctl.core.system import System, mock_blocks, select_blocks
+    from deltoctl.sim.controls import Controls
 
     with contextlib.ExitStack() as stack:
         simulated = (dict.fromkeys(hardware or [hw.name for hw in prof.hardware], "--sim")
                      if sim else mock_blocks(prof, hardware))
+        controls = Controls()
         if simulated:
             served = serve_simulators(stack, prof, list(simulated),
-                                      sim if isinstance(sim, Mapping) else None)
+                                      sim if isinstance(sim, Mapping) else None, controls)
             urls += [f"{bus}={url}" for bus, url in served.items()]
             for name, why in simulated.items():
                 if why != "--sim" and notice is not None:
@@ -125,20 +128,24 @@ def _opened(prof: Profile, urls: list[str], sim: bool | Mapping[str, Any],
                          for hw in select_blocks(prof, hardware)}
         with System(prof, urls, hardware, probe=probe, allow_model_mismatch=allow_model_mismatch,
                     simulated=simulated, allow_motion=allow_motion) as system:
-            yield Robot(system)
+            robot = Robot(system, controls)
+            robot.calibration_warnings = compare_on_open(system)
+            yield robot
 
 
 def serve_simulators(stack: contextlib.ExitStack, profile: Profile, blocks: Sequence[str] = (),
-                     faults: Mapping[str, Any] | None = None) -> dict[str, str]:
+                     faults: Mapping[str, Any] | None = None,
+                     controls: Any = None) -> dict[str, str]:
     """Start the simulated devices of ``blocks`` (every block without), with ``faults`` (those
-    of ``deltoctl sim serve``), closed with ``stack``; returns ``{bus: target URL}``."""
+    of ``deltoctl sim serve``), closed with ``stack``, their control lines added to
+    ``controls``; returns ``{bus: target URL}``."""
     from deltoctl.sim.serve import ServeOptions, serve_profile
 
     try:
         options = ServeOptions(**dict(faults or {}))
     except TypeError as exc:
         raise InvalidInput(f"sim: {exc}") from None
-    return dict(serve_profile(stack, profile, options, list(blocks))["buses"])
+    return dict(serve_profile(stack, profile, options, list(blocks), controls)["buses"])
 
 
 def block_entry(m: Member, **data: Any) -> dict[str, Any]:
@@ -219,8 +226,19 @@ def _cannot(system: System, capability: str, what: str) -> None:
 class Robot:
     """An open robot: one System of blocks, and the procedures run on it."""
 
-    def __init__(self, system: System) -> None:
+    def __init__(self, system: System, controls: Any = None) -> None:
         self.system = system
+        self.controls = controls  # the control lines of the simulators it started
+        self.calibration_warnings: list[str] = []  # the servos against their calibration file
+
+    def control(self, line: str) -> str:
+        """Run a control line (``hand elbow_flex 30``) on the simulators this robot started;
+        its reply, or an InvalidInput naming what is wrong."""
+        if self.controls is None or not self.controls.words():
+            raise InvalidInput(f"{line!r}: no simulator of this robot answers control lines "
+                               "(--sim starts them; a `deltoctl sim serve` reads them on its "
+                               "input)")
+        return str(self.controls.run(line))
 
     @property
     def profile(self) -> Profile:
@@ -475,6 +493,60 @@ class Robot:
         if confirm is not None:
             confirm(description)
         return calibrate_servos(self.system, half_turn, name, output, force)
+
+    def calibrate_joints(self, middle: Callable[[], None] | None = None,
+                         done: Callable[[list[dict[str, Any]]], bool] | None = None,
+                         seconds: float | None = None, allow: Sequence[str] = (),
+                         lerobot: str | None = None, full_turn: Sequence[str] = (),
+                         confirm: Callable[[str], None] | None = None,
+                         hand: Sequence[str] = ()) -> dict[str, Any]:
+        """LeRobot's joint calibration with this robot's profile (deltoctl.app.joint_calibration):
+        torque off; ``middle`` returns once the arm is in the middle of its range (each joint's
+        homing offset from that pose); then the range moved by hand is sampled until
+        ``done(rows)`` (each sample's per-joint present/min/max) says so or ``seconds`` pass —
+        ``hand``: control lines run on this robot's simulators first —, checked against the
+        profile's limits (a joint short of or beyond them is a warning), written into the
+        servos when ``allow`` holds every permission of ``PERMISSIONS`` (else the file only,
+        a warning saying so), saved in deltoctl's file and, with ``lerobot`` (a device id),
+        in LeRobot's. ``full_turn`` joints take the whole turn, unrecorded. ``confirm`` is
+        told what will happen first (it raises to stop)."""
+        from deltoctl.app import joint_calibration as jc
+
+        if seconds is not None and not (math.isfinite(seconds) and 0 < seconds <= 3600):
+            raise InvalidInput(f"--range-seconds must be 0 to 3600, got {seconds:g}")
+        if done is None and seconds is None:
+            raise InvalidInput("calibrate joints: give a way to end the range (done or seconds)")
+        self.system.check_allowed("calibrating joints")
+        members = jc.able(self.system)
+        write = jc.check_allow(allow)
+        if confirm is not None:
+            confirm(jc.description(self.system, write))
+        for w in self.calibration_warnings:  # stale now: the calibration is made again
+            if w in self.system.notes:
+                self.system.notes.remove(w)
+        for m in members:
+            m.driver.set_torque([j.name for j in m.hw.joints], False)
+        if middle is not None:
+            middle()
+        held, offsets = jc.start(self.system)
+        for line in hand:
+            self.control(line)
+        rows = jc.record_range(self.system, held, offsets, done or (lambda rows: False),
+                               seconds)
+        joints = jc.calibration(self.system, held, offsets, rows, full_turn)
+        self.system.notes.extend(r["note"] for r in joints if r["note"])
+        if write:
+            jc.write(self.system, joints)
+        else:
+            for r in joints:
+                r["written"] = "not written"
+            self.system.notes.append(
+                f"not written to the servos: the homing offset and position limits of "
+                f"{len(joints)} joint(s) (pass {' '.join('--allow ' + p for p in jc.PERMISSIONS)}"
+                "); saved in the file only")
+        files = jc.save(self.system, joints, lerobot)
+        return {"profile": self.profile.name, **files, "written": write, "torque": "off",
+                "joints": joints}
 
     def _registers(self, joint: str) -> Any:
         m = self.system.member(joint)
