@@ -15,11 +15,12 @@ import json
 import math
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from deltoctl.errors import DeviceError, InvalidInput
+from deltoctl.errors import DeltoctlError, DeviceError, InvalidInput, Refused
 
 if TYPE_CHECKING:
     from deltoctl.core.system import Member, System
@@ -35,9 +36,9 @@ Rows = list[dict[str, Any]]
 
 
 def calibration_file(profile_name: str, simulated: bool = False) -> Path:
-    """deltoctl's calibration of a profile: $XDG_DATA_HOME/deltoctl/calibration/NAME.json; a
-    calibration made on simulators started for the command goes under sim/, never compared
-    with a robot's servos."""
+    """deltoctl's calibration of a profile: $XDG_DATA_HOME/deltoctl/calibration/NAME.json; one
+    made on simulators goes under sim/, never compared with a robot's servos (nor with a
+    simulator's: it starts afresh)."""
     from deltoctl.data_paths import user_data_dir
 
     folder = user_data_dir("calibration", *(("sim",) if simulated else ()))
@@ -45,7 +46,7 @@ def calibration_file(profile_name: str, simulated: bool = False) -> Path:
 
 
 def _simulated(system: System) -> bool:
-    return any(m.simulated == "--sim" for m in system.able(CAPABILITY))
+    return any(m.simulated is not None for m in system.able(CAPABILITY))
 
 
 def able(system: System) -> list[Member]:
@@ -57,17 +58,22 @@ def able(system: System) -> list[Member]:
 
 
 def check_allow(allow: Sequence[str]) -> bool:
-    """Whether ``allow`` (``--allow`` values) permits the writes; an unknown name is an
-    InvalidInput naming the known ones."""
+    """Whether ``allow`` (``--allow`` values) permits the writes: all of PERMISSIONS, or none
+    (the file only); some of them is Refused naming the others, an unknown name an
+    InvalidInput."""
     from deltoctl.app import config
 
     given = {config.permission(a) for a in allow}
-    known = set(config.permission_names())
-    unknown = sorted(given - known)
+    unknown = sorted(given - set(config.permission_names()))
     if unknown:
         raise InvalidInput(f"--allow {unknown[0]}: not a permission (these write the "
                            f"calibration: {', '.join(PERMISSIONS)})")
-    return set(PERMISSIONS) <= given
+    missing = [p for p in PERMISSIONS if p not in given]
+    if given & set(PERMISSIONS) and missing:
+        raise Refused(f"nothing done: the calibration is written whole, also needs "
+                      f"{' '.join('--allow ' + p for p in missing)}",
+                      hint="name all three, or none to save the file only")
+    return not missing
 
 
 def description(system: System, write: bool) -> str:
@@ -79,6 +85,64 @@ def description(system: System, write: bool) -> str:
 
 
 # -- the procedure -------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Steps:
+    """How the operator's steps end: ``middle`` returns once the arm is in its middle pose
+    (None: it is already); the range ends when ``done(rows)`` says so or ``seconds`` pass;
+    ``hand``: control lines for the robot's simulators, run after the first sample."""
+
+    middle: Callable[[], None] | None = None
+    done: Callable[[Rows], bool] | None = None
+    seconds: float | None = None
+    hand: Sequence[str] = ()
+
+    def check(self) -> None:
+        seconds = self.seconds
+        if seconds is not None and not (math.isfinite(seconds) and 0 < seconds <= 3600):
+            raise InvalidInput(f"--range-seconds must be 0 to 3600, got {seconds:g}")
+        if self.done is None and seconds is None:
+            raise InvalidInput("the range needs an end: done, or seconds")
+
+
+def calibrate(system: System, control: Callable[[str], str], steps: Steps,
+              allow: Sequence[str] = (), lerobot: str | None = None,
+              full_turn: Sequence[str] = (),
+              confirm: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """The whole procedure (``Robot.calibrate_joints``); ``control`` runs a hand's line."""
+    steps.check()
+    system.check_allowed("calibrating joints")
+    members = able(system)
+    write = check_allow(allow)
+    if confirm is not None:
+        confirm(description(system, write))
+    for m in members:
+        m.driver.set_torque([j.name for j in m.hw.joints], False)
+    if steps.middle is not None:
+        steps.middle()
+    held, offsets = start(system)
+    pending = list(steps.hand)
+
+    def sampled(rows: Rows) -> bool:
+        while pending:
+            control(pending.pop(0))
+        return steps.done(rows) if steps.done is not None else False
+
+    joints = calibration(system, held, offsets,
+                         record_range(system, held, offsets, sampled, steps.seconds), full_turn)
+    system.notes.extend(r["note"] for r in joints if r["note"])
+    if write:
+        _write_servos(system, joints)
+    else:
+        for r in joints:
+            r["written"] = "not written"
+        system.notes.append(
+            f"not written to the servos: the homing offset and position limits of "
+            f"{len(joints)} joint(s) (pass {' '.join('--allow ' + p for p in PERMISSIONS)}); "
+            "saved in the file only")
+    return {"profile": system.profile.name, **save(system, joints, lerobot), "written": write,
+            "torque": "off", "joints": joints}
+
 
 def start(system: System) -> tuple[dict[str, dict[str, Any]], dict[str, int]]:
     """After the arm is in its middle pose (torque off): what each servo holds and the homing
@@ -184,7 +248,7 @@ def calibration(system: System, held: dict[str, dict[str, Any]], offsets: dict[s
     return out
 
 
-def write(system: System, rows: Rows) -> None:
+def _write_servos(system: System, rows: Rows) -> None:
     """Each block's rows into its servos, then each joint verified by reading it back."""
     for m in able(system):
         mine = {r["joint"]: r for r in rows if r["block"] == m.name}
@@ -268,7 +332,7 @@ def compare_on_open(system: System) -> list[str]:
     """The differences between the servos and the profile's calibration file, one warning
     each naming the joint and the register (none without a file, or on simulators started
     for the command); they go to the System's notes too."""
-    members = [m for m in system.able(CAPABILITY) if m.simulated != "--sim"]
+    members = [m for m in system.able(CAPABILITY) if m.simulated is None]
     path = calibration_file(system.profile.name)
     if not members or not path.is_file():
         return []
@@ -282,7 +346,11 @@ def compare_on_open(system: System) -> list[str]:
         wanted = saved.get(m.name)
         if not wanted:
             continue
-        live = m.driver.joint_calibration()
+        try:
+            live = m.driver.joint_calibration()
+        except DeltoctlError as exc:
+            found.append(f"{m.name}: calibration not checked ({exc.message})")
+            continue
         for joint, entry in wanted.items():
             here = live.get(joint)
             if here is None:

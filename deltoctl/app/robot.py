@@ -501,52 +501,22 @@ class Robot:
                          confirm: Callable[[str], None] | None = None,
                          hand: Sequence[str] = ()) -> dict[str, Any]:
         """LeRobot's joint calibration with this robot's profile (deltoctl.app.joint_calibration):
-        torque off; ``middle`` returns once the arm is in the middle of its range (each joint's
-        homing offset from that pose); then the range moved by hand is sampled until
-        ``done(rows)`` (each sample's per-joint present/min/max) says so or ``seconds`` pass —
-        ``hand``: control lines run on this robot's simulators first —, checked against the
-        profile's limits (a joint short of or beyond them is a warning), written into the
-        servos when ``allow`` holds every permission of ``PERMISSIONS`` (else the file only,
-        a warning saying so), saved in deltoctl's file and, with ``lerobot`` (a device id),
-        in LeRobot's. ``full_turn`` joints take the whole turn, unrecorded. ``confirm`` is
-        told what will happen first (it raises to stop)."""
+        torque off; ``middle`` returns once the arm is in the middle of its range (each
+        joint's homing offset from that pose); then the range moved by hand is sampled until
+        ``done(rows)`` (told each sample's per-joint present/min/max) says so or ``seconds``
+        pass (``hand``: control lines run on this robot's simulators after the first sample),
+        checked against the profile's limits (a joint short of or beyond them is a warning),
+        written into the servos when ``allow`` holds every one of ``PERMISSIONS`` (else the
+        file only, a warning saying so), saved in deltoctl's file and, with ``lerobot`` (a
+        device id), in LeRobot's. ``full_turn`` joints take the whole turn, unrecorded.
+        ``confirm`` is told what will happen first (it raises to stop)."""
         from deltoctl.app import joint_calibration as jc
 
-        if seconds is not None and not (math.isfinite(seconds) and 0 < seconds <= 3600):
-            raise InvalidInput(f"--range-seconds must be 0 to 3600, got {seconds:g}")
-        if done is None and seconds is None:
-            raise InvalidInput("calibrate joints: give a way to end the range (done or seconds)")
-        self.system.check_allowed("calibrating joints")
-        members = jc.able(self.system)
-        write = jc.check_allow(allow)
-        if confirm is not None:
-            confirm(jc.description(self.system, write))
-        for w in self.calibration_warnings:  # stale now: the calibration is made again
+        for w in self.calibration_warnings:  # the file's: stale once calibrated again
             if w in self.system.notes:
                 self.system.notes.remove(w)
-        for m in members:
-            m.driver.set_torque([j.name for j in m.hw.joints], False)
-        if middle is not None:
-            middle()
-        held, offsets = jc.start(self.system)
-        for line in hand:
-            self.control(line)
-        rows = jc.record_range(self.system, held, offsets, done or (lambda rows: False),
-                               seconds)
-        joints = jc.calibration(self.system, held, offsets, rows, full_turn)
-        self.system.notes.extend(r["note"] for r in joints if r["note"])
-        if write:
-            jc.write(self.system, joints)
-        else:
-            for r in joints:
-                r["written"] = "not written"
-            self.system.notes.append(
-                f"not written to the servos: the homing offset and position limits of "
-                f"{len(joints)} joint(s) (pass {' '.join('--allow ' + p for p in jc.PERMISSIONS)}"
-                "); saved in the file only")
-        files = jc.save(self.system, joints, lerobot)
-        return {"profile": self.profile.name, **files, "written": write, "torque": "off",
-                "joints": joints}
+        return jc.calibrate(self.system, self.control, jc.Steps(middle, done, seconds, hand),
+                            allow, lerobot, full_turn, confirm)
 
     def _registers(self, joint: str) -> Any:
         m = self.system.member(joint)

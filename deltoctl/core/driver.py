@@ -14,7 +14,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from deltoctl.errors import InvalidInput, Unreachable
 
@@ -215,7 +215,7 @@ class Driver:
         raise Unsupported(f"{self.hw.name} has no servo calibration")
 
     # joint calibration (``calibrate joints``): LeRobot's keys → the family's registers
-    calibration_registers: dict[str, str] = {}
+    calibration_registers: ClassVar[dict[str, str]] = {}
     # LeRobot's robot types of a follower and a leader of this family (its calibration file)
     lerobot_types: tuple[str, str] | None = None
 

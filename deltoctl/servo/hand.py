@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -59,7 +59,7 @@ def _angle(text: str, what: str) -> float:
 
 
 def add_controls(control: Callable[[str, str, Callable[[list[str]], str]], None],
-                 shafts: dict[str, Shaft]) -> None:
+                 shafts: Mapping[str, Shaft]) -> None:
     """The ``hand`` and ``sweep`` lines for the servos of ``shafts`` (joint → servo), through
     the serve context's ``control``."""
     if not shafts:
@@ -78,15 +78,14 @@ def add_controls(control: Callable[[str, str, Callable[[list[str]], str]], None]
     def hand(words: list[str]) -> str:
         if len(words) != 2:
             raise InvalidInput(f"takes JOINT DEGREES, got {' '.join(words)!r}")
-        shaft = limp(words[0])
         degrees = _angle(words[1], "DEGREES")
+        shaft = limp(words[0])
         shaft.hand = Hand(shaft.here(), shaft.steps(degrees), time.monotonic(), 0.0)
         return f"{words[0]}: turned by hand to {degrees:g}°"
 
     def sweep(words: list[str]) -> str:
         if len(words) != 4:
             raise InvalidInput(f"takes JOINT FROM TO SECONDS, got {' '.join(words)!r}")
-        shaft = limp(words[0])
         start, end = _angle(words[1], "FROM"), _angle(words[2], "TO")
         try:
             seconds = float(words[3])
@@ -94,6 +93,7 @@ def add_controls(control: Callable[[str, str, Callable[[list[str]], str]], None]
             seconds = math.nan
         if not 0 <= seconds <= LIMIT_SECONDS:
             raise InvalidInput(f"SECONDS must be 0 to {LIMIT_SECONDS:g}, got {words[3]!r}")
+        shaft = limp(words[0])
         shaft.hand = Hand(shaft.steps(start), shaft.steps(end), time.monotonic(), seconds)
         return f"{words[0]}: swept by hand from {start:g}° to {end:g}° over {seconds:g} s"
 

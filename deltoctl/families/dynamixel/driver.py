@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import replace
-from typing import Any
+from typing import Any, ClassVar
 
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
 from deltoctl.core.exchange import ExchangePolicy
@@ -703,8 +703,9 @@ class DynamixelDriver(Driver):
         self.stop()
 
     # -- joint calibration (LeRobot's: present = actual + Homing Offset) ------------------------
-    calibration_registers = {"drive_mode": "Drive Mode", "homing_offset": "Homing Offset",
-                             "range_min": "Min Position Limit", "range_max": "Max Position Limit"}
+    calibration_registers: ClassVar[dict[str, str]] = {
+        "drive_mode": "Drive Mode", "homing_offset": "Homing Offset",
+        "range_min": "Min Position Limit", "range_max": "Max Position Limit"}
     lerobot_types = ("koch_follower", "koch_leader")
 
     def joint_calibration(self) -> dict[str, dict[str, int]]:

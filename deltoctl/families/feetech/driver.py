@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import Any
+from typing import Any, ClassVar
 
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
 from deltoctl.core.exchange import ExchangePolicy
@@ -706,8 +706,9 @@ class FeetechDriver(Driver):
                 "parts": {n: dict(vars(m)) for n, m in motors.items()}}
 
     # -- joint calibration (LeRobot's: present = actual − Homing_Offset) ----------------------
-    calibration_registers = {"homing_offset": "Homing_Offset", "range_min": "Min_Position_Limit",
-                             "range_max": "Max_Position_Limit"}
+    calibration_registers: ClassVar[dict[str, str]] = {
+        "homing_offset": "Homing_Offset", "range_min": "Min_Position_Limit",
+        "range_max": "Max_Position_Limit"}
     lerobot_types = ("so_follower", "so_leader")
 
     def joint_calibration(self) -> dict[str, dict[str, int]]:

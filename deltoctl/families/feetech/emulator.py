@@ -49,6 +49,7 @@ class Servo:
         self.actual = model.resolution / 2  # the shaft's angle, steps
         self._move: tuple[float, float, float, float] | None = None  # from, to, t0, seconds
         self.hand: Hand | None = None  # a hand turning the shaft while the torque is off
+        self.joint: str | None = None  # the profile's joint it serves, for a hand to find
         self.power_cycle()
 
     # -- a hand on the shaft (deltoctl.servo.hand) -----------------------------------------------
@@ -313,6 +314,8 @@ def bus_of(ctx: ServeContext, hw: Hardware, baud: int) -> FeetechBus:
     volts = {j.name for j in ctx.named("voltage", hw)}
     servos = [Servo(i, _model_of(hw, j), (3, 9) if j.name in old else (3, 10),
                     16.0 if j.name in volts else 12.0) for i, j in joints.items()]
+    for servo, joint in zip(servos, joints.values(), strict=True):
+        servo.joint = joint.name
     if ctx.options.factory_new:  # each at ID 1, 1 Mbps: their replies collide
         missing = {ids[j.name] for j in ctx.named("missing", hw) if j.name in ids}
         present = [s for s in servos if s.id not in missing]
@@ -343,16 +346,13 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
     URL's baud rate."""
     from deltoctl.families.feetech import parse_bus_url
 
-    from deltoctl.families.feetech.ros2_control import servo_ids
-
     buses = {}
     shafts = {}  # joint → its emulated servo, for a hand to turn
     for hw in blocks:
         url = ctx.profile.buses.get(hw.bus or "", "serial:///dev/ttyACM0?baud=1000000")
         _, baud, _ = parse_bus_url(url)
         bus = bus_of(ctx, hw, baud)
-        shafts.update((j.name, s) for j, s in zip(servo_ids(ctx.profile, hw).values(),
-                                                  bus.servos))
+        shafts.update((s.joint, s) for s in bus.servos if s.joint is not None)
         server = ctx.stack.enter_context(FeetechPtyServer(bus, pace=ctx.options.pace))
         query = url.split("?", 1)[1] if "?" in url else f"baud={baud}"
         buses[hw.bus or hw.name] = f"serial://{server.port}?{query}"
