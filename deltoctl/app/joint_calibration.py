@@ -90,7 +90,8 @@ def description(system: System, write: bool) -> str:
 class Steps:
     """How the operator's steps end: ``middle`` returns once the arm is in its middle pose
     (None: it is already); the range ends when ``done(rows)`` says so or ``seconds`` pass;
-    ``hand``: control lines for the robot's simulators, run after the first sample."""
+    ``hand``: control lines for the robot's simulators, one after each sample from the first
+    on (each sees the pose the one before left)."""
 
     middle: Callable[[], None] | None = None
     done: Callable[[Rows], bool] | None = None
@@ -124,7 +125,7 @@ def calibrate(system: System, control: Callable[[str], str], steps: Steps,
     pending = list(steps.hand)
 
     def sampled(rows: Rows) -> bool:
-        while pending:
+        if pending:  # one a sample, as a hand does one thing at a time
             control(pending.pop(0))
         return steps.done(rows) if steps.done is not None else False
 

@@ -504,7 +504,7 @@ class Robot:
         torque off; ``middle`` returns once the arm is in the middle of its range (each
         joint's homing offset from that pose); then the range moved by hand is sampled until
         ``done(rows)`` (told each sample's per-joint present/min/max) says so or ``seconds``
-        pass (``hand``: control lines run on this robot's simulators after the first sample),
+        pass (``hand``: control lines run on this robot's simulators, one after each sample),
         checked against the profile's limits (a joint short of or beyond them is a warning),
         written into the servos when ``allow`` holds every one of ``PERMISSIONS`` (else the
         file only, a warning saying so), saved in deltoctl's file and, with ``lerobot`` (a

@@ -183,8 +183,8 @@ def calibrate_joints(
         "--range-seconds", help="Sample the range this long instead of until Enter (the "
                                 "arm already in its middle pose).")] = None,
     hand: Annotated[list[str] | None, typer.Option(
-        help="With --sim: a control line for the simulator as the range starts ('sweep "
-             "elbow_flex -80 80 2'; repeatable).")] = None,
+        help="With --sim: a control line for the simulator, one a sample as the range starts "
+             "('hand elbow_flex -80', 'sweep gripper 0 90 2'; repeatable).")] = None,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """LeRobot's calibration with the profile: torque off, the arm in the middle of its range

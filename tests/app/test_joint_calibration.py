@@ -249,7 +249,7 @@ def test_a_robot_on_its_own_simulators_runs_control_lines(deltoctl_sim):
         assert "swept by hand" in robot.control("sweep gripper 0 30 0.1")
         assert eventually(lambda: math.isclose(robot.read()["gripper/position"],
                                                math.radians(30), abs_tol=0.01))
-        result = robot.calibrate_joints(seconds=0.5, hand=["hand gripper 0"],
+        result = robot.calibrate_joints(seconds=2, hand=["hand gripper 0"],
                                         full_turn=ARM[:-1])
         assert result["file"] == str(calibration_file("koch-arm", simulated=True))
         assert result["joints"][-1]["range_max"] - result["joints"][-1]["range_min"] > 300
