@@ -170,54 +170,47 @@ def calibrate_servos(
 def calibrate_joints(
     ctx: typer.Context,
     allow: Annotated[list[str] | None, typer.Option(
-        help="Write into the servos: --allow homing-offset --allow min-position-limit "
-             "--allow max-position-limit (else the file only).")] = None,
+        help="Write into the servos (else the file only): --allow homing-offset --allow "
+             "min-position-limit --allow max-position-limit.")] = None,
     fmt: Annotated[str, typer.Option("--format", help="deltoctl, or lerobot: LeRobot's file "
                                      "too, at LeRobot's place for --id.")] = "deltoctl",
     name: Annotated[str, typer.Option("--id", help="The device's name in LeRobot's file.")
                     ] = "my_arm",
     full_turn: Annotated[list[str] | None, typer.Option(
-        help="A joint that turns all the way (its whole turn, not recorded; repeatable).")
-    ] = None,
-    seconds: Annotated[float | None, typer.Option(
-        "--range-seconds", help="Sample the range this long instead of until Enter (the "
-                                "arm already in its middle pose).")] = None,
-    hand: Annotated[list[str] | None, typer.Option(
-        help="With --sim: a control line for the simulator, one a sample as the range starts "
-             "('hand elbow_flex -80', 'sweep gripper 0 90 2'; repeatable).")] = None,
+        help="A joint given its whole turn, not recorded (repeatable).")] = None,
+    seconds: Annotated[float | None, typer.Option("--range-seconds", help=(
+        "Sample the range this long, not until Enter (the arm in its middle pose)."))] = None,
+    hand: Annotated[list[str] | None, typer.Option(help=(
+        "With --sim: a control line, one a sample as the range starts ('hand gripper 40', "
+        "'sweep gripper 0 90 2'; repeatable)."))] = None,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """LeRobot's calibration with the profile: torque off, the arm in the middle of its range
-    (each joint's homing offset: that pose reads zero), then each joint moved by hand through
-    its range, checked against the profile's limits, and saved (deltoctl's file, checked at
-    every later open)."""
+    (each joint's homing offset: that pose reads zero), each joint moved by hand through its
+    range, checked against the profile's limits; saved, and checked at every later open."""
     import sys
     import threading
 
     from deltoctl.render.joint_calibration import RangeLive, calibration_table
 
     opts, pressed = options(ctx), threading.Event()
-    if fmt not in ("deltoctl", "lerobot") or (seconds is None and not sys.stdin.isatty()):
-        raise InvalidInput("--format is deltoctl or lerobot" if seconds is not None else
-                           "no terminal to press Enter on: pass --range-seconds")
-    live = RangeLive() if sys.stderr.isatty() and not opts.json else None
+    if fmt not in ("deltoctl", "lerobot"):
+        raise InvalidInput(f"--format is deltoctl or lerobot, got {fmt!r}")
+    if seconds is None and not sys.stdin.isatty():
+        raise InvalidInput("no terminal to press Enter on: pass --range-seconds")
+    live = RangeLive(sys.stderr.isatty() and not opts.json)
 
     def middle() -> None:
-        _ask("move the arm to the middle of its range, then Enter")
-        input()
+        _ask("move the arm to the middle of its range, then press Enter")
+        sys.stdin.readline()
         threading.Thread(target=lambda: (sys.stdin.readline(), pressed.set()),
                          daemon=True).start()
 
-    with open_robot(opts, allow_model_mismatch) as robot:
-        try:
-            result = robot.calibrate_joints(
-                None if seconds else middle, lambda rows: bool(
-                    live and live.show(rows)) or pressed.is_set(), seconds, allow or [],
-                name if fmt == "lerobot" else None, full_turn or [],
-                lambda what: confirm(ctx, what), hand or [])
-        finally:
-            if live:
-                live.close()
+    with open_robot(opts, allow_model_mismatch) as robot, live:
+        result = robot.calibrate_joints(
+            None if seconds else middle, lambda rows: live.show(rows) or pressed.is_set(),
+            seconds, allow or [], name if fmt == "lerobot" else None, full_turn or [],
+            lambda what: confirm(ctx, what), hand or [])
     emit_json(result) if opts.json else table(*calibration_table(result))
     finish(robot)
 
