@@ -320,13 +320,24 @@ def load(path: Path) -> dict[str, dict[str, dict[str, int]]]:
         raise InvalidInput(f"{path}: cannot read the calibration ({exc.strerror})") from None
     except (ValueError, UnicodeDecodeError) as exc:
         raise InvalidInput(f"{path}: not a calibration file ({exc})") from None
-    blocks = data.get("blocks") if isinstance(data, dict) else None
-    if data.get("format") != FORMAT or not isinstance(blocks, dict) or not all(
-            isinstance(js, dict) and all(isinstance(e, dict) and all(
-                isinstance(v, int) and not isinstance(v, bool) for v in e.values())
-                for e in js.values()) for js in blocks.values()):
+    if not _shaped(data):
         raise InvalidInput(f"{path}: not a {FORMAT} file (blocks → joints → integers)")
-    return blocks
+    return dict(data["blocks"])
+
+
+def _integers(entry: Any) -> bool:
+    return isinstance(entry, dict) and all(
+        isinstance(v, int) and not isinstance(v, bool) for v in entry.values())
+
+
+def _shaped(data: Any) -> bool:
+    """A document of deltoctl's calibration: its format, and blocks → joints → integers."""
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        return False
+    blocks = data.get("blocks")
+    return isinstance(blocks, dict) and all(
+        isinstance(joints, dict) and all(_integers(e) for e in joints.values())
+        for joints in blocks.values())
 
 
 def compare_on_open(system: System) -> list[str]:
@@ -344,22 +355,20 @@ def compare_on_open(system: System) -> list[str]:
         return [system.notes[-1]]
     found = []
     for m in members:
-        wanted = saved.get(m.name)
-        if not wanted:
-            continue
-        try:
-            live = m.driver.joint_calibration()
-        except DeltoctlError as exc:
-            found.append(f"{m.name}: calibration not checked ({exc.message})")
-            continue
-        for joint, entry in wanted.items():
-            here = live.get(joint)
-            if here is None:
-                continue
-            for key, register in m.driver.calibration_registers.items():
-                if key in entry and here.get(key) != entry[key]:
-                    found.append(f"{joint}: {register} is {here.get(key)}, its calibration "
-                                 f"({path}) says {entry[key]}; run deltoctl calibrate joints "
-                                 "(--allow to write it)")
+        if saved.get(m.name):
+            found += _differences(m, saved[m.name], path)
     system.notes.extend(found)
     return found
+
+
+def _differences(m: Member, wanted: dict[str, dict[str, int]], path: Path) -> list[str]:
+    """Where a block's servos differ from its joints' entries in the file, by register."""
+    try:
+        live = m.driver.joint_calibration()
+    except DeltoctlError as exc:
+        return [f"{m.name}: calibration not checked ({exc.message})"]
+    return [f"{joint}: {register} is {live[joint].get(key)}, its calibration ({path}) says "
+            f"{entry[key]}; calibrate again (deltoctl calibrate joints)"
+            for joint, entry in wanted.items() if joint in live
+            for key, register in m.driver.calibration_registers.items()
+            if key in entry and live[joint].get(key) != entry[key]]

@@ -256,3 +256,14 @@ def test_a_robot_on_its_own_simulators_runs_control_lines(deltoctl_sim):
     with open_robot("koch-arm", deltoctl_sim.buses("koch-arm")) as robot, pytest.raises(
             InvalidInput, match="no simulator of this robot"):
         robot.control("hand gripper 0")
+
+
+@pytest.mark.parametrize("text", ["not json", "[]", '{"format": "deltoctl joint calibration", '
+                                  '"blocks": {"koch_arm": {"gripper": {"range_max": "x"}}}}'])
+def test_a_bad_calibration_file_is_a_warning_not_a_failure(deltoctl_sim, text):
+    path = calibration_file("koch-arm")
+    path.parent.mkdir(parents=True)
+    path.write_text(text)
+    with open_robot("koch-arm", deltoctl_sim.buses("koch-arm")) as robot:
+        [warning] = robot.warnings()
+    assert warning.startswith(f"calibration not checked: {path}: not a")
