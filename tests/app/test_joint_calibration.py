@@ -144,6 +144,11 @@ def test_the_calibration_is_written_and_the_sdk_reads_it_back(deltoctl_sim, prof
         rows["gripper"]["range_max"]
     # the range moved is short of every limit of the profile: named per joint
     assert {w.split(":")[0] for w in warnings if "the range moved" in w} == set(ARM)
+    for joint in ARM:  # back in the middle pose: it reads the profile's zero now
+        deltoctl_sim.control(f"hand {joint} {MIDDLE}")
+    with open_robot(profile, buses) as robot:
+        assert robot.calibration_warnings == []
+        assert eventually(lambda: all(abs(robot.read()[f"{j}/position"]) < 0.005 for j in ARM))
 
 
 @pytest.mark.parametrize("profile", ["koch-arm", "so101-follower"])
@@ -172,18 +177,20 @@ def test_without_allow_nothing_is_written_to_the_servos(deltoctl_sim, profile, m
     assert calibration_file(profile).is_file()  # the file was saved
 
 
-def test_a_register_changed_later_is_a_warning_naming_joint_and_register(deltoctl_sim, cli):
-    buses, _, _ = _calibrate(deltoctl_sim, "koch-arm")
-    with open_robot("koch-arm", buses) as robot:
+@pytest.mark.parametrize(("profile", "bus", "register"), [
+    ("koch-arm", "dxl", "Max Position Limit"), ("so101-follower", "so_bus", "Max_Position_Limit")])
+def test_a_register_changed_later_is_a_warning_naming_joint_and_register(deltoctl_sim, cli,
+                                                                        profile, bus, register):
+    buses, _, _ = _calibrate(deltoctl_sim, profile)
+    with open_robot(profile, buses) as robot:
         assert robot.calibration_warnings == []
-        robot.system.member("elbow_flex").driver.write_register("elbow_flex",
-                                                                 "max_position_limit", 3000)
-    result = cli("-p", "koch-arm", "-t", f"dxl={buses['dxl']}", "identify")
+        robot.write_register("elbow_flex", "max_position_limit", 3000)
+    result = cli("-p", profile, "-t", f"{bus}={buses[bus]}", "identify")
     assert result.exit_code == 3, result.output
-    assert "elbow_flex: Max Position Limit is 3000, its calibration" in result.stderr
-    with open_robot("koch-arm", buses) as robot:
+    assert f"elbow_flex: {register} is 3000, its calibration" in result.stderr
+    with open_robot(profile, buses) as robot:
         [warning] = robot.calibration_warnings
-        assert warning.startswith("elbow_flex: Max Position Limit is 3000")
+        assert warning.startswith(f"elbow_flex: {register} is 3000")
         assert warning in robot.warnings()
 
 
