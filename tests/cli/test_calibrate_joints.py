@@ -106,8 +106,11 @@ def test_a_sim_serve_process_moved_by_lines_on_its_input(cli):
         replies = _reader(serve)
         target = ("-p", "koch-arm", "-t", f"dxl={url}", "--yes")
         assert cli(*target, "torque", "on").exit_code == 0
+        # a read after the torque's write (which has no reply) comes back once it took effect
+        on = cli(*target, "--json", "register", "get", "gripper", "torque_enable")
+        assert json.loads(on.stdout)["result"]["values"] == {"Torque Enable": 1}
         calibrate = subprocess.Popen([sys.executable, "-m", "deltoctl", *target, "--json",
-                                      "calibrate", "joints", "--range-seconds", "4", *ALLOW],
+                                      "calibrate", "joints", "--range-seconds", "6", *ALLOW],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:  # refused while the torque is on
@@ -115,7 +118,7 @@ def test_a_sim_serve_process_moved_by_lines_on_its_input(cli):
             if _replies(replies, 1, 0.2):
                 break
         for joint in ARM:
-            _send(serve, f"sweep {joint} -30 30 1")
+            _send(serve, f"sweep {joint} -30 30 3")
         assert len(_replies(replies, len(ARM), 10)) == len(ARM)
         out, err = calibrate.communicate(timeout=60)
     finally:
