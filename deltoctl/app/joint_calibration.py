@@ -101,7 +101,8 @@ class Steps:
     def check(self) -> None:
         seconds = self.seconds
         if seconds is not None and not (math.isfinite(seconds) and 0 < seconds <= 3600):
-            raise InvalidInput(f"--range-seconds must be 0 to 3600, got {seconds:g}")
+            raise InvalidInput(f"--range-seconds must be above 0 and at most 3600, got "
+                               f"{seconds:g}")
         if self.done is None and seconds is None:
             raise InvalidInput("the range needs an end: done, or seconds")
 
@@ -114,6 +115,11 @@ def calibrate(system: System, control: Callable[[str], str], steps: Steps,
     steps.check()
     system.check_allowed("calibrating joints")
     members = able(system)
+    joints = [j.name for m in members for j in m.hw.joints]
+    unknown = sorted(set(full_turn) - set(joints))
+    if unknown:
+        raise InvalidInput(f"--full-turn {unknown[0]}: not a calibrated joint (joints: "
+                           f"{', '.join(joints)})")
     write = check_allow(allow)
     if confirm is not None:
         confirm(description(system, write))
@@ -129,20 +135,20 @@ def calibrate(system: System, control: Callable[[str], str], steps: Steps,
             control(pending.pop(0))
         return steps.done(rows) if steps.done is not None else False
 
-    joints = calibration(system, held, offsets,
-                         record_range(system, held, offsets, sampled, steps.seconds), full_turn)
-    system.notes.extend(r["note"] for r in joints if r["note"])
+    rows = calibration(system, held, offsets,
+                       record_range(system, held, offsets, sampled, steps.seconds), full_turn)
+    system.notes.extend(r["note"] for r in rows if r["note"])
     if write:
-        _write_servos(system, joints)
+        _write_servos(system, rows)
     else:
-        for r in joints:
+        for r in rows:
             r["written"] = "not written"
         system.notes.append(
             f"not written to the servos: the homing offset and position limits of "
-            f"{len(joints)} joint(s) (pass {' '.join('--allow ' + p for p in PERMISSIONS)}); "
+            f"{len(rows)} joint(s) (pass {' '.join('--allow ' + p for p in PERMISSIONS)}); "
             "saved in the file only")
-    return {"profile": system.profile.name, **save(system, joints, lerobot), "written": write,
-            "torque": "off", "joints": joints}
+    return {"profile": system.profile.name, **save(system, rows, lerobot), "written": write,
+            "torque": "off", "joints": rows}
 
 
 def start(system: System) -> tuple[dict[str, dict[str, Any]], dict[str, int]]:
@@ -219,10 +225,6 @@ def calibration(system: System, held: dict[str, dict[str, Any]], offsets: dict[s
     """Each joint's new calibration (LeRobot's keys) and its check against the profile; a
     joint that did not move (its lowest = its highest) is a DeviceError naming it."""
     moved = {r["joint"]: r for r in rows}
-    unknown = sorted(set(full_turn) - set(held))
-    if unknown:
-        raise InvalidInput(f"--full-turn {unknown[0]}: not a calibrated joint (joints: "
-                           f"{', '.join(held)})")
     still = [j for j in held if j not in full_turn and (j not in moved
                                                         or moved[j]["min"] == moved[j]["max"])]
     if still:

@@ -25,6 +25,7 @@ if TYPE_CHECKING:
     from deltoctl.app.sinks import LinkWatch
     from deltoctl.core.system import Member, System
     from deltoctl.profile.model import Profile
+    from deltoctl.sim.controls import Controls
 
 
 @dataclass(frozen=True)
@@ -135,7 +136,7 @@ def _opened(prof: Profile, urls: list[str], sim: bool | Mapping[str, Any],
 
 def serve_simulators(stack: contextlib.ExitStack, profile: Profile, blocks: Sequence[str] = (),
                      faults: Mapping[str, Any] | None = None,
-                     controls: Any = None) -> dict[str, str]:
+                     controls: Controls | None = None) -> dict[str, str]:
     """Start the simulated devices of ``blocks`` (every block without), with ``faults`` (those
     of ``deltoctl sim serve``), closed with ``stack``, their control lines added to
     ``controls``; returns ``{bus: target URL}``."""
@@ -226,7 +227,7 @@ def _cannot(system: System, capability: str, what: str) -> None:
 class Robot:
     """An open robot: one System of blocks, and the procedures run on it."""
 
-    def __init__(self, system: System, controls: Any = None) -> None:
+    def __init__(self, system: System, controls: Controls | None = None) -> None:
         self.system = system
         self.controls = controls  # the control lines of the simulators it started
         self.calibration_warnings: list[str] = []  # the servos against their calibration file
@@ -238,7 +239,7 @@ class Robot:
             raise InvalidInput(f"{line!r}: no simulator of this robot answers control lines "
                                "(--sim starts them; a `deltoctl sim serve` reads them on its "
                                "input)")
-        return str(self.controls.run(line))
+        return self.controls.run(line)
 
     @property
     def profile(self) -> Profile:
@@ -512,6 +513,8 @@ class Robot:
         ``confirm`` is told what will happen first (it raises to stop)."""
         from deltoctl.app import joint_calibration as jc
 
+        if hand:
+            self.control("help")  # no simulator to turn by hand: said before anything
         for w in self.calibration_warnings:  # the file's: stale once calibrated again
             if w in self.system.notes:
                 self.system.notes.remove(w)

@@ -114,6 +114,15 @@ def _feetech_registers(url: str) -> dict[int, tuple[int, int, int]]:
     return found
 
 
+def _refused(deltoctl_sim, joint: str) -> bool:
+    """Whether a hand line is refused because the joint's torque is on."""
+    try:
+        deltoctl_sim.control(f"hand {joint} 10")
+    except InvalidInput as exc:
+        return "its torque is on" in exc.message
+    return False
+
+
 PEERS = {"koch-arm": _dynamixel_registers, "so101-follower": _feetech_registers}
 
 
@@ -234,15 +243,7 @@ def test_a_hand_turns_a_limp_servo_and_not_one_whose_torque_is_on(deltoctl_sim, 
         assert eventually(lambda: math.isclose(robot.read()[f"{joint}/position"],
                                                math.radians(45), abs_tol=0.02))
         robot.torque([joint], True)
-
-        def refused() -> bool:
-            try:
-                deltoctl_sim.control(f"hand {joint} 10")
-            except InvalidInput as exc:
-                return "its torque is on" in exc.message
-            return False
-
-        assert eventually(refused)
+        assert eventually(lambda: _refused(deltoctl_sim, joint))
     for line, message in (("hand nowhere 10", "not a servo joint"),
                           (f"hand {joint} far", "DEGREES must be degrees"),
                           (f"sweep {joint} 0 10", "takes JOINT FROM TO SECONDS"),
@@ -260,9 +261,14 @@ def test_a_robot_on_its_own_simulators_runs_control_lines(deltoctl_sim):
                                         full_turn=ARM[:-1])
         assert result["file"] == str(calibration_file("koch-arm", simulated=True))
         assert result["joints"][-1]["range_max"] - result["joints"][-1]["range_min"] > 300
-    with open_robot("koch-arm", deltoctl_sim.buses("koch-arm")) as robot, pytest.raises(
-            InvalidInput, match="no simulator of this robot"):
-        robot.control("hand gripper 0")
+    with open_robot("koch-arm", deltoctl_sim.buses("koch-arm")) as robot:
+        with pytest.raises(InvalidInput, match="no simulator of this robot"):
+            robot.control("hand gripper 0")
+        robot.torque(["gripper"], True)
+        assert eventually(lambda: _refused(deltoctl_sim, "gripper"))
+        with pytest.raises(InvalidInput, match="no simulator of this robot"):
+            robot.calibrate_joints(seconds=1, hand=["hand gripper 0"])
+        assert _refused(deltoctl_sim, "gripper")  # its torque left on: nothing was done
 
 
 @pytest.mark.parametrize("text", ["not json", "[]", '{"format": "deltoctl joint calibration", '
