@@ -181,8 +181,8 @@ def calibrate_joints(
     seconds: Annotated[float | None, typer.Option("--range-seconds", help=(
         "Sample the range this long, not until Enter (the arm in its middle pose)."))] = None,
     hand: Annotated[list[str] | None, typer.Option(help=(
-        "With --sim: a control line, one a sample as the range starts ('hand gripper 40', "
-        "'sweep gripper 0 90 2'; repeatable)."))] = None,
+        "With --sim: a control line, one a sample as the range starts ('hand wrist_flex 40', "
+        "'sweep wrist_flex 0 90 2'; repeatable)."))] = None,
     allow_model_mismatch: AllowMismatch = False,
 ) -> None:
     """LeRobot's calibration with the profile: torque off, the arm in the middle of its range
