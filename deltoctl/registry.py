@@ -45,6 +45,8 @@ CAPABILITIES: dict[str, tuple[str, ...]] = {
     "reboot": ("reboot",), "config": ("config_read", "config_write"),
     "calibrate_imu": ("sample", "self_test"),
     "calibrate_servos": ("calibrate_servos",),
+    "calibrate_joints": ("joint_calibration", "middle_offsets", "positions_under",
+                         "write_joint_calibration", "set_torque"),
 }
 
 SIM_KINDS = ("flag", "text", "int", "number", "numbers", "steps", "joints")
