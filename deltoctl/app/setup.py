@@ -112,12 +112,13 @@ class Setup:
 
     @contextlib.contextmanager
     def _link(self, bus: LinkBus) -> Iterator[Any]:
-        start = time.perf_counter()
-        try:
-            with bus.addressing.open(bus.url) as link:
+        """The link opened; the time it is in use counted (not its opening and closing)."""
+        with bus.addressing.open(bus.url) as link:
+            start = time.perf_counter()
+            try:
                 yield link
-        finally:
-            self.bus_seconds += time.perf_counter() - start
+            finally:
+                self.bus_seconds += time.perf_counter() - start
 
     @contextlib.contextmanager
     def _port(self, url: str, baud: int | None = None) -> Iterator[Any]:

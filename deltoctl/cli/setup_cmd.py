@@ -88,7 +88,8 @@ def _walk(ctx: typer.Context, run: Any, reset: str | None, dry_run: bool) -> dic
     plan = run.wanted_plan()
     if dry_run:
         return plan.as_dict()
-    if run.controls is None and not on_terminal():
+    if run.controls is None and not on_terminal() and any(map(run.asks_to_connect,
+                                                             run.joints())):
         raise InvalidInput("setup asks for each servo to be connected alone: run it on a "
                            "terminal, or name the joint (setup JOINT) in a script")
     for line in joint_lines(plan.as_dict()):
@@ -99,7 +100,7 @@ def _walk(ctx: typer.Context, run: Any, reset: str | None, dry_run: bool) -> dic
         if simulated is not None:
             info(f"the simulator connected {w.joint} alone")
             return
-        sys.stderr.write(f"connect {w.joint} alone, then Enter: ")
+        sys.stderr.write(run.ask_line(w.joint))
         sys.stderr.flush()
         sys.stdin.readline()
 
