@@ -70,6 +70,7 @@ def test_a_factory_new_two_axis_in_process_then_identify_clean():
     from deltoctl.app.setup import open_setup
 
     with open_setup(str(PROFILE), sim={"factory_new": True}) as run:
+        assert run.ask_line("axis_2").startswith("connect axis_2's drive (those set up may")
         for w in run.joints():
             assert run.connect_alone(w.joint) == f"canopen: {w.joint} connected"
             done = run.apply_one(w.joint, run.plan_one(w.joint))
