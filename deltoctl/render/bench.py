@@ -179,11 +179,11 @@ def scan_lines(results: dict[str, Any]) -> list[str]:
         bus = "-" if ours["bus_s"] is None else f"{ours['bus_s']:.3f} s"
         what = ", ".join(_found(f) for f in ours["found"]) or f"nothing (exit {ours['exit_code']})"
         goal = "" if row.get("goal_bus_le_1_s", True) else "  (over the goal)"
-        lines.append(f"  {name:18} deltoctl  bus {bus:>9}  wall {ours['wall_s']:.3f} s  "
+        lines.append(f"  {name:20} deltoctl  bus {bus:>9}  wall {ours['wall_s']:.3f} s  "
                      f"{ours['probes'] or 0:3} probes  found {what}{goal}")
         for way, sdk in row["sdks"].items():
             found = ", ".join(f"ID {f['id']} at {f['baud']}" for f in sdk["found"]) or "nothing"
-            lines.append(f"  {'':18} {way}: {sdk['s']:.3f} s, {sdk['rates_tried']} rate(s), "
+            lines.append(f"  {'':20} {way}: {sdk['s']:.3f} s, {sdk['rates_tried']} rate(s), "
                          f"found {found}")
     return lines
 

@@ -72,8 +72,7 @@ def listen(port: Any, session: Session, device_id: int, instruction: int, params
     deadline = time.monotonic() + wire(port, len(request)) + status + wait
     end = deadline + more * status
     data = b""
-    while time.monotonic() < deadline:
-        chunk = port.read(port.in_waiting or 1)
+    while (chunk := _read(port, deadline)) is not None:
         if chunk:
             data += chunk
             deadline = min(end, max(deadline, time.monotonic() + status + wait))
@@ -92,7 +91,7 @@ def pings(port: Any, session: Session, instruction: int, ids: Iterable[int], wai
     port.reset_input_buffer()
     data, at = b"", time.perf_counter()
     for device_id in ids:
-        time.sleep(max(0.0, at - time.perf_counter()))  # late only spaces them more
+        _sleep_until(at)  # late only spaces them more
         request = session.send(device_id, instruction, b"")
         port.write(request)
         port.flush()
@@ -102,12 +101,36 @@ def pings(port: Any, session: Session, instruction: int, ids: Iterable[int], wai
             data += port.read(port.in_waiting)
             if first and frames.split(data):
                 break
-    deadline = at + wait
-    while time.perf_counter() < deadline:
-        data += port.read(port.in_waiting or 1)
+    deadline = time.monotonic() + at - time.perf_counter() + wait
+    while (chunk := _read(port, deadline)) is not None:
+        data += chunk
     replies = frames.split(data)
     heard = sum(frames.status_size(len(r[2])) for r in replies)
     return sorted({i for i, _, _ in replies}), heard < len(data)
+
+
+def _read(port: Any, deadline: float) -> bytes | None:
+    """What came by now, or the next byte within the port's read timeout, or nothing;
+    None once ``deadline`` (``time.monotonic``) passed. Where a read could block past the
+    deadline (or for ever), a short sleep instead."""
+    left = deadline - time.monotonic()
+    if left <= 0:
+        return None
+    waiting = port.in_waiting
+    if waiting or (port.timeout is not None and left > port.timeout):
+        return port.read(waiting or 1)
+    time.sleep(min(left, 0.001))
+    return b""
+
+
+def _sleep_until(at: float, spin: float = 0.0003) -> None:
+    """A sleep to ``spin`` short of ``at`` (a sleep overshoots by tenths of a millisecond),
+    then a spin to it."""
+    left = at - time.perf_counter()
+    if left > spin:
+        time.sleep(left - spin)
+    while time.perf_counter() < at:
+        pass
 
 
 def several(ids: list[int]) -> set[int]:
