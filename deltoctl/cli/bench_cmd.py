@@ -102,8 +102,9 @@ def bench_i2c(
 
 
 @app.command("scan")
-def bench_scan(ctx: typer.Context, runs: Annotated[int, typer.Option(min=1)] = 3,
-               sdk_runs: Annotated[int, typer.Option(min=0)] = 3,
+def bench_scan(ctx: typer.Context,
+               runs: Annotated[int, typer.Option(min=1, help="deltoctl's scans a case.")] = 3,
+               sdk_runs: Annotated[int, typer.Option(min=0, help="Each SDK way's.")] = 3,
                case: Annotated[str, typer.Option(help="Cases, comma-separated.")] = "") -> None:
     """How long scan takes to find one servo, per link kind, against the SDKs' own scans."""
     from deltoctl.benchmarks.scan import case_names, measure
