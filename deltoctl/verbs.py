@@ -131,7 +131,7 @@ TABLE: dict[str, Verb] = {
     "bench": Verb(READS, "deltoctl bench loop --duration 2", "bench_cmd", stage=TOOLS,
                   remote=False, subs={
         "loop": Verb(READS), "dynamixel": Verb(READS), "feetech": Verb(READS),
-        "i2c": Verb(READS),
+        "i2c": Verb(READS), "scan": Verb(READS),
     }),
     "ports": Verb(READS, "deltoctl ports --json", "ports_cmd", stage=TOOLS),
     "scan": Verb(READS, "deltoctl scan /dev/ttyUSB0 --json", "scan_cmd", stage=TOOLS),

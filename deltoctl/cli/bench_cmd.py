@@ -1,5 +1,5 @@
-"""``deltoctl bench loop|dynamixel|feetech|i2c``: options, then the figures of deltoctl/benchmarks/
-for people (or as JSON)."""
+"""``deltoctl bench loop|dynamixel|feetech|i2c|scan``: options, then the figures of
+deltoctl/benchmarks/ for people (or as JSON)."""
 
 from collections.abc import Callable
 from typing import Annotated, Any
@@ -9,7 +9,13 @@ import typer
 from deltoctl.cli.context import options
 from deltoctl.cli.output import emit_json, say
 from deltoctl.errors import InvalidInput
-from deltoctl.render.bench import dynamixel_lines, feetech_lines, i2c_lines, loop_lines
+from deltoctl.render.bench import (
+    dynamixel_lines,
+    feetech_lines,
+    i2c_lines,
+    loop_lines,
+    scan_lines,
+)
 from deltoctl.verb_help import DESCRIPTIONS
 
 app = typer.Typer(help="Benchmarks that ship with deltoctl.", no_args_is_help=True)
@@ -79,6 +85,16 @@ def bench_i2c(
     if cycles < 1 or clock <= 0:
         raise InvalidInput("--cycles and --clock must be positive")
     _report(options(ctx).json, measure(cycles, clock), i2c_lines, cycles, clock)
+
+
+@app.command("scan")
+def bench_scan(ctx: typer.Context,
+               runs: Annotated[int, typer.Option(min=1, help="deltoctl's scans a case.")] = 3,
+               sdk_runs: Annotated[int, typer.Option(min=0, help="Each SDK way's.")] = 3,
+               case: Annotated[str, typer.Option(help="Cases, comma-separated.")] = "") -> None:
+    """How long scan takes to find one servo, per link kind, against the SDKs' own scans."""
+    from deltoctl.benchmarks.scan import case_names, measure
+    _report(options(ctx).json, measure(case_names(case), runs, sdk_runs), scan_lines)
 
 
 def _report(as_json: bool, results: dict, lines: Callable[..., list[str]], *args: Any) -> None:

@@ -166,3 +166,30 @@ def feetech_lines(results: dict[str, Any]) -> list[str]:
         lines.append(f"  deltoctl / scservo_sdk: {results['paced_ratio']:.2f} × the reads paced, "
                      f"{results['cpu_ratio']:.2f} × less CPU a read")
     return lines
+
+
+def scan_lines(results: dict[str, Any]) -> list[str]:
+    """Per case, the servo, deltoctl's scan (bus and wall time, what it found) and each SDK
+    way's time, medians; a miss of the goal marked."""
+    lines = [f"scan of one servo alone on a paced emulated bus, at a rate and in a protocol it "
+             f"is not told: medians of {results['runs']} runs (the SDKs' "
+             f"{results['sdk_runs']}); goal {results['goal_bus_s']:g} s of bus time"]
+    for name, row in results["cases"].items():
+        ours = row["deltoctl"]
+        bus = "-" if ours["bus_s"] is None else f"{ours['bus_s']:.3f} s"
+        what = ", ".join(_found(f) for f in ours["found"]) or f"nothing (exit {ours['exit_code']})"
+        goal = "" if row.get("goal_bus_le_1_s", True) else "  (over the goal)"
+        lines.append(f"  {name:20} deltoctl  bus {bus:>9}  wall {ours['wall_s']:.3f} s  "
+                     f"{ours['probes'] or 0:3} probes  found {what}{goal}")
+        for way, sdk in row["sdks"].items():
+            found = ", ".join(f"ID {f['id']} at {f['baud']}" for f in sdk["found"]) or "nothing"
+            lines.append(f"  {'':20} {way}: {sdk['s']:.3f} s, {sdk['rates_tried']} rate(s), "
+                         f"found {found}")
+    return lines
+
+
+def _found(servo: dict[str, Any]) -> str:
+    if servo["id"] is None:
+        return f"garbled replies at {servo['baud']}"
+    return (f"ID {servo['id']} {servo['model'] or '?'} {servo['protocol']} at {servo['baud']}"
+            + (" (colliding)" if servo["colliding"] else ""))

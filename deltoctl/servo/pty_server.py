@@ -19,6 +19,7 @@ from typing import Protocol
 
 PR_SET_TIMERSLACK = 29  # prctl(2)
 PRECISE_MARGIN = 0.0001  # s a paced bus spins before a byte time, its timer slack cut
+TCGETS2 = 0x802C542A  # ioctl(2) of struct termios2 on Linux (x86, ARM)
 SPEEDS = {getattr(termios, name): int(name[1:]) for name in dir(termios)
           if name[:1] == "B" and name[1:].isdigit()}  # termios speed code → baud
 
@@ -66,6 +67,23 @@ def precise_timers() -> bool:
         return False
 
 
+def line_rate(fd: int) -> int | None:
+    """The rate the host set on a pseudo-terminal: a standard speed's, or one set as any
+    number (pyserial's for 250,000 or 2,250,000), read back with Linux's TCGETS2."""
+    rate = SPEEDS.get(termios.tcgetattr(fd)[5])
+    if rate is not None or not sys.platform.startswith("linux"):
+        return rate
+    import array
+    import fcntl
+
+    attrs = array.array("i", [0] * 64)
+    try:
+        fcntl.ioctl(fd, TCGETS2, attrs)
+    except OSError:
+        return None
+    return attrs[10] or None  # struct termios2's c_ospeed
+
+
 class PtyServer:
     """Serves a bus on a pseudo-terminal; ``port`` is the path a serial client opens.
     ``latency``: seconds each reply is held before the host sees it, as a USB adapter's
@@ -108,7 +126,7 @@ class PtyServer:
                     return
             arrived = time.perf_counter()
             if self.bus.baud is not None or self.pace:  # the rate the host set on the pty
-                self.bus.line_baud = SPEEDS.get(termios.tcgetattr(self.master)[5])
+                self.bus.line_baud = line_rate(self.master)
             for size, replies in self.bus.serve(data):
                 if self.pace and self.bus.line_baud:
                     self._paced(arrived, size, replies)

@@ -70,3 +70,38 @@ def test_bench_loop_reports_its_own_cost_per_hand(cli):
     # a send, or a reply already there, is one call: a poll() only waits for a reply not
     # there yet, at most once a hand
     assert calls["by_call"].get("poll", 0) <= 2
+
+
+def test_bench_scan_sets_the_scan_beside_the_sdks(cli, monkeypatch):
+    """One rate for each SDK way (the servos sit at it): each case's deltoctl scan and SDK
+    ways find its servo; the factory-new arm's bus is found colliding."""
+    from deltoctl.benchmarks import scan
+    from deltoctl.render.bench import scan_lines
+
+    for rates in ("FIND_DYNAMIXEL", "FEETECH_TABLE", "LEROBOT_SCAN"):
+        monkeypatch.setattr(scan, rates, (1_000_000,))
+    cases = ["xl430-1m", "ax12a-1m-id1", "sts3215-1m", "so101-factory-new"]
+    result = cli("bench", "scan", "--runs", "1", "--sdk-runs", "1", "--case", ",".join(cases),
+                 "--json")
+    assert result.exit_code == 0, result.stderr
+    report = json.loads(result.stdout)["result"]
+    assert list(report["cases"]) == cases and report["goal_bus_s"] == 1.0
+    sdks = {"xl430-1m": {"dynamixel_sdk broadcastPing"},
+            "ax12a-1m-id1": {"dynamixel_sdk ping sweep"},
+            "sts3215-1m": {"scservo_sdk ping sweep", "scservo_sdk broadcast ping (LeRobot's)"},
+            "so101-factory-new": {"scservo_sdk broadcast ping (LeRobot's)"}}
+    for name, row in report["cases"].items():
+        ours = row["deltoctl"]
+        assert ours["found_it"], (name, ours)
+        assert ours["bus_s"] > 0 and ours["wall_s"] >= ours["bus_s"]
+        assert len(ours["bus_runs_s"]) == len(ours["wall_runs_s"]) == 1
+        assert set(row["sdks"]) == sdks[name]
+        assert all(len(sdk["runs_s"]) == 1 and sdk["rates_tried"] == 1
+                   for sdk in row["sdks"].values())
+    assert all(sdk["found_it"] for name in cases[:3]
+               for sdk in report["cases"][name]["sdks"].values())
+    arm = report["cases"]["so101-factory-new"]["deltoctl"]
+    assert arm["exit_code"] == 3 and {f["id"] for f in arm["found"]} <= {1, None}
+    lines = scan_lines(report)
+    assert len(lines) == 1 + len(cases) + sum(map(len, sdks.values()))
+    assert cli("bench", "scan", "--case", "xl430-2m").exit_code == 2

@@ -65,6 +65,37 @@ def test_two_servos_at_one_id_are_named_colliding(cli):
     assert "several servos at ID 1" in result.stderr and "one at a time" in result.stderr
 
 
+@pytest.mark.parametrize(("bus", "found"), [
+    (Protocol1Bus([Servo1(1)], baud=9_600), (1, "AX-12A", "Dynamixel 1.0", 9_600)),
+    (Protocol1Bus([Servo1(42)], baud=57_600), (42, "AX-12A", "Dynamixel 1.0", 57_600)),
+    (fe.FeetechBus([fe.Servo(1, STS3215)], baud=38_400), (1, "STS3215", "Feetech", 38_400)),
+], ids=["ax-12a-at-9600", "ax-12a-at-id-42", "sts3215-at-38400"])
+def test_a_servo_on_a_paced_bus_is_found_clean_at_a_slow_rate(cli, bus, found):
+    """On a bus that takes the wire's time, the scan listens for as long as the wire takes
+    (a read of a servo's model at 9,600 bps outlasts the wait) and its sweep of every ID
+    finds a servo away from the factory's ID."""
+    server = (fe.FeetechPtyServer if isinstance(bus, fe.FeetechBus) else DynamixelPtyServer)
+    with server(bus, pace=True) as served:
+        result, doc = _scan(cli, served.port)
+    assert result.exit_code == 0, result.output
+    [servo] = doc["result"]["servos"]
+    assert (servo["id"], servo["model"], servo["protocol"], servo["baud"]) == found
+    assert not servo["colliding"] and doc["result"]["colliding"] == []
+
+
+def test_two_protocol_1_servos_at_one_id_found_by_the_sweep_are_named_colliding(cli):
+    """Two AX-12A at ID 9 (not the factory's: only the sweep of every ID reaches them)."""
+    from deltoctl.families.dynamixel.emulator1 import MixedBus
+
+    bus = MixedBus(Protocol1Bus([Servo1(9)], baud=1_000_000),
+                   Protocol1Bus([Servo1(9)], baud=1_000_000))
+    with DynamixelPtyServer(bus, pace=True) as server:
+        result, doc = _scan(cli, server.port)
+    assert result.exit_code == 3, result.output
+    assert doc["result"]["colliding"] == [9]
+    assert "several servos at ID 9" in result.stderr
+
+
 def test_nothing_answers_is_unreachable(cli):
     with fe.FeetechPtyServer(fe.FeetechBus([], baud=1_000_000)) as server:
         result = cli("scan", server.port, "--wait", "0.001")

@@ -152,3 +152,20 @@ def test_a_lost_port_raises_link_lost_not_attribute_errors(bus):
                 call()
     finally:
         link.close()
+
+
+@pytest.mark.parametrize("baud", [57_600, 250_000, 2_250_000])
+def test_the_server_hears_the_rate_the_host_set_standard_or_not(baud):
+    """A rate with no termios speed of its own (250,000; 2,250,000) is set as a number:
+    the bus is told it, not None (a servo at another rate would otherwise answer it)."""
+    import serial
+
+    from deltoctl.servo.pty_server import line_rate
+
+    with PtyServer(CounterBus([1])) as server:
+        port = serial.Serial(server.port, 9_600)
+        try:
+            port.baudrate = baud
+            assert line_rate(server.master) == baud
+        finally:
+            port.close()

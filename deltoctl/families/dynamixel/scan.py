@@ -15,12 +15,13 @@ from deltoctl.families.dynamixel.models import by_number
 from deltoctl.families.dynamixel.models1 import BAUD_CODES
 from deltoctl.servo.scan import (
     BROADCAST,
+    BROADCAST_REPLIES,
     FACTORY_ID,
     SWEEP,
     Found,
     Probe,
-    broadcast_wait,
     listen,
+    pings,
     several,
 )
 
@@ -40,7 +41,7 @@ def _model(number: int) -> str:
 def _broadcast_2(baud: int) -> Probe:
     def run(port: Any, wait: float, first: bool = False) -> list[Found]:
         replies, garbled = listen(port, codec.session(), codec.BROADCAST_ID, codec.PING, b"",
-                                  broadcast_wait(baud, wait))
+                                  wait, 3, BROADCAST_REPLIES - 1)
         ids = [i for i, _, _ in replies]
         twice = several(ids)
         found = {i: Found(i, _model(struct.unpack_from("<H", d)[0]), str(d[2]),
@@ -55,8 +56,9 @@ def _broadcast_2(baud: int) -> Probe:
 
 def _sweep_1(baud: int, ids: tuple[int, ...]) -> Probe:
     def run(port: Any, wait: float, first: bool = False) -> list[Found]:
+        heard, noise = pings(port, protocol1.session(), protocol1.PING, ids, wait, first)
         rows: list[Found] = []
-        for i in ids:
+        for i in ids if noise else heard:  # bytes that garbled: each ID asked alone, to tell
             if rows and first:
                 break
             replies, garbled = listen(port, protocol1.session(), i, protocol1.PING, b"", wait)
@@ -75,7 +77,7 @@ def _sweep_1(baud: int, ids: tuple[int, ...]) -> Probe:
 def _read(port: Any, device_id: int, wait: float) -> tuple[bytes, bool]:
     """Model, firmware and present position (two servos at one ID differ in it: they garble)."""
     replies, garbled = listen(port, protocol1.session(), device_id, protocol1.READ,
-                              protocol1.read_params(0, 38), wait)
+                              protocol1.read_params(0, 38), wait, 38)
     return (replies[0][2] if replies else b""), garbled or len(replies) != 1
 
 

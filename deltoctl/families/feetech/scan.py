@@ -9,13 +9,13 @@ from typing import Any
 
 from deltoctl.families.feetech import codec
 from deltoctl.families.feetech.models import BAUD_RATES, by_bytes
-from deltoctl.servo.scan import BROADCAST, Found, Probe, broadcast_wait, listen, several
+from deltoctl.servo.scan import BROADCAST, BROADCAST_REPLIES, Found, Probe, listen, several
 
 
 def _broadcast(baud: int) -> Probe:
     def run(port: Any, wait: float, first: bool = False) -> list[Found]:
         replies, garbled = listen(port, codec.session(), codec.BROADCAST_ID, codec.PING, b"",
-                                  broadcast_wait(baud, wait, 6))
+                                  wait, 0, BROADCAST_REPLIES - 1)
         ids = [i for i, _, _ in replies]
         twice = several(ids)
         rows = [_identify(port, i, baud, wait, i in twice) for i in sorted(set(ids))]
@@ -28,7 +28,7 @@ def _broadcast(baud: int) -> Probe:
 
 def _identify(port: Any, device_id: int, baud: int, wait: float, twice: bool) -> Found:
     replies, garbled = listen(port, codec.session(), device_id, codec.READ,
-                              codec.read_params(0, 58), wait)
+                              codec.read_params(0, 58), wait, 58)
     if not replies or len(replies[0][2]) < 5:
         return Found(device_id, "", "", "Feetech", baud, True)
     data = replies[0][2]
