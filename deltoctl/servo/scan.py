@@ -50,6 +50,14 @@ def listen(port: Any, session: Session, device_id: int, instruction: int, params
            wait: float) -> tuple[list[Reply], bool]:
     """One request's replies, every one heard within ``wait`` (an ID answering twice is two
     servos at it), and whether bytes came that are no valid reply (replies that collided)."""
+    replies, data = hear(port, session, device_id, instruction, params, wait)
+    heard = sum(session.frames.status_size(len(r[2])) for r in replies)
+    return replies, heard < len(data)
+
+
+def hear(port: Any, session: Session, device_id: int, instruction: int, params: bytes,
+         wait: float) -> tuple[list[Reply], bytes]:
+    """One request's valid replies within ``wait``, and every byte heard."""
     port.reset_input_buffer()
     port.write(session.send(device_id, instruction, params))
     port.flush()
@@ -57,10 +65,7 @@ def listen(port: Any, session: Session, device_id: int, instruction: int, params
     deadline = time.monotonic() + wait
     while time.monotonic() < deadline:
         data += port.read(port.in_waiting or 1)
-    frames = session.frames
-    replies = frames.split(data)
-    heard = sum(frames.status_size(len(r[2])) for r in replies)
-    return replies, heard < len(data)
+    return session.frames.split(data), data
 
 
 def broadcast_wait(baud: int, wait: float, reply_bytes: int = 14) -> float:

@@ -45,6 +45,7 @@ DATA_RANGE_ERROR, DATA_LIMIT_ERROR = 4, 6
 RAW_PER_REV = 4096
 RPM_PER_UNIT = 0.229
 MOVING_CURRENT_MA = 120.0  # what a servo draws while it moves (no load model)
+POSE_STEP = 25  # steps between the poses of factory-new servos (within an AX's 0-1023)
 
 
 class Servo:
@@ -422,8 +423,9 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
 def _factory_new(ctx: ServeContext, hw: Hardware, joints: dict[int, Component],
                  parts: dict[str, Any]) -> Any:
     """Servos as they leave the factory: each at ID 1 and 57,600 bps, an X-series in
-    Protocol 2.0, an AX or MX in 1.0; all on one wire, so several answer at ID 1 (each
-    servo added to ``parts`` by joint, all connected)."""
+    Protocol 2.0, an AX or MX in 1.0, each in a pose of its own; all on one wire, so several
+    answer at ID 1 and their replies collide (each servo added to ``parts`` by joint, all
+    connected)."""
     from deltoctl.families.dynamixel.emulator1 import MixedBus
     from deltoctl.families.dynamixel.models1 import Model1
 
@@ -434,6 +436,7 @@ def _factory_new(ctx: ServeContext, hw: Hardware, joints: dict[int, Component],
             buses.append(_bus(hw, {1: j}, 57_600,
                               1.0 if isinstance(_listed_model(hw, j), Model1) else 2.0))
             parts[j.name] = buses[-1].servos[1]
+            parts[j.name].position += POSE_STEP * (len(buses) - 1)  # their replies differ
     return MixedBus(*buses) if buses else DynamixelBus([], 57_600)
 
 

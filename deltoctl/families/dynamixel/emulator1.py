@@ -8,6 +8,7 @@ pty and its pacing are the kit's server (deltoctl.servo.pty_server).
 from __future__ import annotations
 
 import time
+from functools import partial
 
 from deltoctl.families.dynamixel import protocol1 as p1
 from deltoctl.families.dynamixel.models1 import (
@@ -18,6 +19,8 @@ from deltoctl.families.dynamixel.models1 import (
     Model1,
     baud_of,
 )
+from deltoctl.servo.collision import overlap
+from deltoctl.servo.frames import Frames
 from deltoctl.servo.items import item_at
 from deltoctl.servo.pty_server import Replies
 from deltoctl.servo.session import Request
@@ -233,8 +236,9 @@ class Protocol1Bus:
 
 
 class MixedBus:
-    """Two buses on one wire, each answering in its own protocol (a servo set to the other
-    protocol than its bus's): every request's bytes go to both."""
+    """Buses on one wire (a servo set to the other protocol than its bus's; factory-new
+    servos, each at ID 1): every request's bytes go to each, and the statuses that buses of
+    one protocol send to one request from one ID go at once, so they collide."""
 
     def __init__(self, *buses) -> None:
         self.buses = buses
@@ -250,4 +254,16 @@ class MixedBus:
             bus.line_baud = value
 
     def serve(self, data: bytes) -> list[tuple[int, Replies]]:
-        return [answer for bus in self.buses for answer in bus.serve(data)]
+        heard: dict[type, list[list[tuple[int, Replies]]]] = {}
+        frames = {}
+        for bus in self.buses:
+            heard.setdefault(type(bus), []).append(bus.serve(data))
+            frames[type(bus)] = bus.session.frames
+        return [answer for kind, answers in heard.items()
+                for answer in overlap(answers, partial(_sender, frames[kind]))]
+
+
+def _sender(frames: Frames, packet: bytes) -> int | None:
+    """The ID a status is from (None: it does not check)."""
+    statuses = frames.split(packet)
+    return statuses[0][0] if statuses else None

@@ -7,7 +7,7 @@ the torque on and moves the servo at its goal speed within its position limits, 
 ignored) until ``power_cycle``, a supply outside the voltage limits. Behind a pseudo-terminal
 (the kit's PtyServer) that pyserial, and so scservo_sdk, opens as a serial port; a servo
 answers only at its Baud_Rate, and servos sharing an ID answer at once: their bytes collide
-(the line is low when either drives it low). Who answers what is the device session's.
+(the kit's ``collide``). Who answers what is the device session's.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 from deltoctl.core.emulator_contract import ServeContext
 from deltoctl.families.feetech import codec
 from deltoctl.families.feetech.models import BAUD_RATES, BY_NUMBER, Model, expected_model
+from deltoctl.servo.collision import collide
 from deltoctl.servo.items import item_at
 from deltoctl.servo.pty_server import PtyServer, Replies
 from deltoctl.servo.session import Request
@@ -176,19 +177,6 @@ class Servo:
         if not full_angle:
             present %= self.model.resolution
         self.set("Present_Position", max(-32767, min(32767, present)))
-
-
-def collide(packets: list[bytes]) -> bytes:
-    """What the host reads when servos answer at once: the line is low (0) whenever one of
-    them drives it low, so the bytes AND (a longer reply's tail goes through alone)."""
-    out = bytearray(max(len(p) for p in packets))
-    for k in range(len(out)):
-        byte = 0xFF
-        for p in packets:
-            if k < len(p):
-                byte &= p[k]
-        out[k] = byte
-    return bytes(out)
 
 
 class FeetechBus:

@@ -8,7 +8,7 @@ import time
 import pytest
 
 from deltoctl.families.feetech import codec
-from deltoctl.families.feetech.emulator import OVERLOAD, FeetechBus, Servo, collide
+from deltoctl.families.feetech.emulator import OVERLOAD, FeetechBus, Servo
 from deltoctl.families.feetech.models import (
     BAUD_RATES,
     BY_NUMBER,
@@ -18,6 +18,7 @@ from deltoctl.families.feetech.models import (
     config_rules,
     item_named,
 )
+from deltoctl.servo.collision import collide
 from deltoctl.servo.session import NEED_DATA, Done
 
 STS3215, SCS0009 = BY_NUMBER[777], BY_NUMBER[1284]
