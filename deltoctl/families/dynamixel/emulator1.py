@@ -57,13 +57,11 @@ class Servo1:
         self.memory[item.address:item.address + item.size] = item.encode(value)
 
     def reset(self) -> None:
-        """RESET: every item to its default (the ID to 1), the baud rate kept by the bus."""
-        baud = self.memory[4]
+        """RESET: every item to its factory default, the ID to 1 and the Baud Rate to the
+        model's factory rate (an AX's 1 Mbps, an RX's or MX's 57,600 bps)."""
         for item in self.model.table:
             self.set(item.name, item.default)
         self.set("Model Number", self.model.number)
-        if baud:
-            self.memory[4] = baud
 
     def read(self, address: int, length: int) -> tuple[int, bytes]:
         self.update()

@@ -66,6 +66,17 @@ def test_protocol_1_id_and_baud_writes_answer_from_the_old_id_and_rate():
         assert ph.ping(port, 4) == (12, sdk.COMM_SUCCESS, 0)  # AX-12A
 
 
+@pytest.mark.parametrize(("model", "factory"), [(12, 1_000_000), (29, 57_600)])
+def test_protocol_1_reset_answers_from_the_old_id_and_rate_then_the_factory_s(model, factory):
+    bus = Protocol1Bus([Servo1(4, by_number(model))], baud=115_200)
+    with _sdk(bus, 1.0, 115_200) as (port, ph):
+        assert ph.factoryReset(port, 4) == (sdk.COMM_SUCCESS, 0)
+        assert set(bus.servos) == {1}
+        assert ph.ping(port, 1)[1] == sdk.COMM_RX_TIMEOUT  # no longer at 115,200
+        assert port.setBaudRate(factory)
+        assert ph.ping(port, 1) == (model, sdk.COMM_SUCCESS, 0)
+
+
 def test_connect_plugs_factory_new_parts_one_at_a_time():
     from deltoctl.profile.catalog import load_profile
     from deltoctl.sim.controls import Controls
