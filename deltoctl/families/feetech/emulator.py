@@ -232,7 +232,7 @@ class FeetechBus:
         if inst == codec.SYNC_READ and len(params) >= 2:
             replies: Replies = []
             for i in self.session.addressed(request, {s.id for s in self.servos}):
-                here = self.at(i)
+                here = [s for s in self.at(i) if s.model.sync_read]  # an SCS does not answer
                 replies += self._status(here, [s.read(params[0], params[1]) for s in here])
             return replies
         if inst == codec.SYNC_WRITE and len(params) >= 2:
