@@ -25,3 +25,13 @@ def cache_file(name: str) -> Path:
 
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "deltoctl" / f"{name}-{__version__}.json"
+
+
+def user_data_dir(*parts: str) -> Path:
+    """What deltoctl keeps for this user across versions (calibrations):
+    $XDG_DATA_HOME/deltoctl/PARTS (~/.local/share/… by default)."""
+    import os
+
+    base = os.environ.get("XDG_DATA_HOME") or os.path.join(os.path.expanduser("~"), ".local",
+                                                            "share")
+    return Path(base, "deltoctl", *parts)

@@ -45,6 +45,8 @@ CAPABILITIES: dict[str, tuple[str, ...]] = {
     "reboot": ("reboot",), "config": ("config_read", "config_write"),
     "calibrate_imu": ("sample", "self_test"),
     "calibrate_servos": ("calibrate_servos",),
+    "calibrate_joints": ("joint_calibration", "middle_offsets", "positions_under",
+                         "write_joint_calibration", "set_torque"),
 }
 
 SIM_KINDS = ("flag", "text", "int", "number", "numbers", "steps", "joints")
@@ -252,6 +254,10 @@ class Family:
     # "module:function" (url, wait, every) → a `deltoctl scan` result: how it finds its devices
     # on a link of one of its schemes (a CAN bus), as deltoctl.app.scan.scan reports them
     link_scan: str | None = None
+    # "module:function" () → its deltoctl.core.link_setup.LinkAddressing: how `deltoctl setup`
+    # gives its parts on a link of one of its schemes (CANopen drives: LSS) the profile's
+    # addresses and rates
+    link_setup: str | None = None
 
     def __post_init__(self) -> None:
         unknown = self.capabilities - CAPABILITIES.keys()
@@ -296,6 +302,10 @@ class Family:
 
     def addressing(self) -> Any:
         return _load(self.setup)() if self.setup else None
+
+    def link_addressing(self) -> Any:
+        return _load(self.link_setup)() if self.link_setup else None
+
     def link_scanner(self, scheme: str) -> Callable[..., dict[str, Any]] | None:
         """Its scan of a link of this scheme, if it has one."""
         return _load(self.link_scan) if self.link_scan and scheme in self.schemes else None

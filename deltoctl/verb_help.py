@@ -114,7 +114,7 @@ DESCRIPTIONS = {
     Each family's emulator serves its blocks behind a real link, with the faults and settings
     the family declares (below). --hardware serves some blocks only; --json prints one line.
     A device that can be turned or moved from outside answers control lines on the standard
-    input, one a line (face -x, tilt 10 0 0 …); the line help lists them.
+    input, one a line (face -x, hand elbow_flex 30 …); the line help lists them.
 
     While it runs, --sim of the same profile (same content and faults) drives it instead of
     starting a simulator of its own, so a robot homed by one command stays homed for the

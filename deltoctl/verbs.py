@@ -97,6 +97,8 @@ TABLE: dict[str, Verb] = {
         "imu": Verb(ACTUATES, "deltoctl -p mh5 calibrate imu --tumble"),  # its self-test
         "servos": Verb(READS, "deltoctl -p so101-follower calibrate servos --half-turn",
                        when={("--half-turn",): ACTUATES}),
+        "joints": Verb(ACTUATES, "deltoctl -p koch-arm calibrate joints --allow homing-offset "
+                       "--allow min-position-limit --allow max-position-limit"),
     }),
     "gpio": Verb(READS, "deltoctl -p rrbot-gpio gpio set flange_vacuum/vacuum on", "device_cmd",
                  stage=LIFECYCLE, subs={

@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     from deltoctl.cmdline import Options
     from deltoctl.core.system import Member, System
     from deltoctl.profile.model import Profile
+    from deltoctl.sim.controls import Controls
 
 
 @dataclass(frozen=True)
@@ -109,6 +110,7 @@ def _opened(prof: Profile, urls: list[str], sim: bool | Mapping[str, Any],
             hardware: Sequence[str], allow_model_mismatch: bool, probe: bool,
             notice: Callable[[str], None] | None, served_by: str | None,
             allow_motion: bool = True) -> Iterator[Robot]:
+    from deltoctl.app.joint_calibration import compare_on_open
     from deltoctl.core.system import System, mock_blocks, select_blocks
     from deltoctl.sim.controls import Controls
 
@@ -116,6 +118,7 @@ def _opened(prof: Profile, urls: list[str], sim: bool | Mapping[str, Any],
     with contextlib.ExitStack() as stack:
         simulated = (dict.fromkeys(hardware or [hw.name for hw in prof.hardware], "--sim")
                      if sim else mock_blocks(prof, hardware))
+        controls = Controls()
         if simulated:
             served = serve_simulators(stack, prof, list(simulated),
                                       sim if isinstance(sim, Mapping) else None, controls)
@@ -128,16 +131,17 @@ def _opened(prof: Profile, urls: list[str], sim: bool | Mapping[str, Any],
                          for hw in select_blocks(prof, hardware)}
         with System(prof, urls, hardware, probe=probe, allow_model_mismatch=allow_model_mismatch,
                     simulated=simulated, allow_motion=allow_motion) as system:
-            yield Robot(system, controls if controls.words() else None)
+            robot = Robot(system, controls if controls.words() else None)
+            robot.calibration_warnings = compare_on_open(system)
+            yield robot
 
 
 def serve_simulators(stack: contextlib.ExitStack, profile: Profile, blocks: Sequence[str] = (),
                      faults: Mapping[str, Any] | None = None,
-                     controls: Any = None) -> dict[str, str]:
+                     controls: Controls | None = None) -> dict[str, str]:
     """Start the simulated devices of ``blocks`` (every block without), with ``faults`` (those
-    of ``deltoctl sim serve``), closed with ``stack``; returns ``{bus: target URL}``. The
-    control lines they answer (``connect JOINT``, ``face -x``) are added to ``controls`` (a
-    deltoctl.sim.controls.Controls)."""
+    of ``deltoctl sim serve``), closed with ``stack``, their control lines added to
+    ``controls``; returns ``{bus: target URL}``."""
     from deltoctl.sim.serve import ServeOptions, serve_profile
 
     try:
@@ -225,17 +229,19 @@ def _cannot(system: System, capability: str, what: str) -> None:
 class Robot:
     """An open robot: one System of blocks, and the procedures run on it."""
 
-    def __init__(self, system: System, controls: Any = None) -> None:
+    def __init__(self, system: System, controls: Controls | None = None) -> None:
         self.system = system
-        self.controls = controls  # the simulators' control lines, when this process serves them
+        self.controls = controls  # the control lines of the simulators it started
+        self.calibration_warnings: list[str] = []  # the servos against their calibration file
 
-    def simulator_control(self, line: str) -> str:
-        """Run a control line (``connect shoulder_pan``, ``face -x``) on the simulators this
-        robot runs on; InvalidInput when it runs on none of its own."""
-        if self.controls is None:
-            raise InvalidInput("no simulator of this process answers control lines (--sim "
-                               "starts one; a 'sim serve' reads them on its standard input)")
-        return str(self.controls.run(line))
+    def control(self, line: str) -> str:
+        """Run a control line (``hand elbow_flex 30``) on the simulators this robot started;
+        its reply, or an InvalidInput naming what is wrong."""
+        if self.controls is None or not self.controls.words():
+            raise InvalidInput(f"{line!r}: no simulator of this robot answers control lines "
+                               "(--sim starts them; a `deltoctl sim serve` reads them on its "
+                               "input)")
+        return self.controls.run(line)
 
     @property
     def profile(self) -> Profile:
@@ -490,6 +496,32 @@ class Robot:
         if confirm is not None:
             confirm(description)
         return calibrate_servos(self.system, half_turn, name, output, force)
+
+    def calibrate_joints(self, middle: Callable[[], None] | None = None,
+                         done: Callable[[list[dict[str, Any]]], bool] | None = None,
+                         seconds: float | None = None, allow: Sequence[str] = (),
+                         lerobot: str | None = None, full_turn: Sequence[str] = (),
+                         confirm: Callable[[str], None] | None = None,
+                         hand: Sequence[str] = ()) -> dict[str, Any]:
+        """LeRobot's joint calibration with this robot's profile (deltoctl.app.joint_calibration):
+        torque off; ``middle`` returns once the arm is in the middle of its range (each
+        joint's homing offset from that pose); then the range moved by hand is sampled until
+        ``done(rows)`` (told each sample's per-joint present/min/max) says so or ``seconds``
+        pass (``hand``: control lines run on this robot's simulators, one after each sample),
+        checked against the profile's limits (a joint short of or beyond them is a warning),
+        written into the servos when ``allow`` holds every one of ``PERMISSIONS`` (else the
+        file only, a warning saying so), saved in deltoctl's file and, with ``lerobot`` (a
+        device id), in LeRobot's. ``full_turn`` joints take the whole turn, unrecorded.
+        ``confirm`` is told what will happen first (it raises to stop)."""
+        from deltoctl.app import joint_calibration as jc
+
+        if hand:
+            self.control("help")  # no simulator to turn by hand: said before anything
+        for w in self.calibration_warnings:  # the file's: stale once calibrated again
+            if w in self.system.notes:
+                self.system.notes.remove(w)
+        return jc.calibrate(self.system, self.control, jc.Steps(middle, done, seconds, hand),
+                            allow, lerobot, full_turn, confirm)
 
     def _registers(self, joint: str) -> Any:
         m = self.system.member(joint)

@@ -1,6 +1,6 @@
 """``deltoctl setup``: the servos of a profile's buses given the IDs and rates the profile
 says, as a procedure — planned, confirmed by the caller, applied, verified at the new
-settings. Bus-level: no System is opened (a box of new servos answers at no joint's ID).
+settings. Bus-level: no System is opened (a box of new parts answers at no joint's ID).
 
 - *One at a time* (new servos, all at the factory's ID): the part connected alone is found at
   any rate and protocol (the scan's probes), its model checked against the joint's, then torque
@@ -13,18 +13,31 @@ settings. Bus-level: no System is opened (a box of new servos answers at no join
   rates, then verified.
 
 A servo no joint of the profile is, or an ID no joint has, is never written. The bus time is
-the time spent on the links."""
+the time spent on the links.
+
+A block on a link of a family's own (CANopen drives on a CAN bus: node IDs by LSS) is set up
+one joint at a time through its family's ``link_setup`` (deltoctl.app.setup_link); the rows
+and steps are of the same shape (deltoctl.app.setup_rows), the in-place pairing and ordering
+of servos is deltoctl.app.setup_in_place."""
 
 from __future__ import annotations
 
 import contextlib
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from deltoctl import registry
-from deltoctl.errors import DeviceError, InvalidInput, Refused, Unreachable
+from deltoctl.app import setup_link
+from deltoctl.app.setup_in_place import match, ordered_steps, run_step
+from deltoctl.app.setup_link import LinkBus, connect_lines, link_buses
+from deltoctl.app.setup_rows import Outcome
+from deltoctl.app.setup_rows import row as _row
+from deltoctl.app.setup_rows import step as _step
+from deltoctl.app.setup_rows import verified as _verified
+from deltoctl.core.link_setup import LinkJoint
+from deltoctl.errors import InvalidInput, Refused, Unreachable
 from deltoctl.servo.addressing import Addresser, Addressing, Wanted
 
 WAIT = 0.01  # s a probe waits for a reply
@@ -43,26 +56,6 @@ class Bus:
     wanted: list[Wanted]
 
 
-@dataclass
-class Outcome:
-    """What setup did (or, dry, would do): each joint's row, the writes in order."""
-
-    mode: str
-    dry_run: bool
-    joints: list[dict[str, Any]] = field(default_factory=list)
-    steps: list[dict[str, Any]] = field(default_factory=list)
-    bus_seconds: float = 0.0
-
-    def as_dict(self) -> dict[str, Any]:
-        return {"mode": self.mode, "dry_run": self.dry_run, "joints": self.joints,
-                "steps": self.steps, "bus_seconds": round(self.bus_seconds, 3)}
-
-
-def _step(joint: str, action: str, at_id: int, at_baud: int, value: Any = None) -> dict[str, Any]:
-    return {"joint": joint, "action": action, "at_id": at_id, "at_baud": at_baud,
-            "value": value}
-
-
 class Setup:
     """The servo buses of a profile (``buses``: bus → target URL), and the procedures on
     them; ``controls``: the control lines of simulators this process serves (a rehearsal
@@ -72,34 +65,66 @@ class Setup:
                  controls: Any = None, wait: float = WAIT) -> None:
         self.profile, self.controls, self.wait = profile, controls, wait
         self.buses = _servo_buses(profile, buses, hardware)
+        self.links = link_buses(profile, buses, hardware)
         self.bus_seconds = 0.0
-        if not self.buses:
+        if not self.buses and not self.links:
             raise InvalidInput(f"{profile.name} has no servo bus that setup addresses "
-                               "(Dynamixel, Feetech)")
+                               "(Dynamixel, Feetech), nor a CANopen bus (node IDs by LSS)")
 
     # -- what the profile wants --------------------------------------------------------------
     def targets(self) -> list[str]:
         """``BUS=URL`` of each servo bus (open_robot's targets, once the servos are set)."""
-        return [f"{b.bus}={b.url}" for b in self.buses]
+        return [f"{b.bus}={b.url}" for b in [*self.buses, *self.links]]
 
-    def joints(self) -> list[Wanted]:
-        return [w for bus in self.buses for w in bus.wanted]
+    def joints(self) -> list[Wanted | LinkJoint]:
+        return [w for bus in [*self.buses, *self.links] for w in bus.wanted]
 
     def _bus_of(self, joint: str) -> tuple[Bus, Wanted]:
         for bus in self.buses:
             for w in bus.wanted:
                 if w.joint == joint:
                     return bus, w
+        if any(w.joint == joint for link in self.links for w in link.wanted):
+            raise InvalidInput(f"{joint}: a CANopen drive's joint: not a servo's")
         names = ", ".join(w.joint for w in self.joints())
         raise InvalidInput(f"no servo joint {joint!r} in {self.profile.name} (its servo joints: "
                            f"{names}); setup writes only where the profile says")
 
+    def _link_of(self, joint: str) -> tuple[LinkBus, LinkJoint] | None:
+        return next(((bus, w) for bus in self.links for w in bus.wanted if w.joint == joint),
+                    None)
+
     def connect_alone(self, joint: str) -> str | None:
-        """On this process's simulators, ``connect JOINT``: its reply; None without them."""
-        self._bus_of(joint)  # one of the profile's servo joints, or InvalidInput
+        """On this process's simulators, the joint's part made the one to set up (a servo
+        alone on the wire; a drive plugged in, the later ones pulled out): the reply; None
+        without them."""
+        link = self._link_of(joint)
+        lines = [f"connect {joint}"] if link is None else connect_lines(*link)
+        if link is None:
+            self._bus_of(joint)  # one of the profile's servo joints, or InvalidInput
         if self.controls is None or "connect" not in self.controls.words():
             return None
-        return str(self.controls.run(f"connect {joint}"))
+        return [str(self.controls.run(line)) for line in lines][-1]
+
+    def asks_to_connect(self, w: Wanted | LinkJoint) -> bool:
+        """Whether ``w``'s part must be connected for its turn (no serial names it)."""
+        return getattr(w, "serial", None) is None
+
+    def ask_line(self, joint: str) -> str:
+        """What a person is asked before ``joint``'s turn."""
+        if self._link_of(joint) is None:
+            return f"connect {joint} alone, then Enter: "
+        return f"connect {joint}'s drive (those set up may stay connected), then Enter: "
+
+    @contextlib.contextmanager
+    def _link(self, bus: LinkBus) -> Iterator[Any]:
+        """The link opened; the time it is in use counted (not its opening and closing)."""
+        with bus.addressing.open(bus.url) as link:
+            start = time.perf_counter()
+            try:
+                yield link
+            finally:
+                self.bus_seconds += time.perf_counter() - start
 
     @contextlib.contextmanager
     def _port(self, url: str, baud: int | None = None) -> Iterator[Any]:
@@ -156,7 +181,11 @@ class Setup:
                           "servo given the wrong joint's ID: setup --in-place --map ID=JOINT)")
 
     def plan_one(self, joint: str, reset: str | None = None) -> Outcome:
-        """What setting up ``joint``'s servo (connected alone) writes; nothing is written."""
+        """What setting up ``joint``'s servo (connected alone) or drive writes; nothing is
+        written."""
+        link = self._link_of(joint)
+        if link is not None:
+            return self._plan_link(*link, reset)
         bus, w = self._bus_of(joint)
         addresser = self._addresser(bus, w.protocol)
         if reset is not None:
@@ -170,6 +199,12 @@ class Setup:
 
     def apply_one(self, joint: str, plan: Outcome) -> Outcome:
         """Write the plan of ``plan_one`` and verify; the outcome with each joint's status."""
+        link = self._link_of(joint)
+        if link is not None:
+            with self._link(link[0]) as opened:
+                done = setup_link.apply_one(opened, *link, plan)
+            done.bus_seconds = self.bus_seconds
+            return done
         bus, w = self._bus_of(joint)
         addresser = self._addresser(bus, w.protocol)
         row = plan.joints[0]
@@ -189,18 +224,28 @@ class Setup:
         done.bus_seconds = self.bus_seconds
         return done
 
+    def _plan_link(self, bus: LinkBus, w: LinkJoint, reset: str | None) -> Outcome:
+        if reset is not None:
+            raise InvalidInput(f"{bus.block}: {bus.family.name} drives: no factory reset")
+        with self._link(bus) as opened:
+            outcome = setup_link.plan_one(opened, bus, w)
+        outcome.bus_seconds = self.bus_seconds
+        return outcome
+
     def wanted_plan(self) -> Outcome:
         """What a walk of every joint will set, before any servo is found."""
         return Outcome("one at a time", True, [_row(w, None, "planned") for w in self.joints()])
 
-    def walk(self, connect: Callable[[Wanted, str | None], None], reset: str | None = None,
+    def walk(self, connect: Callable[[Any, str | None], None], reset: str | None = None,
              done: Callable[[dict[str, Any]], None] | None = None) -> Outcome:
-        """Every joint in the profile's order: ``connect(wanted, reply)`` once its servo is to
-        be connected alone (``reply``: this process's simulators connected it, else None),
-        then set up and verified (``done`` told each joint's row)."""
+        """Every joint in the profile's order: ``connect(wanted, reply)`` once its part is to
+        be connected (``reply``: this process's simulators connected it, else None; not for
+        a part its serial names, all connected at once), then set up and verified (``done``
+        told each joint's row)."""
         outcome = Outcome("one at a time", False)
         for w in self.joints():
-            connect(w, self.connect_alone(w.joint))
+            if self.asks_to_connect(w):
+                connect(w, self.connect_alone(w.joint))
             one = self.apply_one(w.joint, self.plan_one(w.joint, reset))
             outcome.joints += one.joints
             outcome.steps += one.steps
@@ -221,15 +266,18 @@ class Setup:
         where the match is ambiguous), and the ID and rate changes ordered without two servos
         ever at one ID; nothing is written."""
         mapping = dict(mapping)
+        if not self.buses:
+            raise InvalidInput(f"{self.profile.name}: --in-place readdresses servos; its "
+                               "drives are set up by setup (or setup JOINT)")
         outcome = Outcome("in place", True)
         for bus in self.buses:
             found = self._scan_bus(bus)
-            matched, missing = _match(bus, found, mapping)
+            matched, missing = match(bus, found, mapping)
             for servo, w in matched:
                 outcome.joints.append(_row(w, servo, "planned"))
             for w in missing:
                 outcome.joints.append(_row(w, None, "missing"))
-            outcome.steps += _ordered_steps(bus, found, matched)
+            outcome.steps += ordered_steps(bus, found, matched)
         order = [w.joint for w in self.joints()]
         outcome.joints.sort(key=lambda r: order.index(r["joint"]))  # the profile's order
         unknown = set(mapping.values()) - {r["joint"] for r in outcome.joints}
@@ -279,7 +327,7 @@ class Setup:
         with self._port(bus.url) as port:
             for step in steps:
                 port.baudrate = step["at_baud"]
-                _run_step(port, addressers[step["joint"]], step)
+                run_step(port, addressers[step["joint"]], step)
             for row in rows:
                 w = by_joint[row["joint"]]
                 port.baudrate = w.baud
@@ -338,14 +386,6 @@ def _check_reset(bus: Bus, addresser: Addresser, option: str) -> None:
                            f"{', '.join(addresser.reset_options)}, not {option!r}")
 
 
-def _row(w: Wanted, servo: dict[str, Any] | None, status: str) -> dict[str, Any]:
-    found = None if servo is None else {k: servo[k] for k in ("id", "baud", "protocol",
-                                                                "model")}
-    return {"joint": w.joint, "block": w.block, "from": found,
-            "to": {"id": w.id, "baud": w.baud, "protocol": w.protocol, "model": w.model},
-            "status": status, "verified": False}
-
-
 def _one_steps(w: Wanted, servo: dict[str, Any], reset: str | None) -> list[dict[str, Any]]:
     at_id, at_baud = servo["id"], servo["baud"]
     steps = [_step(w.joint, "factory reset", at_id, at_baud, reset)] if reset else []
@@ -369,136 +409,6 @@ def _address(port: Any, addresser: Addresser, at_id: int, at_baud: int, w: Wante
         addresser.write_baud(port, w.id, w.baud)
         port.baudrate = w.baud
     addresser.finish(port, w.id)
-
-
-def _verified(row: dict[str, Any], w: Wanted, model: str | None, was: str) -> None:
-    """The row marked verified, or DeviceError when the servo does not answer at its new ID
-    and rate as the model it was."""
-    if model is None:
-        raise DeviceError(f"{w.joint}: no answer at ID {w.id}, {w.baud} baud after the writes",
-                          hint=f"scan the bus (deltoctl scan) to see where it went, then run "
-                               f"setup {w.joint} again with it alone")
-    if model != was:
-        raise DeviceError(f"{w.joint}: a {model} answers at ID {w.id}, {w.baud} baud, not "
-                          f"the {was} written to")
-    row["status"] = "set" if (row["from"]["id"], row["from"]["baud"]) != (w.id, w.baud) \
-        else "already set"
-    row["verified"] = True
-
-
-# -- helpers: in place -----------------------------------------------------------------------
-
-def _match(bus: Bus, found: list[dict[str, Any]], mapping: dict[int, str]
-           ) -> tuple[list[tuple[dict[str, Any], Wanted]], list[Wanted]]:
-    """Found servos paired with the block's joints: as ``mapping`` says, then at the joint's
-    ID with its model, then the only one of a model; ambiguity is InvalidInput (--map), a servo
-    that is no joint's or of another model is Refused."""
-    by_id = {s["id"]: s for s in found}
-    pairs = _mapped(bus, by_id, mapping)
-    left = [w for w in bus.wanted if w not in pairs.values()]
-    for w in list(left):
-        servo = by_id.get(w.id)
-        if servo is not None and w.id not in pairs and servo["model"] == w.model:
-            pairs[w.id] = w
-            left.remove(w)
-    _by_model(bus, found, pairs, left)
-    for device_id, w in pairs.items():
-        _same_model(w, by_id[device_id])
-    return [(by_id[i], w) for i, w in pairs.items()], [w for w in bus.wanted
-                                                        if w not in pairs.values()]
-
-
-def _mapped(bus: Bus, by_id: dict[int, dict[str, Any]], mapping: dict[int, str]
-            ) -> dict[int, Wanted]:
-    """The pairs ``--map`` gives for this block's joints; an ID where none answers is
-    InvalidInput."""
-    joints = {w.joint: w for w in bus.wanted}
-    pairs: dict[int, Wanted] = {}
-    for device_id, joint in mapping.items():
-        if joint not in joints:
-            continue
-        if device_id not in by_id:
-            raise InvalidInput(f"--map {device_id}={joint}: no servo answers at ID {device_id}"
-                               f" on {bus.url}")
-        pairs[device_id] = joints[joint]
-    return pairs
-
-
-def _same_model(w: Wanted, servo: dict[str, Any]) -> None:
-    if (w.model and servo["model"] != w.model) or servo["protocol"] != w.protocol:
-        raise Refused(f"{w.joint}: the servo at ID {servo['id']} is a {servo['model']} "
-                      f"({servo['protocol']}); the profile says a {w.model or 'servo'} "
-                      f"({w.protocol}): nothing was written")
-
-
-def _by_model(bus: Bus, found: list[dict[str, Any]], pairs: dict[int, Wanted],
-              left: list[Wanted]) -> None:
-    """The rest paired by model: one servo and one joint of a model go together."""
-    loose = [s for s in found if s["id"] not in pairs]
-    for model in sorted({s["model"] for s in loose}):
-        servos = [s for s in loose if s["model"] == model]
-        joints = [w for w in left if w.model in (model, "")]
-        if len(servos) == 1 and len(joints) == 1:
-            pairs[servos[0]["id"]] = joints[0]
-            left.remove(joints[0])
-        elif servos and joints:
-            ids = ", ".join(str(s["id"]) for s in servos)
-            raise InvalidInput(f"{bus.block}: {model} servos at IDs {ids} could be any of "
-                               f"{', '.join(w.joint for w in joints)}",
-                               hint="say which with --map ID=JOINT (repeatable)")
-        else:
-            ids = ", ".join(str(s["id"]) for s in servos)
-            raise Refused(f"{bus.block}: the {model} at ID {ids} is no joint of the profile: "
-                          "setup does not write to it; nothing was written",
-                          "disconnect it, or --map ID=JOINT if it is one")
-
-
-def _ordered_steps(bus: Bus, found: list[dict[str, Any]],
-                   matched: list[tuple[dict[str, Any], Wanted]]) -> list[dict[str, Any]]:
-    """Torque off, then the ID changes in an order where no two servos share an ID (a
-    temporary free ID breaks a cycle), then the rates at the new IDs."""
-    occupied = {s["id"] for s in found}
-    moving = {s["id"]: (s, w) for s, w in matched if (s["id"], s["baud"]) != (w.id, w.baud)}
-    pending = {i: w.id for i, (s, w) in moving.items() if i != w.id}
-    for i, target in pending.items():
-        if target in occupied and target not in pending:
-            raise Refused(f"{bus.block}: ID {target}, {moving[i][1].joint}'s, is held by a "
-                          "servo that stays: nothing was written")
-    steps = [_step(w.joint, "torque off", i, s["baud"]) for i, (s, w) in moving.items()]
-    baud_of = {i: s["baud"] for i, (s, _) in moving.items()}
-    joint_of = {i: w.joint for i, (_, w) in moving.items()}
-    while pending:
-        ready = [i for i, t in pending.items() if t not in occupied]
-        start = ready[0] if ready else next(iter(pending))
-        target = pending[start] if ready else _free_id(bus, occupied)
-        steps.append(_step(joint_of[start], "id", start, baud_of[start], target))
-        occupied.discard(start)
-        occupied.add(target)
-        baud_of[target], joint_of[target] = baud_of.pop(start), joint_of.pop(start)
-        final = pending.pop(start)
-        if target != final:
-            pending[target] = final
-    steps += [_step(w.joint, "baud", w.id, s["baud"], w.baud) for s, w in moving.values()
-              if s["baud"] != w.baud]
-    return steps
-
-
-def _free_id(bus: Bus, occupied: set[int]) -> int:
-    """A temporary ID no servo holds and no joint wants: the highest of the family's range."""
-    low, high = bus.family.address_range or (0, 252)
-    wanted = {w.id for w in bus.wanted}
-    return next(i for i in range(min(high, 252), low, -1)
-                if i not in occupied and i not in wanted)
-
-
-def _run_step(port: Any, addresser: Addresser, step: dict[str, Any]) -> None:
-    action, at = step["action"], step["at_id"]
-    if action == "torque off":
-        addresser.prepare(port, at)
-    elif action == "id":
-        addresser.write_id(port, at, step["value"])
-    elif action == "baud":
-        addresser.write_baud(port, at, step["value"])
 
 
 # -- opening ---------------------------------------------------------------------------------

@@ -1,6 +1,7 @@
 """``deltoctl calibrate ft``: tare the fingertip F/T sensors and check what is left;
 ``deltoctl calibrate imu``: the IMU's self-test, gravity check and six-position tumble;
-``deltoctl calibrate servos``: the servos' calibration in their family's file format."""
+``deltoctl calibrate servos``: the servos' calibration in their family's file format;
+``deltoctl calibrate joints``: LeRobot's joint calibration with the robot's profile."""
 
 from pathlib import Path
 from typing import Annotated, Any
@@ -11,6 +12,7 @@ from deltoctl.cli.confirm import confirm
 from deltoctl.cli.context import Options, options, parse_pairs
 from deltoctl.cli.device_cmd import AllowMismatch, finish, open_robot
 from deltoctl.cli.output import emit_json, info, table
+from deltoctl.errors import InvalidInput
 
 app = typer.Typer(help="Calibration routines that write a report.", no_args_is_help=True)
 
@@ -161,6 +163,55 @@ def calibrate_servos(
                                                 strict=True):
             table(title, columns, rows)
             info(line)
+    finish(robot)
+
+
+@app.command("joints")
+def calibrate_joints(
+    ctx: typer.Context,
+    allow: Annotated[list[str] | None, typer.Option(
+        help="Write into the servos (else the file only): --allow homing-offset --allow "
+             "min-position-limit --allow max-position-limit.")] = None,
+    fmt: Annotated[str, typer.Option("--format", help="deltoctl, or lerobot: LeRobot's file "
+                                     "too, at LeRobot's place for --id.")] = "deltoctl",
+    name: Annotated[str, typer.Option("--id", help="The device's name in LeRobot's file.")
+                    ] = "my_arm",
+    full_turn: Annotated[list[str] | None, typer.Option(
+        help="A joint given its whole turn, not recorded (repeatable).")] = None,
+    seconds: Annotated[float | None, typer.Option("--range-seconds", help=(
+        "Sample the range this long, not until Enter (the arm in its middle pose)."))] = None,
+    hand: Annotated[list[str] | None, typer.Option(help=(
+        "With --sim: a control line, one a sample as the range starts ('hand wrist_flex 40', "
+        "'sweep wrist_flex 0 90 2'; repeatable)."))] = None,
+    allow_model_mismatch: AllowMismatch = False,
+) -> None:
+    """LeRobot's calibration with the profile: torque off, the arm in the middle of its range
+    (each joint's homing offset: that pose reads zero), each joint moved by hand through its
+    range, checked against the profile's limits; saved, and checked at every later open."""
+    import sys
+    import threading
+
+    from deltoctl.render.joint_calibration import RangeLive, calibration_table
+
+    opts, pressed = options(ctx), threading.Event()
+    if fmt not in ("deltoctl", "lerobot"):
+        raise InvalidInput(f"--format is deltoctl or lerobot, got {fmt!r}")
+    if seconds is None and not sys.stdin.isatty():
+        raise InvalidInput("no terminal to press Enter on: pass --range-seconds")
+    live = RangeLive(sys.stderr.isatty() and not opts.json)
+
+    def middle() -> None:
+        _ask("move the arm to the middle of its range, then press Enter")
+        sys.stdin.readline()
+        threading.Thread(target=lambda: (sys.stdin.readline(), pressed.set()),
+                         daemon=True).start()
+
+    with open_robot(opts, allow_model_mismatch) as robot, live:
+        result = robot.calibrate_joints(
+            None if seconds else middle, lambda rows: live.show(rows) or pressed.is_set(),
+            seconds, allow or [], name if fmt == "lerobot" else None, full_turn or [],
+            lambda what: confirm(ctx, what), hand or [])
+    emit_json(result) if opts.json else table(*calibration_table(result))
     finish(robot)
 
 

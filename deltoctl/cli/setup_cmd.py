@@ -1,5 +1,5 @@
-"""``deltoctl setup [JOINT]``: the servos given the profile's IDs and rates, one at a time or
-in place, planned, confirmed, applied and verified (deltoctl.app.setup)."""
+"""``deltoctl setup [JOINT]``: the servos (and CANopen drives) given the profile's IDs and rates,
+one at a time or in place, planned, confirmed, applied and verified (deltoctl.app.setup)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ def register(app: typer.Typer) -> None:
 
 def setup(ctx: typer.Context,
           joint: Annotated[str | None, typer.Argument(
-              help="The joint whose servo is connected alone (default: each in turn).")] = None,
+              help="The joint whose part is to be set up (default: each in turn).")] = None,
           in_place: Annotated[bool, typer.Option(
               "--in-place", help="IDs unique but not the profile's: readdress them all.")] = False,
           maps: Annotated[list[str] | None, typer.Option(
@@ -34,9 +34,10 @@ def setup(ctx: typer.Context,
           wait: Annotated[float, typer.Option("--wait", min=0.001, max=1.0,
                                               help="Seconds a probe waits.")] = 0.01,
           ) -> None:
-    """Give each servo the profile's ID and baud rate: one at a time (new servos, all at one
-    ID: each joint's connected alone, found at any rate and protocol, its model checked) or
-    --in-place. The plan is confirmed (--yes) before anything is written; each servo is
+    """Give each servo the profile's ID and baud rate, each CANopen drive its node ID (LSS):
+    one at a time (new servos, all at one ID: each joint's connected alone, found at any rate
+    and protocol, its model checked; a drive by its serial, or the only one without a node
+    ID) or --in-place. The plan is confirmed (--yes) before anything is written; each part is
     verified at its new ID and rate. Colliding replies: exit 5, nothing written."""
     from deltoctl.app import setup as app
     from deltoctl.render.setup import setup_parts
@@ -88,7 +89,8 @@ def _walk(ctx: typer.Context, run: Any, reset: str | None, dry_run: bool) -> dic
     plan = run.wanted_plan()
     if dry_run:
         return plan.as_dict()
-    if run.controls is None and not on_terminal():
+    if run.controls is None and not on_terminal() and any(map(run.asks_to_connect,
+                                                             run.joints())):
         raise InvalidInput("setup asks for each servo to be connected alone: run it on a "
                            "terminal, or name the joint (setup JOINT) in a script")
     for line in joint_lines(plan.as_dict()):
@@ -99,7 +101,7 @@ def _walk(ctx: typer.Context, run: Any, reset: str | None, dry_run: bool) -> dic
         if simulated is not None:
             info(f"the simulator connected {w.joint} alone")
             return
-        sys.stderr.write(f"connect {w.joint} alone, then Enter: ")
+        sys.stderr.write(run.ask_line(w.joint))
         sys.stderr.flush()
         sys.stdin.readline()
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from deltoctl.errors import InvalidInput, Unreachable
 
@@ -213,6 +213,34 @@ class Driver:
         ``half_turn``, each servo's present pose is made the middle of its turn first (its
         zero written into the servo)."""
         raise Unsupported(f"{self.hw.name} has no servo calibration")
+
+    # joint calibration (``calibrate joints``): LeRobot's keys → the family's registers
+    calibration_registers: ClassVar[dict[str, str]] = {}
+    # LeRobot's robot types of a follower and a leader of this family (its calibration file)
+    lerobot_types: tuple[str, str] | None = None
+
+    def joint_calibration(self) -> dict[str, dict[str, int]]:
+        """Per joint, the calibration its servo holds as LeRobot's file has it: ``id``,
+        ``drive_mode``, ``homing_offset``, ``range_min``, ``range_max`` (steps, as in the
+        registers), and its ``resolution`` (steps a turn)."""
+        raise Unsupported(f"{self.hw.name} has no joint calibration")
+
+    def middle_offsets(self) -> dict[str, int]:
+        """Per joint, the homing offset that makes the present pose read the middle of the
+        turn (LeRobot's half-turn homing); nothing written. A DeviceError naming a joint whose
+        offset would be beyond its register's reach."""
+        raise Unsupported(f"{self.hw.name} has no joint calibration")
+
+    def positions_under(self, offsets: dict[str, int],
+                        held: dict[str, int]) -> dict[str, int]:
+        """The present positions (steps, one read) as they would read with ``offsets`` in
+        the servos in place of the ``held`` ones; a joint that does not answer is left out."""
+        raise Unsupported(f"{self.hw.name} has no joint calibration")
+
+    def write_joint_calibration(self, values: dict[str, dict[str, int]]) -> None:
+        """Write each joint's ``homing_offset``, ``range_min`` and ``range_max`` into its
+        servo (its torque off, its EEPROM unlocked and locked again where it has a lock)."""
+        raise Unsupported(f"{self.hw.name} has no joint calibration")
 
     def register_items(self) -> list[str]:
         raise Unsupported(f"{self.hw.name} has no registers")

@@ -12,7 +12,11 @@ def _where(at: dict[str, Any] | None) -> str:
     if at is None:
         return "not found"
     model = f" {at['model']}" if at.get("model") else ""
-    return f"ID {at['id']} @ {at['baud']}{model}"
+    return f"{_id(at['id'])} @ {at['baud']}{model}"
+
+
+def _id(device_id: int | None) -> str:
+    return "no ID" if device_id is None else f"ID {device_id}"
 
 
 def joint_rows(result: dict[str, Any]) -> list[list[Any]]:
@@ -23,9 +27,10 @@ def joint_rows(result: dict[str, Any]) -> list[list[Any]]:
 def step_lines(result: dict[str, Any]) -> list[str]:
     """The writes, one a line: ``elbow_flex: ID 1 → 3 (at ID 1, 57600 baud)``."""
     words = {"factory reset": "factory reset {}", "torque off": "torque off",
-             "id": "ID {at_id} → {}", "baud": "baud {at_baud} → {}"}
-    return [f"{s['joint']}: " + words[s["action"]].format(s["value"], **s)
-            + f" (at ID {s['at_id']}, {s['at_baud']} baud)" for s in result["steps"]]
+             "id": "{at} → {}", "baud": "baud {at_baud} → {}",
+             "store": "ID and baud {} stored"}
+    return [f"{s['joint']}: " + words[s["action"]].format(s["value"], at=_id(s["at_id"]), **s)
+            + f" (at {_id(s['at_id'])}, {s['at_baud']} baud)" for s in result["steps"]]
 
 
 def setup_parts(result: dict[str, Any]) -> list[str | tuple]:

@@ -152,6 +152,8 @@ CASES = {
                                        "imu", "-o", str(tmp)],
     "calibrate servos": lambda cli, tmp: ["-p", "so101-follower", "--sim", "calibrate",
                                           "servos", "--half-turn", "-o", str(tmp / "c.json")],
+    "calibrate joints": lambda cli, tmp: ["-p", "koch-arm", "--sim", "calibrate", "joints",
+                                          "--range-seconds", "1"],
     "gpio set": lambda cli, tmp: ["-p", "rrbot-gpio", "--sim", "gpio", "set",
                                   "flange_vacuum/vacuum", "on"],
     "replay": _replay_case,

@@ -274,12 +274,12 @@ def test_a_robot_on_its_own_simulators_runs_their_control_lines():
     from deltoctl.errors import InvalidInput
 
     with open_robot("mh5", sim=True, hardware=("i2c",)) as robot:
-        assert robot.simulator_control("face -z")
+        assert robot.control("face -z")
         with pytest.raises(InvalidInput, match="unknown control"):
-            robot.simulator_control("spin")
+            robot.control("spin")
     with open_robot("koch-arm", sim=True) as robot, \
-            pytest.raises(InvalidInput, match="no simulator of this process"):
-        robot.simulator_control("connect gripper")  # its simulators answer no control line
+            pytest.raises(InvalidInput, match="unknown control 'connect'"):
+        robot.control("connect gripper")  # parts are plugged one by one only factory-new
 
 
 def test_in_place_with_a_servo_missing_warns(cli):

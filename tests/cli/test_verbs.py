@@ -53,7 +53,7 @@ def test_the_fleet_sets_and_help_examples_come_from_the_table():
     assert MOTION.declared() == {"home", "jog", "replay", "report", "fleet run"}
     assert ACTUATING.declared() == MOTION.declared() | {
         "gpio set", "torque", "reboot", "register set", "config restore", "calibrate ft",
-        "calibrate imu", "calibrate servos", "doctor", "setup"}
+        "calibrate imu", "calibrate servos", "calibrate joints", "doctor", "setup"}
     assert sorted(NOT_REMOTE) == ["agent", "bench", "completion", "fleet", "sim"]
     assert EXAMPLES["gpio set"] == verbs.lookup("gpio set").example  # type: ignore[union-attr]
     assert list(cli_main.VERBS) == list(verbs.TABLE)

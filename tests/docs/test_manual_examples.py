@@ -70,7 +70,10 @@ def test_the_commands_of_a_page_run_as_documented(page, tmp_path):
         pytest.skip("the CANopen plugin is not installed")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
         [str(REPO), str(REPO / "plugins" / "deltoctl-canopen"),
-         os.environ.get("PYTHONPATH", "")])}
+         os.environ.get("PYTHONPATH", "")]),
+        # what a page's calibrations save stays in its folder
+        "XDG_DATA_HOME": str(tmp_path / "data"),
+        "HF_LEROBOT_CALIBRATION": str(tmp_path / "lerobot")}
     for line, argv, codes in PAGES[page]:
         assert argv[0] == "deltoctl", f"{page}: a runnable block runs deltoctl only: {line}"
         assert "--sim" in argv or argv[1:2] in (["profile"], ["info"], ["help"]), \

@@ -22,7 +22,7 @@ FAMILY = Family(
     address_range=(0, 252),
     address_kind="Dynamixel ID",
     capabilities=frozenset({"identify", "detect", "home", "jog", "registers", "torque",
-                            "reboot", "config"}),
+                            "reboot", "config", "calibrate_joints"}),
     serve_options=(
         SimOption("missing", "joints", "Fault: a joint that never answers (repeatable)."),
         SimOption("pace", "flag", "Serial buses take the wire time of every byte at the baud "

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import replace
-from typing import Any
+from typing import Any, ClassVar
 
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
 from deltoctl.core.exchange import ExchangePolicy
@@ -701,6 +701,62 @@ class DynamixelDriver(Driver):
         this session moved; the torque stays on (an arm must not fall)."""
         self.moving.update(self.joints)
         self.stop()
+
+    # -- joint calibration (LeRobot's: present = actual + Homing Offset) ------------------------
+    calibration_registers: ClassVar[dict[str, str]] = {
+        "drive_mode": "Drive Mode", "homing_offset": "Homing Offset",
+        "range_min": "Min Position Limit", "range_max": "Max Position Limit"}
+    lerobot_types = ("koch_follower", "koch_leader")
+
+    def joint_calibration(self) -> dict[str, dict[str, int]]:
+        """Drive Mode (10), Homing Offset (20) and the position limits (48, 52) of each servo,
+        in one read of 10..55."""
+        found = {}
+        for device_id, joint in self.joints.items():
+            if device_id not in self.present:
+                continue
+            table = bytes(10) + self.read_table(device_id, 10, 46)
+            found[joint.name] = {"id": device_id, "resolution": 4096, **{
+                key: BY_NAME[item].of_table(table)
+                for key, item in self.calibration_registers.items()}}
+        return found
+
+    def _present_positions(self) -> dict[int, int]:
+        ids = [i for i in self.joints if i in self.present]
+        return {i: struct.unpack("<i", data)[0] for i, _, data in self._sync_read(132, 4, ids)
+                if len(data) == 4}
+
+    def middle_offsets(self) -> dict[str, int]:
+        """LeRobot's half-turn homing: the offset that makes each present pose read 2047."""
+        item = BY_NAME["Homing Offset"]
+        offsets = {}
+        for device_id, present in self._present_positions().items():
+            held = self.read_register(device_id, item)
+            offset = CENTER - (present - held)
+            if not item.in_range(offset):
+                raise DeviceError(f"{self.joints[device_id].name}: an offset of {offset} is "
+                                  f"beyond Homing Offset's range ({item.low}..{item.high})",
+                                  hint="reboot the servo (its multi-turn count resets), then "
+                                       "calibrate again")
+            offsets[self.joints[device_id].name] = offset
+        return offsets
+
+    def positions_under(self, offsets: dict[str, int],
+                        held: dict[str, int]) -> dict[str, int]:
+        return {self.joints[i].name: here - held.get(self.joints[i].name, 0)
+                + offsets.get(self.joints[i].name, 0)
+                for i, here in self._present_positions().items()}
+
+    def write_joint_calibration(self, values: dict[str, dict[str, int]]) -> None:
+        """Torque off, then Homing Offset and the position limits (EEPROM: torque off)."""
+        torque = BY_NAME["Torque Enable"]
+        for joint, entry in values.items():
+            device_id = self.servo(joint)
+            self.write_register_item(device_id, torque, 0)
+            self.torque_enabled.discard(device_id)
+            for key in ("homing_offset", "range_min", "range_max"):
+                self.write_register_item(device_id, BY_NAME[self.calibration_registers[key]],
+                                         entry[key])
 
     def cleanup(self) -> None:
         self.link.close()

@@ -8,7 +8,7 @@ joint is reversed here (Protocol 1.0 servos have no Drive Mode)."""
 from __future__ import annotations
 
 import struct
-from typing import Any
+from typing import Any, ClassVar
 
 from deltoctl.core.driver import Block, Driver
 from deltoctl.core.loop import CommLoop
@@ -41,6 +41,13 @@ def _signed(raw: int) -> int:
 
 class Protocol1Driver(DynamixelDriver):
     protocol = 1.0
+    # no Homing Offset in a Protocol 1.0 table: no joint calibration (the contract's refusal)
+    calibration_registers: ClassVar[dict[str, str]] = {}
+    lerobot_types = None
+    joint_calibration = Driver.joint_calibration
+    middle_offsets = Driver.middle_offsets
+    positions_under = Driver.positions_under
+    write_joint_calibration = Driver.write_joint_calibration
 
     def __init__(self, block: Block) -> None:  # the 2.0 driver's attributes, no sync loops
         Driver.__init__(self, block)

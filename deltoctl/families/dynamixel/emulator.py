@@ -7,7 +7,9 @@ mode it lacks is a data range error; position mode keeps goals within the positi
 extended and current-based position do not; velocity mode turns at the goal velocity, within
 the velocity limit), moves to a goal with a time-based or velocity-based profile, reports its
 current in its own unit (or its load, without a current sensor), temperature and voltage, and
-honours REG_WRITE and ACTION, reboot and factory reset, and answers only at its Baud Rate (the
+honours REG_WRITE and ACTION, reboot and factory reset, Homing Offset (present = the shaft's
+position + offset), a hand turning it while its torque is off (``hand``, ``sweep``: the kit's
+deltoctl.servo.hand), and answers only at its Baud Rate (the
 rate the host set on the pty). Who answers what (Status Return Level, broadcast, sync, fast
 sync and bulk reads) is the device session's (deltoctl.servo.session), the pty and its pacing
 the kit's server (deltoctl.servo.pty_server). Faults: a missing servo, a corrupted CRC, no
@@ -34,6 +36,7 @@ from deltoctl.families.dynamixel.models import (
     by_number,
     expected_model,
 )
+from deltoctl.servo.hand import Hand, add_controls
 from deltoctl.servo.pty_server import Bus, PtyServer, Replies
 from deltoctl.servo.session import Request
 
@@ -68,6 +71,21 @@ class Servo:
         self._turned_at = time.monotonic()  # velocity mode: when the position was last moved
         self.stalled = False  # fault: held where it is, its goal never reached (Moving stays 1)
         self.connected = True  # on the wire (the ``connect`` control line unplugs it)
+        self.hand: Hand | None = None  # a hand turning the shaft while the torque is off
+
+    # -- a hand on the shaft (deltoctl.servo.hand) -----------------------------------------------
+    def limp(self) -> bool:
+        return self.memory[64] == 0
+
+    def steps(self, degrees: float) -> float:
+        return 2047 + degrees * RAW_PER_REV / 360
+
+    def here(self) -> float:
+        return self.position
+
+    def _offset(self) -> int:
+        """Present Position = the shaft's position + Homing Offset (e-manual)."""
+        return self.get("Homing Offset")
 
     # -- the table ---------------------------------------------------------------------------
     def get(self, name: str) -> int:
@@ -95,7 +113,7 @@ class Servo:
             if not item.eeprom and item.access == "RW":
                 self.set(item.name, item.default)
         self.set("Hardware Error Status", 0)
-        self.set("Goal Position", round(self.position))
+        self.set("Goal Position", round(self.position) + self._offset())
         self._move = None
 
     def read(self, address: int, length: int) -> tuple[int, bytes]:
@@ -144,7 +162,7 @@ class Servo:
 
     # -- motion ----------------------------------------------------------------------------------
     def _start_move(self) -> None:
-        goal = float(self.get("Goal Position"))
+        goal = float(self.get("Goal Position") - self._offset())
         if self.memory[64] != 1 or self.get("Operating Mode") not in (POSITION, EXTENDED, 5):
             return
         time_based = self.memory[10] & 0x04
@@ -162,6 +180,10 @@ class Servo:
     def update(self) -> None:
         now = time.monotonic()
         turned, self._turned_at = self._turned_at, now
+        if self.hand is not None:
+            self.position, done = self.hand.now()
+            if done or self.memory[64]:
+                self.hand = None
         if self.memory[64] == 1 and self.get("Operating Mode") == VELOCITY:
             units = self.get("Goal Velocity")
             self.position += units * RPM_PER_UNIT / 60.0 * RAW_PER_REV * (now - turned)
@@ -183,8 +205,8 @@ class Servo:
             if fraction >= 1.0:
                 self._move = None
             self._effort(self.stalled or previous != self.position)
-        self.memory[self._at:self._at + 4] = round(self.position).to_bytes(4, "little",
-                                                                          signed=True)
+        present = round(self.position) + self._offset()
+        self.memory[self._at:self._at + 4] = present.to_bytes(4, "little", signed=True)
 
     def _effort(self, moving: bool) -> None:
         """Present Current in the model's unit, or Present Load (0.1 %) without a sensor."""
@@ -373,15 +395,15 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
     from deltoctl.families.dynamixel.ros2_control import servo_ids
 
     o = ctx.options
-    buses = {}
-    parts: dict[str, Any] = {}  # a factory-new bus's servos by joint: the connect control's
+    buses: dict[str, str] = {}
+    shafts: dict[str, Any] = {}  # joint → its emulated servo, for a hand to turn
     for hw in blocks:
         url = ctx.profile.buses.get(hw.bus or "", "serial:///dev/ttyUSB0?baud=1000000")
         protocol = protocol_of(hw.params, hw.name)
         _, baud, _ = parse_bus_url(url, protocol)
         joints = servo_ids(ctx.profile, hw)
         if o.factory_new:
-            bus = _factory_new(ctx, hw, joints, parts)
+            bus = _factory_new(ctx, hw, joints, shafts)
             server = ctx.stack.enter_context(DynamixelPtyServer(bus, pace=o.pace))
             buses[hw.bus or hw.name] = f"serial://{server.port}?baud={baud}"
             continue
@@ -395,6 +417,7 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
 
             bus = MixedBus(bus, _bus(hw, theirs, baud, 3.0 - protocol))
         for part in getattr(bus, "buses", (bus,)):
+            shafts.update((joints[i].name, s) for i, s in part.servos.items())
             part_missing = {ids[j.name] for j in ctx.named("missing", hw) if j.name in ids}
             if isinstance(part, DynamixelBus):
                 part.faults.missing |= part_missing
@@ -413,30 +436,30 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
         server = ctx.stack.enter_context(DynamixelPtyServer(bus, pace=o.pace))
         query = url.split("?", 1)[1] if "?" in url else f"baud={baud}"
         buses[hw.bus or hw.name] = f"serial://{server.port}?{query}"
-    if parts:
-        from deltoctl.servo.wiring import add_controls
+    add_controls(ctx.control, shafts)
+    if o.factory_new:
+        from deltoctl.servo import wiring
 
-        add_controls(ctx, parts)
+        wiring.add_controls(ctx, shafts)
     return buses
 
 
 def _factory_new(ctx: ServeContext, hw: Hardware, joints: dict[int, Component],
-                 parts: dict[str, Any]) -> Any:
+                 shafts: dict[str, Any]) -> Any:
     """Servos as they leave the factory: each at ID 1 and 57,600 bps, an X-series in
     Protocol 2.0, an AX or MX in 1.0, each in a pose of its own; all on one wire, so several
-    answer at ID 1 and their replies collide (each servo added to ``parts`` by joint, all
+    answer at ID 1 and their replies collide (each servo added to ``shafts`` by joint, all
     connected)."""
     from deltoctl.families.dynamixel.emulator1 import MixedBus
     from deltoctl.families.dynamixel.models1 import Model1
 
     missing = {j.name for j in ctx.named("missing", hw)}
-    buses = []
-    for j in joints.values():
-        if j.name not in missing:
-            buses.append(_bus(hw, {1: j}, 57_600,
-                              1.0 if isinstance(_listed_model(hw, j), Model1) else 2.0))
-            parts[j.name] = buses[-1].servos[1]
-            parts[j.name].position += POSE_STEP * (len(buses) - 1)  # their replies differ
+    present = [j for j in joints.values() if j.name not in missing]
+    buses = [_bus(hw, {1: j}, 57_600, 1.0 if isinstance(_listed_model(hw, j), Model1) else 2.0)
+             for j in present]
+    for k, bus in enumerate(buses):
+        bus.servos[1].position += POSE_STEP * k  # poses of their own: their replies differ
+    shafts.update((j.name, b.servos[1]) for j, b in zip(present, buses, strict=True))
     return MixedBus(*buses) if buses else DynamixelBus([], 57_600)
 
 

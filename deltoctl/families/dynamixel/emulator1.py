@@ -1,8 +1,9 @@
 """A Dynamixel Protocol 1.0 bus (AX, RX, MX servos): each servo keeps its model's control table
 (models1.py), answers at its Baud Rate only and in Protocol 1.0 only, moves to a Goal Position
-within its angle limits at its Moving Speed, and reports its position, speed, load (sign in
-bit 10), voltage and temperature. Who answers what is the Protocol 1.0 device session's; the
-pty and its pacing are the kit's server (deltoctl.servo.pty_server).
+within its angle limits at its Moving Speed, reports its position, speed, load (sign in bit
+10), voltage and temperature, and turns by hand while its torque is off (``hand``). Who
+answers what is the Protocol 1.0 device session's; the pty and its pacing are the kit's server
+(deltoctl.servo.pty_server).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from deltoctl.families.dynamixel.models1 import (
 )
 from deltoctl.servo.collision import overlap
 from deltoctl.servo.frames import Frames
+from deltoctl.servo.hand import Hand
 from deltoctl.servo.items import item_at
 from deltoctl.servo.pty_server import Replies
 from deltoctl.servo.session import Request
@@ -44,6 +46,17 @@ class Servo1:
         self.registered: tuple[int, bytes] | None = None
         self._move: tuple[float, float, float, float] | None = None  # start, goal, t0, s
         self.connected = True  # on the wire (the ``connect`` control line unplugs it)
+        self.hand: Hand | None = None  # a hand turning the shaft while the torque is off
+
+    # -- a hand on the shaft (deltoctl.servo.hand) -----------------------------------------------
+    def limp(self) -> bool:
+        return self.memory[TORQUE_ENABLE] == 0
+
+    def steps(self, degrees: float) -> float:
+        return self.model.center + degrees * self.model.resolution / self.model.degrees
+
+    def here(self) -> float:
+        return self.position
 
     @property
     def id(self) -> int:
@@ -108,6 +121,11 @@ class Servo1:
                       / steps_per_s)
 
     def update(self) -> None:
+        if self.hand is not None:
+            self.position, done = self.hand.now()
+            self.position = max(0.0, min(self.model.resolution - 1.0, self.position))
+            if done or self.memory[TORQUE_ENABLE]:
+                self.hand = None
         if self._move is not None and self.memory[TORQUE_ENABLE]:
             start, goal, t0, duration = self._move
             fraction = 1.0 if duration <= 0 else min(1.0, (time.monotonic() - t0) / duration)

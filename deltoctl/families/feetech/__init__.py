@@ -24,7 +24,7 @@ FAMILY = Family(
     address_kind="Feetech ID",
     address_by_position=True,  # a joint without an ID is its block's N-th, as LeRobot's motors
     capabilities=frozenset({"identify", "detect", "home", "jog", "registers", "torque",
-                            "config", "calibrate_servos"}),
+                            "config", "calibrate_servos", "calibrate_joints"}),
     serve_options=(
         SimOption("missing", "joints", "Fault: a servo that never answers (repeatable)."),
         SimOption("pace", "flag", "The bus takes the wire time of every byte at the baud "

@@ -12,7 +12,6 @@ truncated toward zero, as LeRobot's ``int()``.
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -84,13 +83,9 @@ def save(path: Path, motors: dict[str, MotorCalibration]) -> Path:
 
 def default_path(device_id: str, leader: bool = False) -> Path:
     """Where LeRobot looks for a calibration: its cache, by device kind and id."""
-    root = os.environ.get("HF_LEROBOT_CALIBRATION")
-    if root is None:
-        home = os.environ.get("HF_LEROBOT_HOME") or str(
-            Path(os.environ.get("HF_HOME", Path.home() / ".cache" / "huggingface")) / "lerobot")
-        root = str(Path(home) / "calibration")
-    kind = ("teleoperators", "so_leader") if leader else ("robots", "so_follower")
-    return Path(root).expanduser() / kind[0] / kind[1] / f"{device_id}.json"
+    from deltoctl.servo import lerobot
+
+    return lerobot.path("so_leader" if leader else "so_follower", device_id, leader)
 
 
 def _range(m: MotorCalibration) -> tuple[int, int]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import Any
+from typing import Any, ClassVar
 
 from deltoctl.core.driver import Block, Driver, MoveResult, Progress
 from deltoctl.core.exchange import ExchangePolicy
@@ -72,6 +72,7 @@ class FeetechDriver(Driver):
         self.allow_model_mismatch = block.allow_model_mismatch
         self.moving: set[int] = set()
         self.faults: dict[int, int] = {}  # id → the error bits last warned of
+        self._wrapping: dict[int, bool] = {}  # id → positions within one turn (Phase bit 4)
         self.loops = {}
         for name, default in LOOPS.items():
             try:
@@ -722,6 +723,52 @@ class FeetechDriver(Driver):
         return {"format": "LeRobot calibration", "text": calibration.dump(motors),
                 "file": str(calibration.default_path(name, leader)),
                 "parts": {n: dict(vars(m)) for n, m in motors.items()}}
+
+    # -- joint calibration (LeRobot's: present = actual − Homing_Offset) ----------------------
+    calibration_registers: ClassVar[dict[str, str]] = {
+        "homing_offset": "Homing_Offset", "range_min": "Min_Position_Limit",
+        "range_max": "Max_Position_Limit"}
+    lerobot_types = ("so_follower", "so_leader")
+
+    def joint_calibration(self) -> dict[str, dict[str, int]]:
+        """LeRobot's calibration the servos hold (drive_mode 0, as LeRobot reads it)."""
+        return {name: {**vars(m), "resolution": self.model(m.id).resolution}
+                for name, m in self.lerobot_calibration().items()}
+
+    def middle_offsets(self) -> dict[str, int]:
+        return {self.joints[i].name: self._half_turn_offset(i) for i in self.joints
+                if i in self.present and "Homing_Offset" in self.model(i).by_name}
+
+    def _wraps(self, device_id: int) -> bool:
+        """Positions within one turn (Phase bit 4 clear), read once per servo."""
+        wraps = self._wrapping
+        if device_id not in wraps:
+            phase = self.read_register(device_id, self.model(device_id).by_name["Phase"])
+            wraps[device_id] = not phase & 0x10
+        return bool(wraps[device_id])
+
+    def positions_under(self, offsets: dict[str, int],
+                        held: dict[str, int]) -> dict[str, int]:
+        ids = [i for i in self.joints if i in self.present]
+        found = {}
+        for device_id, _, data in self.sync.read(PRESENT, 2, ids):
+            model = self.model(device_id)
+            name = self.joints[device_id].name
+            here = model.by_name["Present_Position"].decode(data) + held.get(name, 0) \
+                - offsets.get(name, 0)
+            found[name] = here % model.resolution if self._wraps(device_id) else here
+        return found
+
+    def write_joint_calibration(self, values: dict[str, dict[str, int]]) -> None:
+        """Torque off, then Homing_Offset and the position limits, each between the EEPROM's
+        unlock and lock."""
+        self.set_torque(list(values), False)
+        for joint, entry in values.items():
+            device_id = self.servo(joint)
+            items = self.model(device_id).by_name
+            for key in ("homing_offset", "range_min", "range_max"):
+                self.write_register_item(device_id, items[self.calibration_registers[key]],
+                                         entry[key])
 
     def cleanup(self) -> None:
         self.link.close()

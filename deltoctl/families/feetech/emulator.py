@@ -3,8 +3,9 @@ sign-magnitude items, EEPROM kept only while Lock is 0 (a write with Lock 1 hold
 power is cycled, then the saved value is back), Phase bit 4 (clear: positions wrap to one
 turn; set: the full angle), Homing_Offset (present = actual − offset), a goal written turns
 the torque on and moves the servo at its goal speed within its position limits, Torque_Enable
-128 centres the offset — and its status error byte: an overload latched (torque off, goals
-ignored) until ``power_cycle``, a supply outside the voltage limits. Behind a pseudo-terminal
+128 centres the offset, a hand turns it while its torque is off (``hand``, ``sweep``) — and
+its status error byte: an overload latched (torque off, goals ignored) until ``power_cycle``,
+a supply outside the voltage limits. Behind a pseudo-terminal
 (the kit's PtyServer) that pyserial, and so scservo_sdk, opens as a serial port; a servo
 answers only at its Baud_Rate, and servos sharing an ID answer at once: their bytes collide
 (the kit's ``collide``). Who answers what is the device session's.
@@ -19,6 +20,7 @@ from deltoctl.core.emulator_contract import ServeContext
 from deltoctl.families.feetech import codec
 from deltoctl.families.feetech.models import BAUD_RATES, BY_NUMBER, Model, expected_model
 from deltoctl.servo.collision import collide
+from deltoctl.servo.hand import Hand, add_controls
 from deltoctl.servo.items import item_at
 from deltoctl.servo.pty_server import PtyServer, Replies
 from deltoctl.servo.session import Request
@@ -48,7 +50,19 @@ class Servo:
         self.actual = model.resolution / 2  # the shaft's angle, steps
         self._move: tuple[float, float, float, float] | None = None  # from, to, t0, seconds
         self.connected = True  # on the wire (the ``connect`` control line unplugs it)
+        self.hand: Hand | None = None  # a hand turning the shaft while the torque is off
+        self.joint: str | None = None  # the profile's joint it serves, for a hand to find
         self.power_cycle()
+
+    # -- a hand on the shaft (deltoctl.servo.hand) -----------------------------------------------
+    def limp(self) -> bool:
+        return self.get("Torque_Enable") == 0
+
+    def steps(self, degrees: float) -> float:
+        return self.model.resolution / 2 + degrees * self.model.resolution / 360
+
+    def here(self) -> float:
+        return self.actual
 
     # -- the table -------------------------------------------------------------------------------
     def get(self, name: str) -> int:
@@ -158,6 +172,10 @@ class Servo:
 
     def update(self) -> None:
         velocity = 0
+        if self.hand is not None:
+            self.actual, done = self.hand.now()
+            if done or self.get("Torque_Enable"):
+                self.hand = None
         if self._move is not None:
             start, goal, t0, seconds = self._move
             fraction = 1.0 if seconds <= 0 else min(1.0, (time.monotonic() - t0) / seconds)
@@ -277,10 +295,8 @@ def _model_of(hw: Hardware, joint: Component) -> Model:
     return (BY_NUMBER.get(number) if number is not None else None) or STS3215
 
 
-def bus_of(ctx: ServeContext, hw: Hardware, baud: int,
-           parts: dict[str, Servo] | None = None) -> FeetechBus:
-    """A block's servos at their joints' IDs, with the faults ``ctx`` names (factory-new,
-    each servo added to ``parts`` by joint)."""
+def bus_of(ctx: ServeContext, hw: Hardware, baud: int) -> FeetechBus:
+    """A block's servos at their joints' IDs, with the faults ``ctx`` names."""
     from deltoctl.families.feetech.ros2_control import servo_ids
 
     joints = servo_ids(ctx.profile, hw)
@@ -289,14 +305,14 @@ def bus_of(ctx: ServeContext, hw: Hardware, baud: int,
     volts = {j.name for j in ctx.named("voltage", hw)}
     servos = [Servo(i, _model_of(hw, j), (3, 9) if j.name in old else (3, 10),
                     16.0 if j.name in volts else 12.0) for i, j in joints.items()]
+    for servo, joint in zip(servos, joints.values(), strict=True):
+        servo.joint = joint.name
     if ctx.options.factory_new:  # each at ID 1, 1 Mbps: their replies collide
         missing = {ids[j.name] for j in ctx.named("missing", hw) if j.name in ids}
         present = [s for s in servos if s.id not in missing]
         for k, servo in enumerate(present):
             servo.set("ID", 1)
             servo.actual += 300 * k  # poses of their own: their replies differ
-        if parts is not None:
-            parts.update({j.name: s for s, j in zip(servos, joints.values()) if s in present})
         return FeetechBus(present, baud=1_000_000)
     bus = FeetechBus(servos, baud=baud)
     by_id = {s.id: s for s in servos}
@@ -322,16 +338,18 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
     from deltoctl.families.feetech import parse_bus_url
 
     buses = {}
-    parts: dict[str, Servo] = {}  # a factory-new bus's servos by joint: the connect control's
+    shafts = {}  # joint → its emulated servo, for a hand to turn
     for hw in blocks:
         url = ctx.profile.buses.get(hw.bus or "", "serial:///dev/ttyACM0?baud=1000000")
         _, baud, _ = parse_bus_url(url)
-        server = ctx.stack.enter_context(FeetechPtyServer(bus_of(ctx, hw, baud, parts),
-                                                          pace=ctx.options.pace))
+        bus = bus_of(ctx, hw, baud)
+        shafts.update((s.joint, s) for s in bus.servos if s.joint is not None)
+        server = ctx.stack.enter_context(FeetechPtyServer(bus, pace=ctx.options.pace))
         query = url.split("?", 1)[1] if "?" in url else f"baud={baud}"
         buses[hw.bus or hw.name] = f"serial://{server.port}?{query}"
-    if parts:
-        from deltoctl.servo.wiring import add_controls
+    add_controls(ctx.control, shafts)
+    if ctx.options.factory_new:
+        from deltoctl.servo import wiring
 
-        add_controls(ctx, parts)
+        wiring.add_controls(ctx, shafts)
     return buses

@@ -17,6 +17,7 @@ FAMILY = Family(
     frame_names="deltoctl_canopen.codec:frame_name",
     emulator="deltoctl_canopen.emulator:serve",
     link_scan="deltoctl_canopen.scan:scan_link",
+    link_setup="deltoctl_canopen.addressing:addressing",
     plugins=("canopen_ros2_control/Cia402System",),
     schemes=("can",),
     address_range=(1, 127),

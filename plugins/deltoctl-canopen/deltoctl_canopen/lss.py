@@ -21,7 +21,7 @@ from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
-from deltoctl.errors import DeviceError, InvalidInput, NoAnswer
+from deltoctl.errors import DeviceError, InvalidInput, NoAnswer, Refused
 
 from deltoctl_canopen.session import LSS_BITRATES, LSS_FROM_SLAVE, UNCONFIGURED
 
@@ -288,18 +288,17 @@ def plan(profile: Profile, hw: Hardware) -> list[Step]:
             for joint, node in block_nodes(profile, hw).items()]
 
 
-def apply(network: Any, step: Step) -> dict[str, Any]:
-    """One step on the bus: done already when a drive answers at its node ID (with its
-    serial, when it names one); else its drive found among those without a node ID (by
-    serial, or the only one) and given the node ID and bit rate."""
+def locate(network: Any, step: Step) -> tuple[Identity, bool]:
+    """The drive that is the step's, and whether it answers at its node ID already (with
+    its serial, when it names one); else the one without a node ID that has its serial (or
+    the only one). Two unnamed drives are Refused, nothing written to them."""
     there = read_identity(network, step.node_id)
     if there is not None and step.serial in (None, there.serial):
-        return {"joint": step.joint, "node_id": step.node_id, "done": "already",
-                "identity": there.as_dict()}
+        return there, True
     if there is not None:
-        raise DeviceError(f"{step.joint}: node {step.node_id} is taken by the drive with serial "
-                          f"{there.serial:#010x}, not {step.serial:#010x}",
-                          hint="give that drive its own node ID first")
+        raise Refused(f"{step.joint}: node {step.node_id} is taken by the drive with serial "
+                      f"{there.serial:#010x}, not {step.serial:#010x}: nothing was written",
+                      "give that drive its own node ID first")
     found = find_unconfigured(network)
     chosen = [i for i in found if step.serial in (None, i.serial)]
     if not chosen:
@@ -307,11 +306,22 @@ def apply(network: Any, step: Step) -> dict[str, Any]:
             f" has serial {step.serial:#010x}" if step.serial is not None else " answers"),
             hint=f"connect {step.joint}'s drive (and power it)")
     if len(chosen) > 1:
-        raise DeviceError(f"{step.joint}: {len(chosen)} drives have no node ID: which is "
-                          f"{step.joint}'s is not known",
-                          hint=f"connect {step.joint}'s drive alone, or give the joint its "
-                               "drive's serial (lss_serial param)")
-    done = assign(network, chosen[0], step.node_id, step.bitrate)
+        raise Refused(f"{step.joint}: {len(chosen)} drives have no node ID: which is "
+                      f"{step.joint}'s is not known: nothing was written",
+                      f"connect {step.joint}'s drive alone, or give the joint its drive's "
+                      "serial (lss_serial param)")
+    return chosen[0], False
+
+
+def apply(network: Any, step: Step) -> dict[str, Any]:
+    """One step on the bus: done already when a drive answers at its node ID (with its
+    serial, when it names one); else its drive found among those without a node ID (by
+    serial, or the only one) and given the node ID and bit rate."""
+    identity, already = locate(network, step)
+    if already:
+        return {"joint": step.joint, "node_id": step.node_id, "done": "already",
+                "identity": identity.as_dict()}
+    done = assign(network, identity, step.node_id, step.bitrate)
     return {"joint": step.joint, "done": "assigned", **done}
 
 

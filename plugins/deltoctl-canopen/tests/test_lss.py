@@ -8,7 +8,7 @@ import json
 import canopen
 import pytest
 from conftest import PROFILE
-from deltoctl.errors import DeviceError, NoAnswer, ProfileError
+from deltoctl.errors import DeviceError, NoAnswer, ProfileError, Refused
 from deltoctl.profile.catalog import load_profile
 from deltoctl.sim.controls import Controls
 from deltoctl.sim.serve import ServeOptions, serve_profile
@@ -97,7 +97,7 @@ def test_drives_named_by_serial_are_set_up_all_connected(box, variant):
 
 def test_two_drives_nobody_named_are_not_guessed(box):
     served = box()
-    with pytest.raises(DeviceError, match="2 drives have no node ID"):
+    with pytest.raises(Refused, match="2 drives have no node ID"):
         lss.apply(served.network, served.steps()[0])
     with pytest.raises(DeviceError, match="several LSS drives answer"):
         lss.assign(served.network, None, 5)
@@ -114,7 +114,7 @@ def test_no_drive_connected_and_a_node_id_taken(box):
     with pytest.raises(NoAnswer, match="no drive answers at LSS address"):
         lss.assign(served.network, lss.Identity(0xDE7, 0x40201, 0x10002, 0x1234), 5)
     taken = lss.Step("axis_2", 2, 1_000_000, serial=0x1234)
-    with pytest.raises(DeviceError, match="node 2 is taken"):
+    with pytest.raises(Refused, match="node 2 is taken"):
         lss.apply(served.network, taken)
 
 
