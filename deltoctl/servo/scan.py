@@ -59,10 +59,19 @@ def wire(port: Any, size: int) -> float:
 def listen(port: Any, session: Session, device_id: int, instruction: int, params: bytes,
            wait: float, length: int = 0, more: int = 1) -> tuple[list[Reply], bool]:
     """One request's replies, every one heard (an ID answering twice is two servos at it),
-    and whether bytes came that are no valid reply (replies that collided). It listens until
-    the wire would have carried the request and a status of ``length`` data bytes after the
-    longest return delay, and ``wait`` more (the host's own latency); once bytes come, on
-    while they keep coming, up to ``more`` statuses later (a broadcast's further replies)."""
+    and whether bytes came that are no valid reply (replies that collided); ``hear`` says how
+    long it listens."""
+    replies, data = hear(port, session, device_id, instruction, params, wait, length, more)
+    heard = sum(session.frames.status_size(len(r[2])) for r in replies)
+    return replies, heard < len(data)
+
+
+def hear(port: Any, session: Session, device_id: int, instruction: int, params: bytes,
+         wait: float, length: int = 0, more: int = 1) -> tuple[list[Reply], bytes]:
+    """One request's valid replies, and every byte heard. It listens until the wire would have
+    carried the request and a status of ``length`` data bytes after the longest return delay,
+    and ``wait`` more (the host's own latency); once bytes come, on while they keep coming, up
+    to ``more`` statuses later (a broadcast's further replies)."""
     frames = session.frames
     request = session.send(device_id, instruction, params)
     status = wire(port, frames.status_size(length)) + RETURN_DELAY
@@ -76,9 +85,7 @@ def listen(port: Any, session: Session, device_id: int, instruction: int, params
         if chunk:
             data += chunk
             deadline = min(end, max(deadline, time.monotonic() + status + wait))
-    replies = frames.split(data)
-    heard = sum(frames.status_size(len(r[2])) for r in replies)
-    return replies, heard < len(data)
+    return frames.split(data), data
 
 
 def pings(port: Any, session: Session, instruction: int, ids: Iterable[int], wait: float,

@@ -129,8 +129,9 @@ def _count_writes(monkeypatch, cls):
 
 def test_colliding_parts_are_named_and_nothing_is_written(cli, monkeypatch):
     writes = _count_writes(monkeypatch, Servo)
-    bus = MixedBus(*(DynamixelBus([Servo(1, model=by_number(1200))], baud=57_600)
-                     for _ in range(2)))
+    twins = [Servo(1, model=by_number(1200)) for _ in range(2)]
+    twins[1].position += 300  # another pose: alike, they would ping as one
+    bus = MixedBus(*(DynamixelBus([twin], baud=57_600) for twin in twins))
     with DynamixelPtyServer(bus) as server:
         result = cli("-p", "koch-arm", "-t", f"dxl=serial://{server.port}?baud=1000000",
                      "setup", "elbow_flex", "--yes", *WAIT)

@@ -18,7 +18,6 @@ from deltoctl.families.dynamixel import protocol1 as p1
 from deltoctl.families.dynamixel.driver import POLICY, REGISTER_POLICY, DynamixelDriver
 from deltoctl.families.dynamixel.models import expected_model
 from deltoctl.families.dynamixel.models1 import (
-    AX_12A,
     GOAL_POSITION,
     PRESENT,
     TORQUE_ENABLE,
@@ -128,11 +127,20 @@ class Protocol1Driver(DynamixelDriver):
                               f"number {number}, not a Protocol 1.0 model deltoctl knows")
         return model
 
-    def _model_or_ax(self, device_id: int) -> Model1:
-        try:
-            return self.model(device_id)
-        except (DeviceError, KeyError):
-            return AX_12A
+    def _check_models(self) -> None:
+        """The 2.0 driver's check, then a servo of a model deltoctl has no Protocol 1.0 table
+        for is refused, whatever is allowed: its steps' scale (300° in 1,024 or 360° in
+        4,096) is not known, so no position of it could be read or sent."""
+        from deltoctl.families.dynamixel.models import by_number
+        from deltoctl.families.dynamixel.models1 import MODELS_1
+
+        super()._check_models()
+        unknown = [f"{self.joints[i].name} (ID {i}) reports model number {m}"
+                   for i, (m, _) in sorted(self.present.items())
+                   if not isinstance(by_number(m), Model1)]
+        if unknown:
+            raise DeviceError("; ".join(unknown) + ": not a Protocol 1.0 model deltoctl knows",
+                              hint="deltoctl knows " + ", ".join(m.name for m in MODELS_1))
 
     # -- the read loop: each servo in turn, or an MX bus in one BULK_READ ------------------------
     def start_read(self) -> None:
@@ -157,7 +165,7 @@ class Protocol1Driver(DynamixelDriver):
     def read_present(self, ids: list[int]) -> list[Reply]:
         """Present Position to Temperature (36, 8 bytes) of each servo: one BULK_READ when
         every one is an MX, else a READ of each in turn."""
-        if all(self._model_or_ax(i).bulk_read for i in ids):
+        if all(self.model(i).bulk_read for i in ids):
             return self.bulk_read([(i, *PRESENT) for i in ids])
         replies = []
         params = p1.read_params(*PRESENT)
@@ -180,7 +188,7 @@ class Protocol1Driver(DynamixelDriver):
         for device_id, error, data in replies:
             if error or len(data) != PRESENT[1]:
                 continue
-            model = self._model_or_ax(device_id)
+            model = self.model(device_id)
             joint = self.joints[device_id]
             position, speed, load, voltage, temperature = PRESENT_STRUCT.unpack(data)
             sign = -1.0 if joint.inverse else 1.0
@@ -193,7 +201,7 @@ class Protocol1Driver(DynamixelDriver):
             values[name + "/temperature"] = float(temperature)
 
     def _raw_goal(self, device_id: int, rad: float) -> int:
-        model = self._model_or_ax(device_id)
+        model = self.model(device_id)
         joint = self.joints[device_id]
         sign = -1.0 if joint.inverse else 1.0
         return round(sign * (rad - joint.offset) / model.rad_per_step + model.center)
@@ -208,7 +216,7 @@ class Protocol1Driver(DynamixelDriver):
             return
         data = {}
         for i, rad in ids.items():
-            model = self._model_or_ax(i)
+            model = self.model(i)
             now = self.values.get(f"{self.joints[i].name}/position", rad)
             speed = min(1023, max(1, round(abs(rad - now) / seconds / model.rad_s_per_unit)))
             goal, reach = self._raw_goal(i, rad), model.by_name["Goal Position"]
@@ -321,15 +329,24 @@ class Protocol1Driver(DynamixelDriver):
     # -- detect ----------------------------------------------------------------------------------
     def detect(self) -> dict:
         """A PING of each of the profile's IDs (Protocol 1.0 has no broadcast PING); for the
-        missing, pings at the other Protocol 1.0 rates, then a Protocol 2.0 broadcast PING."""
+        missing, pings at the other Protocol 1.0 rates, then a Protocol 2.0 broadcast PING.
+        The block's ``detect_sweep: true`` pings every other ID too, at the bus's rate (a few
+        seconds), to find servos at IDs the profile does not list."""
         from deltoctl.families.dynamixel.driver import other_protocol
 
         assert self.port is not None
+        sweep = self._sweep_asked()
         found = {}
         for i in self.expected:
             answer = self.ping(i)
             if answer is not None:
                 found[i] = answer[0]
+        if sweep:
+            for i in range(p1.BROADCAST_ID):
+                if i not in self.expected and self._quick_ping(i):
+                    answer = self.ping(i)
+                    if answer is not None:
+                        found[i] = answer[0]
         missing = sorted(set(self.expected) - set(found))
         elsewhere: dict[int, int] = {}
         own = self.port.baudrate
@@ -344,7 +361,19 @@ class Protocol1Driver(DynamixelDriver):
             finally:
                 self.port.baudrate = own
         speaks_2 = other_protocol(self, [i for i in missing if i not in elsewhere], 1.0)
-        return self._detect_report(found, missing, elsewhere, speaks_2)
+        report = self._detect_report(found, missing, elsewhere, speaks_2)
+        report["swept"] = sweep
+        if not sweep:
+            report["summary"] += ("; other IDs not looked for (no broadcast PING in Protocol "
+                                  "1.0: the block's detect_sweep param, or deltoctl scan, "
+                                  "pings every ID)")
+        return report
+
+    def _sweep_asked(self) -> bool:
+        value = str(self.hw.params.get("detect_sweep", "false")).strip().lower()
+        if value not in ("true", "false"):
+            raise InvalidInput(f"{self.hw.name}: detect_sweep is true or false, not {value!r}")
+        return value == "true"
 
     def _quick_ping(self, device_id: int) -> bool:
         done = self.link.exchange(self.session, device_id, p1.PING, b"", 0.02)

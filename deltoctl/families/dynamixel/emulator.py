@@ -48,6 +48,7 @@ DATA_RANGE_ERROR, DATA_LIMIT_ERROR = 4, 6
 RAW_PER_REV = 4096
 RPM_PER_UNIT = 0.229
 MOVING_CURRENT_MA = 120.0  # what a servo draws while it moves (no load model)
+POSE_STEP = 25  # steps between the poses of factory-new servos (within an AX's 0-1023)
 
 
 class Servo:
@@ -446,8 +447,9 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
 def _factory_new(ctx: ServeContext, hw: Hardware, joints: dict[int, Component],
                  shafts: dict[str, Any]) -> Any:
     """Servos as they leave the factory: each at ID 1 and 57,600 bps, an X-series in
-    Protocol 2.0, an AX or MX in 1.0; all on one wire, so several answer at ID 1 (each
-    servo added to ``shafts`` by joint, all connected)."""
+    Protocol 2.0, an AX or MX in 1.0, each in a pose of its own; all on one wire, so several
+    answer at ID 1 and their replies collide (each servo added to ``shafts`` by joint, all
+    connected)."""
     from deltoctl.families.dynamixel.emulator1 import MixedBus
     from deltoctl.families.dynamixel.models1 import Model1
 
@@ -455,6 +457,8 @@ def _factory_new(ctx: ServeContext, hw: Hardware, joints: dict[int, Component],
     present = [j for j in joints.values() if j.name not in missing]
     buses = [_bus(hw, {1: j}, 57_600, 1.0 if isinstance(_listed_model(hw, j), Model1) else 2.0)
              for j in present]
+    for k, bus in enumerate(buses):
+        bus.servos[1].position += POSE_STEP * k  # poses of their own: their replies differ
     shafts.update((j.name, b.servos[1]) for j, b in zip(present, buses, strict=True))
     return MixedBus(*buses) if buses else DynamixelBus([], 57_600)
 

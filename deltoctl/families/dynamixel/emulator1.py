@@ -9,6 +9,7 @@ answers what is the Protocol 1.0 device session's; the pty and its pacing are th
 from __future__ import annotations
 
 import time
+from functools import partial
 
 from deltoctl.families.dynamixel import protocol1 as p1
 from deltoctl.families.dynamixel.models1 import (
@@ -19,6 +20,8 @@ from deltoctl.families.dynamixel.models1 import (
     Model1,
     baud_of,
 )
+from deltoctl.servo.collision import overlap
+from deltoctl.servo.frames import Frames
 from deltoctl.servo.hand import Hand
 from deltoctl.servo.items import item_at
 from deltoctl.servo.pty_server import Replies
@@ -67,13 +70,11 @@ class Servo1:
         self.memory[item.address:item.address + item.size] = item.encode(value)
 
     def reset(self) -> None:
-        """RESET: every item to its default (the ID to 1), the baud rate kept by the bus."""
-        baud = self.memory[4]
+        """RESET: every item to its factory default, the ID to 1 and the Baud Rate to the
+        model's factory rate (an AX's 1 Mbps, an RX's or MX's 57,600 bps)."""
         for item in self.model.table:
             self.set(item.name, item.default)
         self.set("Model Number", self.model.number)
-        if baud:
-            self.memory[4] = baud
 
     def read(self, address: int, length: int) -> tuple[int, bytes]:
         self.update()
@@ -251,8 +252,9 @@ class Protocol1Bus:
 
 
 class MixedBus:
-    """Two buses on one wire, each answering in its own protocol (a servo set to the other
-    protocol than its bus's): every request's bytes go to both."""
+    """Buses on one wire (a servo set to the other protocol than its bus's; factory-new
+    servos, each at ID 1): every request's bytes go to each, and the statuses that buses of
+    one protocol send to one request from one ID go at once, so they collide."""
 
     def __init__(self, *buses) -> None:
         self.buses = buses
@@ -268,4 +270,16 @@ class MixedBus:
             bus.line_baud = value
 
     def serve(self, data: bytes) -> list[tuple[int, Replies]]:
-        return [answer for bus in self.buses for answer in bus.serve(data)]
+        heard: dict[type, list[list[tuple[int, Replies]]]] = {}
+        frames = {}
+        for bus in self.buses:
+            heard.setdefault(type(bus), []).append(bus.serve(data))
+            frames[type(bus)] = bus.session.frames
+        return [answer for kind, answers in heard.items()
+                for answer in overlap(answers, partial(_sender, frames[kind]))]
+
+
+def _sender(frames: Frames, packet: bytes) -> int | None:
+    """The ID a status is from (None: it does not check)."""
+    statuses = frames.split(packet)
+    return statuses[0][0] if statuses else None

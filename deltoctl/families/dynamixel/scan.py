@@ -1,5 +1,6 @@
 """How a box of Dynamixel servos is found at an unknown rate and protocol: a broadcast PING
-per X-series rate in Protocol 2.0 (every servo answers with its model and firmware), and in
+per X-series rate in Protocol 2.0 (every servo answers with its model and firmware; then a READ
+of each one's present position, as servos of one model at one ID ping alike), and in
 Protocol 1.0, whose broadcast PING no servo answers, a PING to ID 1 (the factory's) per AX/MX
 rate, then to each ID 0–252 in turn, and the model and firmware of each that answers read at
 address 0. The common rates come first (1 Mbps, the AX's default; 57,600, the X's and MX's)."""
@@ -20,6 +21,7 @@ from deltoctl.servo.scan import (
     SWEEP,
     Found,
     Probe,
+    hear,
     listen,
     pings,
     several,
@@ -40,18 +42,48 @@ def _model(number: int) -> str:
 
 def _broadcast_2(baud: int) -> Probe:
     def run(port: Any, wait: float, first: bool = False) -> list[Found]:
-        replies, garbled = listen(port, codec.session(), codec.BROADCAST_ID, codec.PING, b"",
-                                  wait, 3, BROADCAST_REPLIES - 1)
-        ids = [i for i, _, _ in replies]
-        twice = several(ids)
-        found = {i: Found(i, _model(struct.unpack_from("<H", d)[0]), str(d[2]),
-                          "Dynamixel 2.0", baud, i in twice) for i, _, d in replies if len(d) == 3}
-        rows = list(found.values())
-        if garbled:
-            rows.append(Found(None, "", "", "Dynamixel 2.0", baud, True))
+        session = codec.session()
+        replies, data = hear(port, session, codec.BROADCAST_ID, codec.PING, b"",
+                             wait, 3,
+                             BROADCAST_REPLIES - 1)
+        twice = several([i for i, _, _ in replies])
+        rows = [Found(i, _model(number), str(d[2]), "Dynamixel 2.0", baud,
+                      i in twice or not _alone(port, i, number, wait))
+                for i, _, d in replies if len(d) == 3
+                for number in struct.unpack_from("<H", d)]
+        rows = list({row.id: row for row in rows}.values())
+        if sum(session.frames.status_size(len(d)) for _, _, d in replies) < len(data):
+            ids = _headers(data) - {row.id for row in rows}  # garbled statuses keep their ID
+            rows += [Found(i, "", "", "Dynamixel 2.0", baud, True) for i in sorted(ids)] or \
+                [Found(None, "", "", "Dynamixel 2.0", baud, True)]
         return rows
 
     return Probe("Dynamixel 2.0", baud, BROADCAST, run)
+
+
+def _alone(port: Any, device_id: int, number: int, wait: float) -> bool:
+    """Whether the PING's clean status was one servo's: servos of one model and firmware at
+    one ID send byte-identical statuses, which superimpose cleanly, but their present
+    positions differ, so a READ of it garbles (no reply says nothing: a servo may answer
+    PINGs only)."""
+    model = by_number(number)
+    item = model.by_name.get("Present Position") if model is not None else None
+    if item is None:
+        return True
+    replies, garbled = listen(port, codec.session(), device_id, codec.READ,
+                              codec.read_params(item.address, item.size), wait)
+    return not garbled and len(replies) <= 1
+
+
+def _headers(data: bytes) -> set[int]:
+    """The IDs in the Protocol 2.0 headers among ``data`` (servos at one ID send one header:
+    it survives their collision)."""
+    ids, at = set(), data.find(codec.HEADER)
+    while 0 <= at < len(data) - 4:
+        if data[at + 4] < codec.BROADCAST_ID:
+            ids.add(data[at + 4])
+        at = data.find(codec.HEADER, at + 1)
+    return ids
 
 
 def _sweep_1(baud: int, ids: tuple[int, ...]) -> Probe:

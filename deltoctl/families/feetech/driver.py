@@ -200,6 +200,7 @@ class FeetechDriver(Driver):
                        "check power, the cable between servos, the baud rate and the IDs "
                        "(deltoctl detect scans the other baud rates)")
         self._check_models()
+        self.sync.singly = {i for i, (m, _) in self.present.items() if not m.sync_read}
         self.connected = True
 
     def _check_models(self) -> None:
@@ -420,6 +421,7 @@ class FeetechDriver(Driver):
         ids = {by_name[n]: v for n, v in goals.items() if n in by_name}
         if not ids:
             return
+        self._check_position_mode(list(ids))
         self.sync_write(TORQUE, {i: b"\x01" for i in ids})
         data = {}
         for i, value in ids.items():
@@ -430,6 +432,23 @@ class FeetechDriver(Driver):
         self.moving.update(ids)
         self.sync_write(GOAL, data)
         self.link.flush()
+
+    def _check_position_mode(self, ids: list[int]) -> None:
+        """Refused, before anything is written, when a servo to move is not in position mode
+        (Operating_Mode 0): a goal position would not bring it there (an SCS has no such
+        item: it runs to its goal)."""
+        wrong = []
+        for i in ids:
+            item = self.model(i).by_name.get("Operating_Mode")
+            mode = self.read_register(i, item) if item is not None else 0
+            if mode:
+                wrong.append(f"{self.joints[i].name} (Operating_Mode {mode}: "
+                             f"{OPERATING_MODES.get(mode, 'unknown')})")
+        if wrong:
+            raise Refused(f"{', '.join(wrong)}: not in position mode (0), so a goal position "
+                          "would not bring it there: nothing was moved",
+                          hint="set it with deltoctl register set JOINT operating_mode 0, "
+                               "then move again")
 
     def move(self, targets: dict[str, float], velocity: float | None = None,
              progress: Progress | None = None) -> MoveResult:

@@ -8,7 +8,7 @@ its status error byte: an overload latched (torque off, goals ignored) until ``p
 a supply outside the voltage limits. Behind a pseudo-terminal
 (the kit's PtyServer) that pyserial, and so scservo_sdk, opens as a serial port; a servo
 answers only at its Baud_Rate, and servos sharing an ID answer at once: their bytes collide
-(the line is low when either drives it low). Who answers what is the device session's.
+(the kit's ``collide``). Who answers what is the device session's.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 from deltoctl.core.emulator_contract import ServeContext
 from deltoctl.families.feetech import codec
 from deltoctl.families.feetech.models import BAUD_RATES, BY_NUMBER, Model, expected_model
+from deltoctl.servo.collision import collide
 from deltoctl.servo.hand import Hand, add_controls
 from deltoctl.servo.items import item_at
 from deltoctl.servo.pty_server import PtyServer, Replies
@@ -196,19 +197,6 @@ class Servo:
         self.set("Present_Position", max(-32767, min(32767, present)))
 
 
-def collide(packets: list[bytes]) -> bytes:
-    """What the host reads when servos answer at once: the line is low (0) whenever one of
-    them drives it low, so the bytes AND (a longer reply's tail goes through alone)."""
-    out = bytearray(max(len(p) for p in packets))
-    for k in range(len(out)):
-        byte = 0xFF
-        for p in packets:
-            if k < len(p):
-                byte &= p[k]
-        out[k] = byte
-    return bytes(out)
-
-
 class FeetechBus:
     """The servos on one bus: request bytes in (read by the bus's device session, which also
     says who answers), the servos' statuses out. ``baud``: the rate the servos listen at
@@ -262,7 +250,7 @@ class FeetechBus:
         if inst == codec.SYNC_READ and len(params) >= 2:
             replies: Replies = []
             for i in self.session.addressed(request, {s.id for s in self.servos}):
-                here = self.at(i)
+                here = [s for s in self.at(i) if s.model.sync_read]  # an SCS does not answer
                 replies += self._status(here, [s.read(params[0], params[1]) for s in here])
             return replies
         if inst == codec.SYNC_WRITE and len(params) >= 2:

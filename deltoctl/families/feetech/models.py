@@ -156,6 +156,12 @@ class Model:
     def big_endian(self) -> bool:
         return self.layout == "SCS"
 
+    @property
+    def sync_read(self) -> bool:
+        """Whether it answers a SYNC READ: the SCS series does not (Feetech's SDK has no sync
+        read for it, and LeRobot refuses one on an SCS bus)."""
+        return self.layout != "SCS"
+
     @cached_property
     def table(self) -> tuple[Item, ...]:
         rows = []

@@ -249,6 +249,45 @@ def test_jog_moves_the_ax_servo_by_its_300_degree_scale(cli):
         assert bus.servos[1].get("Goal Position") == 512  # only the elbow's goal changed
 
 
+def test_a_servo_of_a_model_without_a_table_is_refused_even_when_allowed(cli):
+    bus = Protocol1Bus([Servo1(i) for i in range(1, 6)], baud=1_000_000)
+    bus.servos[3].memory[0:2] = struct.pack("<H", 300)  # an AX-12W: deltoctl has no table
+    with DynamixelPtyServer(bus) as server:
+        target = f"serial://{server.port}?baud=1000000"
+        run = cli("-p", "phantomx-arm", "-t", target, "identify")
+        assert run.exit_code == 1 and "model mismatch" in run.stderr
+        run = cli("-p", "phantomx-arm", "-t", target, "identify", "--allow-model-mismatch")
+    assert run.exit_code == 1, run.output
+    assert "elbow (ID 3) reports model number 300" in run.stderr
+    assert "not a Protocol 1.0 model deltoctl knows" in run.stderr and "AX-12A" in run.stderr
+
+
+@pytest.mark.parametrize("sweep", ["", "detect_sweep: true"])
+def test_detect_sweeps_every_id_for_servos_the_profile_lacks_only_when_asked(cli, tmp_path,
+                                                                              sweep):
+    from tests.conftest import REPO
+
+    text = (REPO / "profiles" / "phantomx-arm.yaml").read_text()
+    profile = tmp_path / "px.yaml"
+    profile.write_text(text.replace("protocol_version: 1.0", f"protocol_version: 1.0\n      "
+                                    f"{sweep}"))
+    bus = Protocol1Bus([*(Servo1(i) for i in range(1, 6)), Servo1(9, BY_NUMBER_1[29])],
+                       baud=1_000_000)
+    with DynamixelPtyServer(bus) as server:
+        run = cli("-p", str(profile), "-t", f"serial://{server.port}?baud=1000000", "detect",
+                  "--json")
+    (block,) = json.loads(run.stdout)["blocks"]
+    if sweep:
+        assert run.exit_code == 3, run.output  # a servo the profile lacks: a warning
+        assert block["details"]["unexpected"] == [9] and block["details"]["swept"]
+        assert "1 unexpected" in block["summary"] and "ID 9" in run.stdout
+    else:
+        assert run.exit_code == 0, run.output
+        assert block["details"]["unexpected"] == [] and not block["details"]["swept"]
+        assert "other IDs not looked for" in block["summary"]
+        assert "detect_sweep" in block["summary"]
+
+
 def test_detect_names_a_servo_answering_in_the_other_protocol(cli):
     run = cli("--sim", "--sim-option", "other_protocol=elbow", "-p", "phantomx-arm",
               "detect", "--json")

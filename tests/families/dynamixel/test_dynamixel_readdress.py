@@ -66,6 +66,17 @@ def test_protocol_1_id_and_baud_writes_answer_from_the_old_id_and_rate():
         assert ph.ping(port, 4) == (12, sdk.COMM_SUCCESS, 0)  # AX-12A
 
 
+@pytest.mark.parametrize(("model", "factory"), [(12, 1_000_000), (29, 57_600)])
+def test_protocol_1_reset_answers_from_the_old_id_and_rate_then_the_factory_s(model, factory):
+    bus = Protocol1Bus([Servo1(4, by_number(model))], baud=115_200)
+    with _sdk(bus, 1.0, 115_200) as (port, ph):
+        assert ph.factoryReset(port, 4) == (sdk.COMM_SUCCESS, 0)
+        assert set(bus.servos) == {1}
+        assert ph.ping(port, 1)[1] == sdk.COMM_RX_TIMEOUT  # no longer at 115,200
+        assert port.setBaudRate(factory)
+        assert ph.ping(port, 1) == (model, sdk.COMM_SUCCESS, 0)
+
+
 def test_connect_plugs_factory_new_parts_one_at_a_time():
     from deltoctl.profile.catalog import load_profile
     from deltoctl.sim.controls import Controls
@@ -81,7 +92,7 @@ def test_connect_plugs_factory_new_parts_one_at_a_time():
         patient(port)
         ph = sdk.PacketHandler(2.0)
         try:
-            assert ph.ping(port, 1)[0] == 1060  # six answer at once: an XL430's first
+            assert ph.ping(port, 1)[1] != sdk.COMM_SUCCESS  # six answer at once
             assert controls.run("connect elbow_flex") == "on the wire: elbow_flex"
             assert ph.ping(port, 1) == (1200, sdk.COMM_SUCCESS, 0)  # the XL330 alone
             assert controls.run("disconnect all") == "on the wire: nothing"
@@ -92,3 +103,37 @@ def test_connect_plugs_factory_new_parts_one_at_a_time():
                 controls.run("connect elbow")
         finally:
             port.closePort()
+
+
+@contextlib.contextmanager
+def _factory_new(profile: str, protocol: float):
+    """A factory-new ``profile`` served, its control lines, and dynamixel-sdk on its bus."""
+    from deltoctl.profile.catalog import load_profile
+    from deltoctl.sim.controls import Controls
+    from deltoctl.sim.serve import ServeOptions, serve_profile
+
+    controls = Controls()
+    with contextlib.ExitStack() as stack:
+        info = serve_profile(stack, load_profile(profile), ServeOptions(factory_new=True),
+                             controls=controls)
+        port = sdk.PortHandler(info["endpoint"].split("?")[0].removeprefix("serial://"))
+        assert port.openPort() and port.setBaudRate(57_600)
+        patient(port)
+        try:
+            yield port, sdk.PacketHandler(protocol), controls
+        finally:
+            port.closePort()
+
+
+def test_factory_new_servos_at_one_id_garble_and_never_answer_cleanly():
+    with _factory_new("koch-arm", 2.0) as (port, ph, controls):
+        assert ph.ping(port, 1)[1] != sdk.COMM_SUCCESS  # XL430s and XL330s: garbled
+        assert ph.read4ByteTxRx(port, 1, 132)[1] != sdk.COMM_SUCCESS
+        controls.run("connect shoulder_pan shoulder_lift")  # two XL430-W250s, alike
+        assert ph.ping(port, 1) == (1060, sdk.COMM_SUCCESS, 0)  # identical bytes: clean
+        assert ph.read4ByteTxRx(port, 1, 132)[1] != sdk.COMM_SUCCESS  # their poses differ
+        controls.run("connect shoulder_pan")
+        assert ph.read4ByteTxRx(port, 1, 132)[1:] == (sdk.COMM_SUCCESS, 0)
+    with _factory_new("phantomx-arm", 1.0) as (port, ph, controls):
+        assert ph.ping(port, 1) == (12, sdk.COMM_SUCCESS, 0)  # five AX-12As, alike
+        assert ph.read2ByteTxRx(port, 1, 36)[1] != sdk.COMM_SUCCESS

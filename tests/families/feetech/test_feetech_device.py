@@ -8,7 +8,7 @@ import time
 import pytest
 
 from deltoctl.families.feetech import codec
-from deltoctl.families.feetech.emulator import OVERLOAD, FeetechBus, Servo, collide
+from deltoctl.families.feetech.emulator import OVERLOAD, FeetechBus, Servo
 from deltoctl.families.feetech.models import (
     BAUD_RATES,
     BY_NUMBER,
@@ -18,6 +18,7 @@ from deltoctl.families.feetech.models import (
     config_rules,
     item_named,
 )
+from deltoctl.servo.collision import collide
 from deltoctl.servo.session import NEED_DATA, Done
 
 STS3215, SCS0009 = BY_NUMBER[777], BY_NUMBER[1284]
@@ -240,3 +241,58 @@ def test_an_inverse_joints_velocity_and_effort_turn_with_its_position(so101):
     driver._take_pvl([(6, 0, data)])
     for key in ("velocity", "effort"):
         assert plain[key] > 0 and driver.values[f"gripper/{key}"] == -plain[key]
+
+
+def test_an_scs_servo_answers_no_sync_read():
+    bus = FeetechBus([Servo(1), Servo(2, SCS0009)])
+    done = _exchange(bus, codec.BROADCAST_ID, codec.SYNC_READ,
+                     codec.sync_read_params(56, 2, [1, 2]))
+    assert [i for i, _, _ in done.replies] == [1]  # the STS only
+    assert _exchange(bus, 2, codec.READ, codec.read_params(56, 2)).replies == [
+        (2, 0, b"\x02\x00")]  # a READ it answers: 512, big-endian
+
+
+def test_the_driver_reads_an_scs_servo_one_read_at_a_time(tmp_path):
+    from deltoctl.families.feetech.driver import FeetechDriver
+    from deltoctl.families.feetech.emulator import FeetechPtyServer
+    from deltoctl.profile.catalog import load_profile
+    from tests.conftest import block_for
+    from tests.families.feetech.test_feetech_cli import MIXED
+
+    path = tmp_path / "mixed.yaml"
+    path.write_text(MIXED)
+    profile = load_profile(path)
+    [hw] = profile.hardware
+    bus = FeetechBus([Servo(1), Servo(2, SCS0009)], baud=1_000_000)
+    heard = []
+    serve = bus.serve
+    bus.serve = lambda data: heard.append(data) or serve(data)
+    with FeetechPtyServer(bus) as server:
+        driver = FeetechDriver(block_for(profile, hw, f"serial://{server.port}?baud=1000000"))
+        driver.configure()
+        try:
+            heard.clear()
+            values = driver.read()
+            assert (values["sts/position"], values["scs/position"]) == (0.0, 0.0)
+            assert driver.stats["errors"] == 0
+        finally:
+            driver.cleanup()
+    requests = [r for data in heard for r in codec.session(codec.DEVICE).receive_requests(data)]
+    synced = [r for r in requests if r.instruction == codec.SYNC_READ]
+    assert synced and all(r.params[2:] == b"\x01" for r in synced)  # the STS's ID alone
+    assert any(r.instruction == codec.READ and r.id == 2 for r in requests)
+
+
+def test_a_move_of_a_servo_not_in_position_mode_is_refused_with_nothing_written(so101):
+    from deltoctl.errors import Refused
+
+    driver, bus = so101
+    elbow = bus.servos[2]
+    elbow.set("Operating_Mode", 1)  # constant speed
+    goal = elbow.get("Goal_Position")
+    with pytest.raises(Refused, match=r"elbow_flex \(Operating_Mode 1: constant speed\)"):
+        driver.move({"elbow_flex": 0.1, "gripper": 0.1})
+    assert elbow.get("Goal_Position") == goal and elbow.get("Torque_Enable") == 0
+    assert bus.servos[5].get("Torque_Enable") == 0  # nothing moved, the others neither
+    elbow.set("Operating_Mode", 0)
+    assert driver.move({"elbow_flex": 0.1}).settled
