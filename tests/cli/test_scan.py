@@ -84,11 +84,14 @@ def test_a_servo_on_a_paced_bus_is_found_clean_at_a_slow_rate(cli, bus, found):
 
 
 def test_two_protocol_1_servos_at_one_id_found_by_the_sweep_are_named_colliding(cli):
-    """Two AX-12A at ID 9 (not the factory's: only the sweep of every ID reaches them)."""
+    """Two AX-12A at ID 9 (not the factory's: only the sweep of every ID reaches them), in
+    poses of their own: their replies garble."""
     from deltoctl.families.dynamixel.emulator1 import MixedBus
 
+    twin = Servo1(9)
+    twin.position += 25
     bus = MixedBus(Protocol1Bus([Servo1(9)], baud=1_000_000),
-                   Protocol1Bus([Servo1(9)], baud=1_000_000))
+                   Protocol1Bus([twin], baud=1_000_000))
     with DynamixelPtyServer(bus, pace=True) as server:
         result, doc = _scan(cli, server.port)
     assert result.exit_code == 3, result.output
