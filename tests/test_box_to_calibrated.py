@@ -243,12 +243,17 @@ class Served:
         [(self.bus, self.url)] = json.loads(self.lines.get(timeout=REPLY))["buses"].items()
         self.target = f"{self.bus}={self.url}"
 
-    def control(self, line: str) -> str:
-        self.proc.stdin.write(line + "\n")
+    def send(self, lines: list[str]) -> list[str]:
+        """Control lines written at once, then their replies."""
+        self.proc.stdin.write("".join(line + "\n" for line in lines))
         self.proc.stdin.flush()
-        reply = json.loads(self.lines.get(timeout=REPLY))
-        assert reply["control"] == line
-        return reply["reply"]
+        replies = [json.loads(self.lines.get(timeout=REPLY)) for _ in lines]
+        assert [r["control"] for r in replies] == lines
+        return [r["reply"] for r in replies]
+
+    def control(self, line: str) -> str:
+        [reply] = self.send([line])
+        return reply
 
     def stop(self) -> None:
         self.proc.terminate()
@@ -283,8 +288,8 @@ def _calibrate(arm: Arm, served: Served) -> dict:
         said = []
         while not any("the middle pose is read" in line for line in said):
             said.append(err.get(timeout=REPLY))
-        for joint in ARM:
-            served.control(f"sweep {joint} {LOW} {HIGH} 1")
+        replies = served.send([f"sweep {joint} {LOW} {HIGH} 1" for joint in ARM])
+        assert all("swept by hand" in r for r in replies)
         proc.wait(timeout=REPLY)
         said += list(err.queue)
         document = json.loads(proc.stdout.read())
@@ -330,6 +335,8 @@ def _walk(cli, arm: Arm, served: Served) -> None:
         done = json.loads(result.stdout)["result"]
         [row] = done["joints"]
         assert row["verified"] and (row["to"]["id"], row["to"]["baud"]) == (k, 1_000_000)
+        # where the factory left it: the refusals above wrote nothing
+        assert (row["from"]["id"], row["from"]["baud"]) == (1, arm.factory_baud)
         bus_seconds += done["bus_seconds"]
     assert bus_seconds > 0
     assert served.control("connect all") == f"on the wire: {', '.join(ARM)}"
