@@ -193,7 +193,7 @@ def calibrate_joints(
 
     from deltoctl.render.joint_calibration import RangeLive, calibration_table
 
-    opts, pressed = options(ctx), threading.Event()
+    opts, pressed, started = options(ctx), threading.Event(), threading.Event()
     if fmt not in ("deltoctl", "lerobot"):
         raise InvalidInput(f"--format is deltoctl or lerobot, got {fmt!r}")
     if seconds is None and not sys.stdin.isatty():
@@ -206,9 +206,17 @@ def calibrate_joints(
         threading.Thread(target=lambda: (sys.stdin.readline(), pressed.set()),
                          daemon=True).start()
 
+    def sampled(rows: list[dict[str, Any]]) -> bool:
+        if not started.is_set():  # the middle pose is read: a script moves the arm now
+            started.set()
+            _ask("the middle pose is read: move each joint by hand through its range, "
+                 + (f"within {seconds:g} s" if seconds else "then press Enter"))
+        live.show(rows)
+        return pressed.is_set()
+
     with open_robot(opts, allow_model_mismatch) as robot, live:
         result = robot.calibrate_joints(
-            None if seconds else middle, lambda rows: live.show(rows) or pressed.is_set(),
+            None if seconds else middle, sampled,
             seconds, allow or [], name if fmt == "lerobot" else None, full_turn or [],
             lambda what: confirm(ctx, what), hand or [])
     emit_json(result) if opts.json else table(*calibration_table(result))

@@ -50,6 +50,9 @@ def test_a_sim_rehearsal_moved_by_hand(cli, profile, tmp_path):
     assert document["result"]["file"] == str(calibration_file(profile, simulated=True))
     assert document["result"]["lerobot_file"].endswith("/rehearsal.json")
     assert any("the range moved" in w for w in document["warnings"])
+    # a script is told when the middle pose is read and the range is to be moved
+    assert "the middle pose is read: move each joint by hand through its range, within 4 s" \
+        in result.stderr
 
 
 def test_a_script_without_range_seconds_or_yes_is_told_what_to_pass(cli):
