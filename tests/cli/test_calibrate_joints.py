@@ -47,7 +47,8 @@ def test_a_sim_rehearsal_moved_by_hand(cli, profile, tmp_path):
         assert joint["written"] == "verified"
         assert abs(joint["range_min"] - (2047 - 455)) <= 2
         assert abs(joint["range_max"] - (2047 + 455)) <= 2
-    assert document["result"]["file"] == str(calibration_file(profile, simulated=True))
+    assert document["result"]["file"] == str(calibration_file(profile, simulated=True,
+                                                              name="rehearsal"))
     assert document["result"]["lerobot_file"].endswith("/rehearsal.json")
     assert any("the range moved" in w for w in document["warnings"])
     # a script is told when the middle pose is read and the range is to be moved
