@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import string
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -40,15 +41,16 @@ Rows = list[dict[str, Any]]
 
 
 PLAIN = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]*")
+_KEPT = frozenset(string.ascii_letters + string.digits + "-_")
 
 
 def file_name(name: str) -> str:
     """A profile's or block's name as one file name: a plain name (letters, digits, ``-_.``,
-    not starting with a dot) as it is; any other byte, and a leading dot, as ``%XX``."""
+    not starting with a dot) as it is; else each byte but a letter, digit, ``-`` or ``_`` as
+    ``%XX`` (a dot too: no ``..``)."""
     if PLAIN.fullmatch(name):
         return name
-    return "".join(chr(b) if chr(b).isascii() and PLAIN.fullmatch(chr(b)) and (i or b != 46)
-                   else f"%{b:02X}" for i, b in enumerate(name.encode())) or "%"
+    return "".join(chr(b) if chr(b) in _KEPT else f"%{b:02X}" for b in name.encode()) or "%"
 
 
 def check_id(name: str | None) -> None:
@@ -127,6 +129,11 @@ def description(system: System, write: bool) -> str:
             f"joint's middle and range, {where}")
 
 
+def check_seconds(seconds: float | None) -> None:
+    if seconds is not None and not (math.isfinite(seconds) and 0 < seconds <= 3600):
+        raise InvalidInput(f"--range-seconds must be above 0 and at most 3600, got {seconds:g}")
+
+
 # -- the procedure -------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -142,11 +149,8 @@ class Steps:
     hand: Sequence[str] = ()
 
     def check(self) -> None:
-        seconds = self.seconds
-        if seconds is not None and not (math.isfinite(seconds) and 0 < seconds <= 3600):
-            raise InvalidInput(f"--range-seconds must be above 0 and at most 3600, got "
-                               f"{seconds:g}")
-        if self.done is None and seconds is None:
+        check_seconds(self.seconds)
+        if self.done is None and self.seconds is None:
             raise InvalidInput("the range needs an end: done, or seconds")
 
 
@@ -159,6 +163,7 @@ def calibrate(system: System, control: Callable[[str], str], steps: Steps,
     steps.check()
     check_id(name)
     check_id(lerobot)
+    write = check_allow(allow)
     system.check_allowed("calibrating joints")
     members = able(system)
     joints = [j.name for m in members for j in m.hw.joints]
@@ -166,7 +171,6 @@ def calibrate(system: System, control: Callable[[str], str], steps: Steps,
     if unknown:
         raise InvalidInput(f"--full-turn {unknown[0]}: not a calibrated joint (joints: "
                            f"{', '.join(joints)})")
-    write = check_allow(allow)
     if confirm is not None:
         confirm(description(system, write))
     if steps.middle is not None:  # limp, the arm is put in its middle pose and held there

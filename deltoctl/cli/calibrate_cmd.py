@@ -193,13 +193,15 @@ def calibrate_joints(
     import sys
     import threading
 
-    from deltoctl.app.joint_calibration import check_id
+    from deltoctl.app.joint_calibration import check_allow, check_id, check_seconds
     from deltoctl.render.joint_calibration import RangeLive, calibration_table
 
     opts, pressed, started = options(ctx), threading.Event(), threading.Event()
     if fmt not in ("deltoctl", "lerobot"):
         raise InvalidInput(f"--format is deltoctl or lerobot, got {fmt!r}")
     check_id(name)
+    check_allow(allow or [])
+    check_seconds(seconds)
     if seconds is None and not sys.stdin.isatty():
         raise InvalidInput("no terminal to press Enter on: pass --range-seconds")
     live = RangeLive(sys.stderr.isatty() and not opts.json)
