@@ -121,12 +121,17 @@ def check_allow(allow: Sequence[str]) -> bool:
     return not missing
 
 
-def description(system: System, write: bool) -> str:
+def description(system: System, write: bool, posed: bool = False) -> str:
+    """What calibrating does, in order; ``posed``: the limp arm is put in its middle pose
+    first (else the pose it stands in is read as its middle, before the torque goes off)."""
     names = ", ".join(m.name for m in able(system))
     where = ("written into the servos (Homing Offset, position limits) and saved" if write
              else "saved to the calibration file only (no --allow: the servos are not written)")
-    return (f"switch the torque off on {names}: the arm goes limp, support it; then each "
-            f"joint's middle and range, {where}")
+    limp = f"switch the torque off on {names}: the arm goes limp, support it"
+    if posed:
+        return f"{limp}; then each joint's middle and range, {where}"
+    return (f"read the arm's pose as the middle of each joint's range, then {limp}; then each "
+            f"joint's range, {where}")
 
 
 def check_seconds(seconds: float | None) -> None:
@@ -172,7 +177,7 @@ def calibrate(system: System, control: Callable[[str], str], steps: Steps,
         raise InvalidInput(f"--full-turn {unknown[0]}: not a calibrated joint (joints: "
                            f"{', '.join(joints)})")
     if confirm is not None:
-        confirm(description(system, write))
+        confirm(description(system, write, steps.middle is not None))
     if steps.middle is not None:  # limp, the arm is put in its middle pose and held there
         _torque_off(members)
         steps.middle()

@@ -512,8 +512,9 @@ class Robot:
         checked against the profile's limits (a joint short of or beyond them is a warning),
         written into the servos when ``allow`` holds every one of ``PERMISSIONS`` (else the
         file only, a warning saying so), saved in deltoctl's file (the arm ``name``'s, when
-        given) and, with ``lerobot`` (a device id), in LeRobot's. ``full_turn`` joints take the whole turn, unrecorded.
-        ``confirm`` is told what will happen first (it raises to stop)."""
+        given) and, with ``lerobot`` (a device id), in LeRobot's. ``full_turn`` joints take
+        the whole turn, unrecorded. ``confirm`` is told what will happen first (it raises to
+        stop)."""
         from deltoctl.app import joint_calibration as jc
 
         if hand:
