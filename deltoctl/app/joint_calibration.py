@@ -182,7 +182,8 @@ def calibrate(system: System, control: Callable[[str], str], steps: Steps,
         _torque_off(members)
         steps.middle()
     held, offsets = start(system)  # the middle pose read before the arm goes limp
-    _torque_off(members)
+    if steps.middle is None:
+        _torque_off(members)
     pending = list(steps.hand)
 
     def sampled(rows: Rows) -> bool:
