@@ -4,15 +4,20 @@ the profile's zero); the torque off, each joint moved by hand through its range 
 present, lowest and highest positions are sampled; the range checked against the profile's
 joint limits; then the homing offsets and position limits written into the servos (only with
 the permissions ``config restore --allow`` asks for the same registers) and saved: deltoctl's
-file, one per profile in the user's data directory, and LeRobot's on request.
+file, one per profile (and per arm's ``--id``) in the user's data directory, and LeRobot's on
+request. A file saved without the writes says so (``"written": false``): a record, and the
+source of LeRobot's file, never compared.
 
-On every later open of a profile that has a file, each servo's registers are compared with it:
+On every later open of a profile that has a file the servos were given, each servo's registers
+are compared with it (with several arms' files, with the one they match or else the closest):
 a difference is a warning naming the joint and the register, as LeRobot's check at connect."""
 
 from __future__ import annotations
 
 import json
 import math
+import re
+import string
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -35,25 +40,65 @@ PERIOD = 0.05  # s between samples of the range
 Rows = list[dict[str, Any]]
 
 
-def calibration_file(profile_name: str, simulated: bool = False) -> Path:
-    """deltoctl's calibration of a profile: $XDG_DATA_HOME/deltoctl/calibration/NAME.json; one
-    made on simulators goes under sim/, never compared with a robot's servos (nor with a
-    simulator's: it starts afresh)."""
+PLAIN = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]*")
+_KEPT = frozenset(string.ascii_letters + string.digits + "-_")
+
+
+def file_name(name: str) -> str:
+    """A profile's or block's name as one file name: a plain name (letters, digits, ``-_.``,
+    not starting with a dot) as it is; else each byte but a letter, digit, ``-`` or ``_`` as
+    ``%XX`` (a dot too: no ``..``)."""
+    if PLAIN.fullmatch(name):
+        return name
+    return "".join(chr(b) if chr(b) in _KEPT else f"%{b:02X}" for b in name.encode()) or "%"
+
+
+def check_id(name: str | None) -> None:
+    """An arm's ``--id`` names files: a plain name only."""
+    if name is not None and not PLAIN.fullmatch(name):
+        raise InvalidInput(f"--id {name!r} must be a plain name: letters, digits, '-', '_' "
+                           "and '.', not starting with a dot")
+
+
+def calibration_file(profile_name: str, simulated: bool = False,
+                     name: str | None = None) -> Path:
+    """deltoctl's calibration of a profile: $XDG_DATA_HOME/deltoctl/calibration/PROFILE.json,
+    or PROFILE/ID.json for the arm ``name`` (``--id``); one made on simulators goes under sim/,
+    never compared with a robot's servos (nor with a simulator's: it starts afresh)."""
     from deltoctl.data_paths import user_data_dir
 
     folder = user_data_dir("calibration", *(("sim",) if simulated else ()))
-    return folder / f"{profile_name}.json"
+    profile = file_name(profile_name)
+    return folder / (f"{profile}.json" if name is None else f"{profile}/{file_name(name)}.json")
 
 
 def _simulated(system: System) -> bool:
     return any(m.simulated is not None for m in system.able(CAPABILITY))
 
 
+def _unable(m: Member) -> str:
+    """Why a block cannot be calibrated ("" when it can): a driver without a calibration,
+    or a servo without a homing offset register."""
+    if not m.driver.calibration_registers:
+        return f"{m.name}: its servos have no homing offset register"
+    joints = m.driver.uncalibrated_joints()
+    if joints:
+        return f"{m.name}: {', '.join(joints)} has no homing offset register (its servo's model)"
+    return ""
+
+
 def able(system: System) -> list[Member]:
+    """The blocks calibrated: an InvalidInput naming each block or joint that cannot be, when
+    one cannot (before anything is written)."""
     found = system.able(CAPABILITY)
     if not found:
         raise InvalidInput(f"{system.profile.name} has no servo joints deltoctl calibrates "
                            "(Dynamixel Protocol 2.0 and Feetech buses)")
+    cannot = [why for why in map(_unable, found) if why]
+    if cannot:
+        raise InvalidInput(f"nothing done: cannot calibrate {'; '.join(cannot)}",
+                           hint="calibrate the other blocks alone (--hardware)"
+                           if len(cannot) < len(found) else None)
     return found
 
 
@@ -76,12 +121,22 @@ def check_allow(allow: Sequence[str]) -> bool:
     return not missing
 
 
-def description(system: System, write: bool) -> str:
+def description(system: System, write: bool, posed: bool = False) -> str:
+    """What calibrating does, in order; ``posed``: the limp arm is put in its middle pose
+    first (else the pose it stands in is read as its middle, before the torque goes off)."""
     names = ", ".join(m.name for m in able(system))
     where = ("written into the servos (Homing Offset, position limits) and saved" if write
              else "saved to the calibration file only (no --allow: the servos are not written)")
-    return (f"switch the torque off on {names}: the arm goes limp, support it; then each "
-            f"joint's middle and range, {where}")
+    limp = f"switch the torque off on {names}: the arm goes limp, support it"
+    if posed:
+        return f"{limp}; then each joint's middle and range, {where}"
+    return (f"read the arm's pose as the middle of each joint's range, then {limp}; then each "
+            f"joint's range, {where}")
+
+
+def check_seconds(seconds: float | None) -> None:
+    if seconds is not None and not (math.isfinite(seconds) and 0 < seconds <= 3600):
+        raise InvalidInput(f"--range-seconds must be above 0 and at most 3600, got {seconds:g}")
 
 
 # -- the procedure -------------------------------------------------------------------------------
@@ -99,20 +154,21 @@ class Steps:
     hand: Sequence[str] = ()
 
     def check(self) -> None:
-        seconds = self.seconds
-        if seconds is not None and not (math.isfinite(seconds) and 0 < seconds <= 3600):
-            raise InvalidInput(f"--range-seconds must be above 0 and at most 3600, got "
-                               f"{seconds:g}")
-        if self.done is None and seconds is None:
+        check_seconds(self.seconds)
+        if self.done is None and self.seconds is None:
             raise InvalidInput("the range needs an end: done, or seconds")
 
 
 def calibrate(system: System, control: Callable[[str], str], steps: Steps,
               allow: Sequence[str] = (), lerobot: str | None = None,
               full_turn: Sequence[str] = (),
-              confirm: Callable[[str], None] | None = None) -> dict[str, Any]:
+              confirm: Callable[[str], None] | None = None,
+              name: str | None = None) -> dict[str, Any]:
     """The whole procedure (``Robot.calibrate_joints``); ``control`` runs a hand's line."""
     steps.check()
+    check_id(name)
+    check_id(lerobot)
+    write = check_allow(allow)
     system.check_allowed("calibrating joints")
     members = able(system)
     joints = [j.name for m in members for j in m.hw.joints]
@@ -120,14 +176,14 @@ def calibrate(system: System, control: Callable[[str], str], steps: Steps,
     if unknown:
         raise InvalidInput(f"--full-turn {unknown[0]}: not a calibrated joint (joints: "
                            f"{', '.join(joints)})")
-    write = check_allow(allow)
     if confirm is not None:
-        confirm(description(system, write))
-    for m in members:
-        m.driver.set_torque([j.name for j in m.hw.joints], False)
-    if steps.middle is not None:
+        confirm(description(system, write, steps.middle is not None))
+    if steps.middle is not None:  # limp, the arm is put in its middle pose and held there
+        _torque_off(members)
         steps.middle()
-    held, offsets = start(system)
+    held, offsets = start(system)  # the middle pose read before the arm goes limp
+    if steps.middle is None:
+        _torque_off(members)
     pending = list(steps.hand)
 
     def sampled(rows: Rows) -> bool:
@@ -147,13 +203,18 @@ def calibrate(system: System, control: Callable[[str], str], steps: Steps,
             f"not written to the servos: the homing offset and position limits of "
             f"{len(rows)} joint(s) (pass {' '.join('--allow ' + p for p in PERMISSIONS)}); "
             "saved in the file only")
-    return {"profile": system.profile.name, **save(system, rows, lerobot), "written": write,
-            "torque": "off", "joints": rows}
+    return {"profile": system.profile.name, **save(system, rows, lerobot, name, write),
+            "written": write, "torque": "off", "joints": rows}
+
+
+def _torque_off(members: Sequence[Member]) -> None:
+    for m in members:
+        m.driver.set_torque([j.name for j in m.hw.joints], False)
 
 
 def start(system: System) -> tuple[dict[str, dict[str, Any]], dict[str, int]]:
-    """After the arm is in its middle pose (torque off): what each servo holds and the homing
-    offset that makes the pose read the middle of the turn, per joint."""
+    """With the arm in its middle pose: what each servo holds and the homing offset that makes
+    the pose read the middle of the turn, per joint."""
     held: dict[str, dict[str, Any]] = {}
     offsets: dict[str, int] = {}
     for m in able(system):
@@ -252,7 +313,10 @@ def calibration(system: System, held: dict[str, dict[str, Any]], offsets: dict[s
 
 
 def _write_servos(system: System, rows: Rows) -> None:
-    """Each block's rows into its servos, then each joint verified by reading it back."""
+    """Each block's rows into its servos, then each joint verified by reading it back: a
+    register that reads back otherwise is a DeviceError naming joint and register (the file
+    is not saved)."""
+    wrong = []
     for m in able(system):
         mine = {r["joint"]: r for r in rows if r["block"] == m.name}
         if not mine:
@@ -260,40 +324,42 @@ def _write_servos(system: System, rows: Rows) -> None:
         m.driver.write_joint_calibration(mine)
         after = m.driver.joint_calibration()
         for joint, row in mine.items():
-            wrong = [k for k in ("homing_offset", "range_min", "range_max")
-                     if after.get(joint, {}).get(k) != row[k]]
-            row["written"] = "failed" if wrong else "verified"
-            if wrong:
-                system.notes.append(f"{joint}: {', '.join(wrong)} reads back differently "
-                                    "after the write")
+            back = after.get(joint, {})
+            wrong += [f"{joint}: {m.driver.calibration_registers[k]} reads {back.get(k)} after "
+                      f"{row[k]} was written" for k in ("homing_offset", "range_min",
+                                                        "range_max") if back.get(k) != row[k]]
+            row["written"] = "verified"
+    if wrong:
+        raise DeviceError(f"the calibration did not hold: {'; '.join(wrong)}; not saved",
+                          hint="check the servos' power and wiring (deltoctl identify), then "
+                               "calibrate again")
 
 
-def save(system: System, rows: Rows, lerobot: str | None) -> dict[str, str | None]:
-    """deltoctl's file of the profile, and with ``lerobot`` (a device id) LeRobot's of each
-    block where its tools look for it."""
+def save(system: System, rows: Rows, lerobot: str | None, name: str | None = None,
+         written: bool = True) -> dict[str, str | None]:
+    """deltoctl's file of the profile (of the arm ``name`` when given; ``written``: whether
+    the servos hold it), and with ``lerobot`` (a device id) LeRobot's of each block where its
+    tools look for it."""
     from deltoctl.servo import lerobot as lerobot_file
 
-    path = calibration_file(system.profile.name, _simulated(system))
+    path = calibration_file(system.profile.name, _simulated(system), name)
     blocks: dict[str, dict[str, Any]] = {}
     for r in rows:
         blocks.setdefault(r["block"], {})[r["joint"]] = {
             k: r[k] for k in ("id", "drive_mode", "homing_offset", "range_min", "range_max")}
-    document = {"format": FORMAT, "profile": system.profile.name,
+    document = {"format": FORMAT, "profile": system.profile.name, "id": name,
                 "time": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-                "blocks": blocks}
+                "written": written, "blocks": blocks}
     files: dict[str, str | None] = {"file": str(_write(path, json.dumps(document, indent=2))),
                                     "lerobot_file": None}
     if lerobot is not None:
-        from deltoctl.app.calibrate import check_device_name
-
-        check_device_name(lerobot)
         for m in able(system):
             types = m.driver.lerobot_types
             if types is None or m.name not in blocks:
                 continue
             leader = not any(j.command_interfaces for j in m.hw.joints)
-            name = lerobot if len(blocks) == 1 else f"{lerobot}-{m.name}"
-            there = lerobot_file.path(types[leader], name, leader)
+            device = lerobot if len(blocks) == 1 else f"{lerobot}-{file_name(m.name)}"
+            there = lerobot_file.path(types[leader], device, leader)
             files["lerobot_file"] = str(_write(there, lerobot_file.dump(blocks[m.name])))
     return files
 
@@ -309,22 +375,28 @@ def _write(path: Path, text: str) -> Path:
 
 # -- the check on open ---------------------------------------------------------------------------
 
-def load(path: Path) -> dict[str, dict[str, dict[str, int]]]:
-    """A calibration file's blocks → joints → entries; anything else is an InvalidInput."""
+def load(path: Path) -> dict[str, Any]:
+    """A calibration file's document (its blocks → joints → entries, whether the servos were
+    written); anything else is an InvalidInput."""
     import stat
 
     try:
         if not stat.S_ISREG(path.stat().st_mode):
             raise InvalidInput(f"{path}: a calibration file must be a regular file")
         with path.open("rb") as file:
-            data = json.loads(file.read(MAX_BYTES + 1).decode())
+            text = file.read(MAX_BYTES + 1)
+        if len(text) > MAX_BYTES:
+            raise InvalidInput(f"{path}: larger than 1 MiB, not a calibration file")
+        data = json.loads(text.decode())
     except OSError as exc:
         raise InvalidInput(f"{path}: cannot read the calibration ({exc.strerror})") from None
+    except RecursionError:
+        raise InvalidInput(f"{path}: not a calibration file (nested too deep)") from None
     except (ValueError, UnicodeDecodeError) as exc:
         raise InvalidInput(f"{path}: not a calibration file ({exc})") from None
     if not _shaped(data):
         raise InvalidInput(f"{path}: not a {FORMAT} file (blocks → joints → integers)")
-    return dict(data["blocks"])
+    return data
 
 
 def _integers(entry: Any) -> bool:
@@ -333,44 +405,66 @@ def _integers(entry: Any) -> bool:
 
 
 def _shaped(data: Any) -> bool:
-    """A document of deltoctl's calibration: its format, and blocks → joints → integers."""
+    """A document of deltoctl's calibration: its format, whether written (a bool, true when
+    left out), and blocks → joints → integers."""
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         return False
     blocks = data.get("blocks")
-    return isinstance(blocks, dict) and all(
+    return isinstance(data.get("written", True), bool) and isinstance(blocks, dict) and all(
         isinstance(joints, dict) and all(_integers(e) for e in joints.values())
         for joints in blocks.values())
 
 
+def _files(profile_name: str) -> list[Path]:
+    """The profile's calibration files: its own, then each arm's (``--id``)."""
+    path = calibration_file(profile_name)
+    arms = path.with_suffix("")
+    return [p for p in (path, *(sorted(arms.glob("*.json")) if arms.is_dir() else ()))
+            if p.is_file()]
+
+
 def compare_on_open(system: System) -> list[str]:
-    """The differences between the servos and the profile's calibration file, one warning
-    each naming the joint and the register (none without a file, or on simulators started
-    for the command); they go to the System's notes too."""
+    """The differences between the servos and the profile's calibration files the servos were
+    given (none without one, or on simulators started for the command): with several arms'
+    files, none when the servos match one, else those of the closest, one warning each naming
+    the joint and the register. They go to the System's notes too."""
     members = [m for m in system.able(CAPABILITY) if m.simulated is None]
-    path = calibration_file(system.profile.name)
-    if not members or not path.is_file():
-        return []
-    try:
-        saved = load(path)
-    except InvalidInput as exc:
-        system.notes.append(f"calibration not checked: {exc.message}")
-        return [system.notes[-1]]
-    found = []
-    for m in members:
-        if saved.get(m.name):
-            found += _differences(m, saved[m.name], path)
+    paths = _files(system.profile.name) if members else []
+    found: list[str] = []
+    best: list[str] | None = None
+    live: dict[str, dict[str, dict[str, int]] | str] = {}
+    for path in paths:
+        try:
+            document = load(path)
+        except InvalidInput as exc:
+            found.append(f"calibration not checked: {exc.message}")
+            continue
+        saved = document["blocks"]
+        ours = [m for m in members if saved.get(m.name)]
+        if not document.get("written", True) or not ours:
+            continue  # a record the servos were not given, or another arm's blocks
+        differences = [d for m in ours for d in _differences(m, saved[m.name], path, live)]
+        if best is None or len(differences) < len(best):
+            best = differences
+    found += best or []
     system.notes.extend(found)
     return found
 
 
-def _differences(m: Member, wanted: dict[str, dict[str, int]], path: Path) -> list[str]:
-    """Where a block's servos differ from its joints' entries in the file, by register."""
-    try:
-        live = m.driver.joint_calibration()
-    except DeltoctlError as exc:
-        return [f"{m.name}: calibration not checked ({exc.message})"]
-    return [f"{joint}: {register} is {live[joint].get(key)}, its calibration ({path}) says "
+def _differences(m: Member, wanted: dict[str, dict[str, int]], path: Path,
+                 live: dict[str, Any]) -> list[str]:
+    """Where a block's servos differ from its joints' entries in the file, by register (the
+    servos read once, into ``live``)."""
+    if m.name not in live:
+        try:
+            live[m.name] = m.driver.joint_calibration()
+        except DeltoctlError as exc:
+            live[m.name] = exc.message
+    held = live[m.name]
+    if isinstance(held, str):
+        return [f"{m.name}: calibration not checked ({held})"]
+    return [f"{joint}: {register} is {held[joint].get(key)}, its calibration ({path}) says "
             f"{entry[key]}; calibrate again (deltoctl calibrate joints)"
-            for joint, entry in wanted.items() if joint in live
+            for joint, entry in wanted.items() if joint in held
             for key, register in m.driver.calibration_registers.items()
-            if key in entry and live[joint].get(key) != entry[key]]
+            if key in entry and held[joint].get(key) != entry[key]]

@@ -502,17 +502,19 @@ class Robot:
                          seconds: float | None = None, allow: Sequence[str] = (),
                          lerobot: str | None = None, full_turn: Sequence[str] = (),
                          confirm: Callable[[str], None] | None = None,
-                         hand: Sequence[str] = ()) -> dict[str, Any]:
+                         hand: Sequence[str] = (), name: str | None = None) -> dict[str, Any]:
         """LeRobot's joint calibration with this robot's profile (deltoctl.app.joint_calibration):
-        torque off; ``middle`` returns once the arm is in the middle of its range (each
-        joint's homing offset from that pose); then the range moved by hand is sampled until
+        each joint's homing offset from the arm's middle pose (``middle``, when given, returns
+        once the limp arm is put there; without it the pose is read as the arm stands, before
+        the torque goes off); then, torque off, the range moved by hand is sampled until
         ``done(rows)`` (told each sample's per-joint present/min/max) says so or ``seconds``
         pass (``hand``: control lines run on this robot's simulators, one after each sample),
         checked against the profile's limits (a joint short of or beyond them is a warning),
         written into the servos when ``allow`` holds every one of ``PERMISSIONS`` (else the
-        file only, a warning saying so), saved in deltoctl's file and, with ``lerobot`` (a
-        device id), in LeRobot's. ``full_turn`` joints take the whole turn, unrecorded.
-        ``confirm`` is told what will happen first (it raises to stop)."""
+        file only, a warning saying so), saved in deltoctl's file (the arm ``name``'s, when
+        given) and, with ``lerobot`` (a device id), in LeRobot's. ``full_turn`` joints take
+        the whole turn, unrecorded. ``confirm`` is told what will happen first (it raises to
+        stop)."""
         from deltoctl.app import joint_calibration as jc
 
         if hand:
@@ -521,7 +523,7 @@ class Robot:
             if w in self.system.notes:
                 self.system.notes.remove(w)
         return jc.calibrate(self.system, self.control, jc.Steps(middle, done, seconds, hand),
-                            allow, lerobot, full_turn, confirm)
+                            allow, lerobot, full_turn, confirm, name)
 
     def _registers(self, joint: str) -> Any:
         m = self.system.member(joint)

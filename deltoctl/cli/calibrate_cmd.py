@@ -174,8 +174,9 @@ def calibrate_joints(
              "min-position-limit --allow max-position-limit.")] = None,
     fmt: Annotated[str, typer.Option("--format", help="deltoctl, or lerobot: LeRobot's file "
                                      "too, at LeRobot's place for --id.")] = "deltoctl",
-    name: Annotated[str, typer.Option("--id", help="The device's name in LeRobot's file.")
-                    ] = "my_arm",
+    name: Annotated[str | None, typer.Option("--id", help=(
+        "The arm's name: its own calibration file of the profile, and LeRobot's file's name "
+        "(my_arm by default)."))] = None,
     full_turn: Annotated[list[str] | None, typer.Option(
         help="A joint given its whole turn, not recorded (repeatable).")] = None,
     seconds: Annotated[float | None, typer.Option("--range-seconds", help=(
@@ -187,15 +188,20 @@ def calibrate_joints(
 ) -> None:
     """LeRobot's calibration with the profile: torque off, the arm in the middle of its range
     (each joint's homing offset: that pose reads zero), each joint moved by hand through its
-    range, checked against the profile's limits; saved, and checked at every later open."""
+    range, checked against the profile's limits; saved (one file per profile, and per --id),
+    and checked at every later open when written into the servos."""
     import sys
     import threading
 
+    from deltoctl.app.joint_calibration import check_allow, check_id, check_seconds
     from deltoctl.render.joint_calibration import RangeLive, calibration_table
 
     opts, pressed, started = options(ctx), threading.Event(), threading.Event()
     if fmt not in ("deltoctl", "lerobot"):
         raise InvalidInput(f"--format is deltoctl or lerobot, got {fmt!r}")
+    check_id(name)
+    check_allow(allow or [])
+    check_seconds(seconds)
     if seconds is None and not sys.stdin.isatty():
         raise InvalidInput("no terminal to press Enter on: pass --range-seconds")
     live = RangeLive(sys.stderr.isatty() and not opts.json)
@@ -207,7 +213,7 @@ def calibrate_joints(
                          daemon=True).start()
 
     def sampled(rows: list[dict[str, Any]]) -> bool:
-        if not started.is_set():  # the middle pose is read: a script moves the arm now
+        if not started.is_set():  # the middle pose is read, the arm limp: it is moved now
             started.set()
             _ask("the middle pose is read: move each joint by hand through its range, "
                  + (f"within {seconds:g} s" if seconds else "then press Enter"))
@@ -217,8 +223,8 @@ def calibrate_joints(
     with open_robot(opts, allow_model_mismatch) as robot, live:
         result = robot.calibrate_joints(
             None if seconds else middle, sampled,
-            seconds, allow or [], name if fmt == "lerobot" else None, full_turn or [],
-            lambda what: confirm(ctx, what), hand or [])
+            seconds, allow or [], (name or "my_arm") if fmt == "lerobot" else None,
+            full_turn or [], lambda what: confirm(ctx, what), hand or [], name)
     emit_json(result) if opts.json else table(*calibration_table(result))
     finish(robot)
 

@@ -219,6 +219,11 @@ class Driver:
     # LeRobot's robot types of a follower and a leader of this family (its calibration file)
     lerobot_types: tuple[str, str] | None = None
 
+    def uncalibrated_joints(self) -> list[str]:
+        """The joints whose servo has no homing offset register (a block with no
+        ``calibration_registers`` has none at all): calibrate joints refuses them."""
+        return [] if self.calibration_registers else [j.name for j in self.hw.joints]
+
     def joint_calibration(self) -> dict[str, dict[str, int]]:
         """Per joint, the calibration its servo holds as LeRobot's file has it: ``id``,
         ``drive_mode``, ``homing_offset``, ``range_min``, ``range_max`` (steps, as in the

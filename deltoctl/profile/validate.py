@@ -343,11 +343,18 @@ def _check_interface(comp: Component, itf: Interface, line: int | None, fail: Fa
 _NOT_NEGATIVE = re.compile(r".*_rate|.*_current|current|max_.*")
 _FINITE = re.compile(r".*_velocity|.*_acceleration|.*_speed|velocity|acceleration|speed")
 _TRAVEL = re.compile(r"min|max")
+_FLAGS = frozenset({"detect_sweep"})  # true or false (a Dynamixel Protocol 1.0 block's sweep)
 
 
 def _check_params(params: dict[str, str], owner: str, line: int | None, fail: Fail,
                   travel: bool = False) -> None:
     for name, value in params.items():
+        if name in _FLAGS:
+            try:
+                parse_bool(str(value))
+            except ValueError:
+                raise fail(f"param {name!r} of {owner} is true or false, got {value!r}",
+                           line) from None
         not_negative = _NOT_NEGATIVE.fullmatch(name) is not None
         finite = _FINITE.fullmatch(name) or (travel and _TRAVEL.fullmatch(name))
         if not (not_negative or finite) or not str(value).strip():

@@ -183,7 +183,10 @@ def test_without_allow_nothing_is_written_to_the_servos(deltoctl_sim, profile, m
                for w in warnings)
     bus = next(iter(buses.values()))
     assert {v[0] for v in PEERS[profile](bus).values()} == {0}  # the offsets as they were
-    assert calibration_file(profile).is_file()  # the file was saved
+    # the file was saved, a record the servos were not given: never compared
+    assert json.loads(calibration_file(profile).read_text())["written"] is False
+    with open_robot(profile, buses) as robot:
+        assert robot.calibration_warnings == []
 
 
 @pytest.mark.parametrize(("profile", "bus", "register"), [
@@ -280,3 +283,158 @@ def test_a_bad_calibration_file_is_a_warning_not_a_failure(deltoctl_sim, text):
     with open_robot("koch-arm", deltoctl_sim.buses("koch-arm")) as robot:
         [warning] = robot.warnings()
     assert warning.startswith(f"calibration not checked: {path}: not a")
+
+
+MIXED = """
+name: mixed
+buses:
+  b: serial:///dev/ttyUSB0?baud=1000000
+ros2_control:
+  - name: mixed
+    type: system
+    plugin: feetech_sts_hardware/FeetechSTSHardware
+    family: feetech
+    bus: b
+    joints:
+      - name: sts
+        limits: {lower: -3, upper: 3, velocity: 5, effort: 3}
+        command_interfaces: [position]
+        state_interfaces: [position, velocity, effort]
+        params: {id: 1, model: STS3215}
+      - name: gripper
+        limits: {lower: -2, upper: 2, velocity: 5, effort: 1}
+        command_interfaces: [position]
+        state_interfaces: [position, velocity, effort]
+        params: {id: 2, model: SCS0009}
+"""
+
+
+def _writes(monkeypatch) -> list[int]:
+    """Every register write the emulators take from now on (addresses)."""
+    from deltoctl.families.dynamixel import emulator as dxl
+    from deltoctl.families.dynamixel import emulator1 as dxl1
+    from deltoctl.families.feetech import emulator as feetech
+
+    writes: list[int] = []
+    for cls in (dxl.Servo, dxl1.Servo1, feetech.Servo):
+        original = cls.write
+
+        def counted(servo, address, data, original=original):
+            writes.append(address)
+            return original(servo, address, data)
+
+        monkeypatch.setattr(cls, "write", counted)
+    return writes
+
+
+@pytest.mark.parametrize(("profile", "named"), [
+    ("phantomx-arm", "phantomx_arm: its servos have no homing offset register"),
+    ("mixed", "mixed: gripper has no homing offset register")])
+def test_a_block_that_cannot_be_calibrated_is_refused_before_anything_is_sent(
+        profile, named, tmp_path, monkeypatch):
+    if profile == "mixed":  # an SCS0009 has no Homing_Offset
+        profile = tmp_path / "mixed.yaml"
+        profile.write_text(MIXED)
+    told = []
+    with open_robot(profile, sim=True) as robot:
+        writes = _writes(monkeypatch)
+        with pytest.raises(InvalidInput, match=f"nothing done: cannot calibrate {named}"):
+            robot.calibrate_joints(seconds=1, allow=PERMISSIONS, confirm=told.append)
+        robot.identify()  # its replies come after any write sent before them
+        assert writes == [] and told == []
+
+
+@pytest.mark.parametrize("bad", ["../x", "a/b", ".hidden", "my arm", ""])
+def test_a_bad_id_is_refused_before_anything_is_read(deltoctl_sim, bad, monkeypatch):
+    told = []
+    with open_robot("koch-arm", deltoctl_sim.buses("koch-arm")) as robot:
+        writes = _writes(monkeypatch)
+        for options in ({"name": bad}, {"lerobot": bad}):
+            with pytest.raises(InvalidInput, match="must be a plain name"):
+                robot.calibrate_joints(seconds=1, allow=PERMISSIONS, confirm=told.append,
+                                       **options)
+        assert writes == [] and told == []
+    assert not calibration_file("koch-arm").exists()
+
+
+def test_a_profile_named_with_a_slash_keeps_its_file_in_the_data_dir(tmp_path):
+    from deltoctl.data_paths import user_data_dir
+    from tests.conftest import REPO
+
+    text = (REPO / "profiles" / "koch-arm.yaml").read_text()
+    assert "\nname: koch-arm\n" in text
+    path = tmp_path / "escape.yaml"
+    path.write_text(text.replace("\nname: koch-arm\n", "\nname: ../../x/y\n"))
+    with open_robot(path, sim=True) as robot:
+        result = robot.calibrate_joints(seconds=1, hand=["hand gripper 30"], full_turn=ARM[:-1],
+                                        lerobot="arm")
+    saved = user_data_dir("calibration", "sim") / "%2E%2E%2F%2E%2E%2Fx%2Fy.json"
+    assert result["file"] == str(saved) and saved.is_file()
+    assert calibration_file("../../x/y", simulated=True) == saved
+    assert [p for p in tmp_path.rglob("*.json") if "calibration" in str(p)] == [saved]
+
+
+@pytest.mark.parametrize(("text", "says"), [
+    ("[" * 200_000, "not a calibration file (nested too deep)"),
+    (" " * (1 << 20) + "{}", "larger than 1 MiB")])
+def test_a_deep_or_large_calibration_file_is_a_warning(deltoctl_sim, text, says):
+    path = calibration_file("koch-arm")
+    path.parent.mkdir(parents=True)
+    path.write_text(text)
+    with open_robot("koch-arm", deltoctl_sim.buses("koch-arm")) as robot:
+        [warning] = robot.warnings()
+    assert warning.startswith(f"calibration not checked: {path}: {says}")
+
+
+def test_the_middle_pose_is_read_before_the_torque_goes_off(deltoctl_sim, monkeypatch):
+    from deltoctl.families.dynamixel.driver import DynamixelDriver
+
+    calls = []
+    for name in ("middle_offsets", "set_torque"):
+        original = getattr(DynamixelDriver, name)
+
+        def spied(driver, *args, original=original, name=name):
+            calls.append(name if name == "middle_offsets" else f"torque {args[1]}")
+            return original(driver, *args)
+
+        monkeypatch.setattr(DynamixelDriver, name, spied)
+    _calibrate(deltoctl_sim, "koch-arm")
+    assert calls.index("middle_offsets") < calls.index("torque False")
+
+
+def test_a_register_that_does_not_hold_is_a_failure_naming_it(deltoctl_sim, monkeypatch):
+    from deltoctl.families.dynamixel import emulator as dxl
+
+    original = dxl.Servo.write
+
+    def deaf(servo, address, data):  # elbow_flex (ID 3) keeps its Homing Offset (20)
+        if address == 20 and servo.get("ID") == 3:
+            return 0
+        return original(servo, address, data)
+
+    monkeypatch.setattr(dxl.Servo, "write", deaf)
+    with pytest.raises(DeviceError, match=r"did not hold: elbow_flex: Homing Offset reads 0 "
+                                          r"after -?\d+ was written; not saved"):
+        _calibrate(deltoctl_sim, "koch-arm")
+    assert not calibration_file("koch-arm").exists()
+
+
+def test_two_arms_of_one_profile_each_have_their_file(deltoctl_sim):
+    buses, left, _ = _calibrate(deltoctl_sim, "koch-arm", name="left")
+    assert left["file"] == str(calibration_file("koch-arm", name="left"))
+    for joint in ARM:  # the other arm: another range
+        deltoctl_sim.control(f"hand {joint} {MIDDLE}")
+    with open_robot("koch-arm", buses) as robot:
+        assert robot.calibration_warnings == []
+        right = robot.calibrate_joints(done=_by_hand(deltoctl_sim.control, low=LOW + 10,
+                                                     high=HIGH - 10), seconds=30,
+                                       allow=PERMISSIONS, name="right")
+    assert right["file"] == str(calibration_file("koch-arm", name="right"))
+    assert left["joints"][0]["range_min"] != right["joints"][0]["range_min"]
+    with open_robot("koch-arm", buses) as robot:  # the servos match the right arm's file
+        assert robot.calibration_warnings == []
+        robot.write_register("elbow_flex", "max_position_limit", 3000)
+    with open_robot("koch-arm", buses) as robot:  # named against the closest file
+        [warning] = robot.calibration_warnings
+        assert warning.startswith("elbow_flex: Max Position Limit is 3000")
+        assert "right.json" in warning

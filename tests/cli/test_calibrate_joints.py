@@ -47,7 +47,8 @@ def test_a_sim_rehearsal_moved_by_hand(cli, profile, tmp_path):
         assert joint["written"] == "verified"
         assert abs(joint["range_min"] - (2047 - 455)) <= 2
         assert abs(joint["range_max"] - (2047 + 455)) <= 2
-    assert document["result"]["file"] == str(calibration_file(profile, simulated=True))
+    assert document["result"]["file"] == str(calibration_file(profile, simulated=True,
+                                                              name="rehearsal"))
     assert document["result"]["lerobot_file"].endswith("/rehearsal.json")
     assert any("the range moved" in w for w in document["warnings"])
     # a script is told when the middle pose is read and the range is to be moved
@@ -70,6 +71,25 @@ def test_a_script_without_range_seconds_or_yes_is_told_what_to_pass(cli):
     assert result.exit_code == 2 and "DEGREES must be degrees" in result.stderr
     result = cli("-p", "dg-4f", "--sim", "--yes", "calibrate", "joints", "--range-seconds", "1")
     assert result.exit_code == 2 and "no servo joints" in result.stderr
+
+
+def test_options_and_blocks_that_cannot_be_calibrated_are_refused_before_anything(cli):
+    for options, says in (
+            (("--format", "lerobot", "--id", "../arm"), "--id '../arm' must be a plain name"),
+            (("--id", "a/b"), "--id 'a/b' must be a plain name"),
+            (("--allow", "homing-offset"), "also needs --allow min-position-limit"),
+            (("--range-seconds", "0"), "--range-seconds must be above 0")):
+        # no --yes: a check after the open would stop at the confirmation (exit 5)
+        result = cli("-p", "koch-arm", "--sim", "calibrate", "joints", "--range-seconds", "1",
+                     *options)
+        assert result.exit_code in (2, 5) and says in result.stderr, result.output
+        assert "the torque off" not in result.stderr
+    assert not calibration_file("koch-arm", simulated=True).exists()
+    result = cli("-p", "phantomx-arm", "--sim", "--yes", "calibrate", "joints",
+                 "--range-seconds", "1", *ALLOW)
+    assert result.exit_code == 2, result.output
+    assert "cannot calibrate phantomx_arm: its servos have no homing offset register" \
+        in result.stderr
 
 
 def _reader(proc) -> queue.Queue:

@@ -730,6 +730,11 @@ class FeetechDriver(Driver):
         "range_max": "Max_Position_Limit"}
     lerobot_types = ("so_follower", "so_leader")
 
+    def uncalibrated_joints(self) -> list[str]:
+        """The servos without Homing_Offset (an SCS0009's table has none)."""
+        return [j.name for i, j in self.joints.items()
+                if i in self.present and "Homing_Offset" not in self.model(i).by_name]
+
     def joint_calibration(self) -> dict[str, dict[str, int]]:
         """LeRobot's calibration the servos hold (drive_mode 0, as LeRobot reads it)."""
         return {name: {**vars(m), "resolution": self.model(m.id).resolution}

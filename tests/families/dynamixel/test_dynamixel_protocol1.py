@@ -391,3 +391,18 @@ def test_a_goal_beyond_the_servos_reach_is_refused_before_torque_is_on(tmp_path)
         with pytest.raises(Refused, match=r"elbow.*0\.\.1023"):
             driver.send_goals({"elbow": 800.0}, 1.0)
         assert all(s.get("Torque Enable") == 0 for s in bus.servos.values())
+
+
+def test_a_bad_detect_sweep_is_named_with_its_file_and_line_by_validate(cli, tmp_path):
+    import re
+
+    from tests.conftest import REPO
+
+    text = (REPO / "profiles" / "phantomx-arm.yaml").read_text()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(text.replace("protocol_version: 1.0",
+                                "protocol_version: 1.0\n      detect_sweep: maybe"))
+    for run in (cli("profile", "validate", str(bad)), cli("--sim", "-p", str(bad), "identify")):
+        assert run.exit_code == 2, run.output
+        assert re.search(r"bad\.yaml:\d+: param 'detect_sweep' of block 'phantomx_arm' is true "
+                         r"or false, got 'maybe'", run.stderr), run.stderr
