@@ -304,3 +304,17 @@ def test_a_joint_set_up_already_and_left_connected_is_not_taken_for_the_next():
             run.plan_one("shoulder_lift")  # shoulder_lift's servo not plugged in
         run.controls.run("connect shoulder_lift")
         assert run.plan_one("shoulder_lift").steps  # its own, at the factory's ID and rate
+
+
+def test_in_place_refuses_one_id_at_two_rates(cli, monkeypatch):
+    writes = _count_writes(monkeypatch, Servo)
+    models = [by_number(n) for n in KOCH_MODELS]
+    at_1m = DynamixelBus([Servo(i, model=m) for i, m in zip((2, 3, 4, 5, 6), models[1:])],
+                         baud=1_000_000)
+    slow = DynamixelBus([Servo(2, model=models[0])], baud=57_600)  # shoulder_pan's, at ID 2
+    with DynamixelPtyServer(MixedBus(at_1m, slow)) as server:
+        result = cli("-p", "koch-arm", "-t", f"dxl=serial://{server.port}?baud=1000000",
+                     "setup", "--in-place", "--map", "2=shoulder_lift", "--yes", *WAIT)
+    assert result.exit_code == 5, result.output
+    assert "ID 2 answers at 57600 and 1000000 baud" in result.stderr
+    assert writes == []
