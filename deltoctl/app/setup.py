@@ -37,7 +37,7 @@ from deltoctl.app.setup_rows import row as _row
 from deltoctl.app.setup_rows import step as _step
 from deltoctl.app.setup_rows import verified as _verified
 from deltoctl.core.link_setup import LinkJoint
-from deltoctl.errors import InvalidInput, Refused, Unreachable
+from deltoctl.errors import DeviceError, InvalidInput, Refused, Unreachable
 from deltoctl.servo.addressing import Addresser, Addressing, Wanted
 
 WAIT = 0.01  # s a probe waits for a reply
@@ -180,6 +180,25 @@ class Setup:
                           f"unplug {other.joint}'s servo and connect {w.joint}'s alone (a "
                           "servo given the wrong joint's ID: setup --in-place --map ID=JOINT)")
 
+    def _target_free(self, bus: Bus, addresser: Addresser, w: Wanted,
+                     servo: dict[str, Any]) -> None:
+        """Refused when a servo answers at the joint's ID at the found servo's rate or at the
+        joint's (a probe may ask the factory's ID only: one there already is unseen)."""
+        rates = [b for b in dict.fromkeys((servo["baud"], w.baud))
+                 if (w.id, b) != (servo["id"], servo["baud"])]
+        with self._port(bus.url) as port:
+            for baud in rates:
+                port.baudrate = baud
+                try:
+                    model = addresser.identify(port, w.id)
+                except DeviceError:  # several answer: their replies garble
+                    model = "servo"
+                if model is not None:
+                    raise Refused(f"{w.joint}: a servo answers at ID {w.id}, {baud} baud ({model}),"
+                                  f" where {w.joint}'s is to go: nothing was written",
+                                  f"unplug it (or give it another ID), connect {w.joint}'s "
+                                  f"servo alone, then run setup {w.joint} again")
+
     def plan_one(self, joint: str, reset: str | None = None) -> Outcome:
         """What setting up ``joint``'s servo (connected alone) or drive writes; nothing is
         written."""
@@ -191,6 +210,7 @@ class Setup:
         if reset is not None:
             _check_reset(bus, addresser, reset)
         servo = self.find(joint)
+        self._target_free(bus, addresser, w, servo)
         outcome = Outcome("one at a time", True)
         outcome.joints.append(_row(w, servo, "planned"))
         outcome.steps += _one_steps(w, servo, reset)

@@ -18,7 +18,10 @@ from typing import Any, Protocol
 
 from deltoctl.errors import DeviceError, NoAnswer
 from deltoctl.servo.frames import Reply
+from deltoctl.servo.scan import alone
 from deltoctl.servo.session import Done, Session
+
+VERIFY_WAIT = 0.05  # s a verification's read waits on, for a second servo's reply
 
 
 @dataclass(frozen=True)
@@ -101,3 +104,15 @@ def checked(reply: Reply | None, what: str, describe: Callable[[int], str]) -> R
     if reply is not None and reply[1]:
         raise DeviceError(f"{what}: the servo at ID {reply[0]} reports {describe(reply[1])}")
     return reply
+
+
+def one_servo(port: Any, session: Session, device_id: int, instruction: int, params: bytes,
+              length: int) -> None:
+    """DeviceError unless one servo answers at ``device_id``: the request (a read of its
+    present position, which differs between servos) answered by a reply that does not garble
+    (see deltoctl.servo.scan.alone)."""
+    if not alone(port, session, device_id, instruction, params, VERIFY_WAIT, length):
+        raise DeviceError(f"several servos answer at ID {device_id}: their replies to a read "
+                          "of the present position garble",
+                          hint="scan the bus (deltoctl scan), unplug all but one of them and "
+                               "give it its ID alone")

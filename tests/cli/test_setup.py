@@ -318,3 +318,34 @@ def test_in_place_refuses_one_id_at_two_rates(cli, monkeypatch):
     assert result.exit_code == 5, result.output
     assert "ID 2 answers at 57600 and 1000000 baud" in result.stderr
     assert writes == []
+
+
+def test_one_at_a_time_refuses_a_target_id_held_already(cli, monkeypatch):
+    writes = _count_writes(monkeypatch, Servo1)
+    new = Protocol1Bus([Servo1(1)], baud=57_600)  # the factory's ID, unlike elbow's
+    held = Protocol1Bus([Servo1(3)], baud=1_000_000)  # a servo at elbow's ID and rate already
+    with DynamixelPtyServer(MixedBus(new, held)) as server:
+        result = cli("-p", "phantomx-arm", "-t",
+                     f"dxl=serial://{server.port}?baud=1000000", "setup", "elbow",
+                     "--yes", *WAIT)
+    assert result.exit_code == 5, result.output
+    assert "a servo answers at ID 3, 1000000 baud" in result.stderr
+    assert writes == []
+
+
+def test_verification_tells_two_alike_servos_at_one_id():
+    from deltoctl.app.setup import open_setup
+    from deltoctl.errors import DeviceError
+
+    model = by_number(1200)
+    new = DynamixelBus([Servo(1, model=model)], baud=57_600)
+    twin = DynamixelBus([], baud=1_000_000)
+    with DynamixelPtyServer(MixedBus(new, twin)) as server, \
+            open_setup("koch-arm", [f"dxl=serial://{server.port}?baud=1000000"],
+                       wait=0.05) as run:
+        plan = run.plan_one("elbow_flex")
+        alike = Servo(3, model=model)  # elbow_flex's ID and rate, plugged in meanwhile
+        alike.position += 300  # another pose: its PING is byte for byte the new one's
+        twin.servos[3] = alike
+        with pytest.raises(DeviceError, match="several servos answer at ID 3"):
+            run.apply_one("elbow_flex", plan)

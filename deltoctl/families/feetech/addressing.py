@@ -11,7 +11,7 @@ from typing import Any
 from deltoctl.errors import DeltoctlError, InvalidInput
 from deltoctl.families.feetech import codec
 from deltoctl.families.feetech.models import BAUD_RATES, Model, by_bytes, expected_model, label
-from deltoctl.servo.addressing import Addressing, Wanted, ask
+from deltoctl.servo.addressing import Addressing, Wanted, ask, one_servo
 
 PROTOCOL = "Feetech"
 NO_RESET = ("Feetech documents no factory reset (instruction 0x06 is in none of its SDKs' "
@@ -46,7 +46,12 @@ class FeetechAddresser:
     def identify(self, port: Any, device_id: int) -> str | None:
         self._models.pop(device_id, None)  # read again: a verification
         model = self._model(port, device_id)
-        return model.name if model else None
+        if model is None:
+            return None
+        item = model.by_name["Present_Position"]  # twins' model reads superimpose cleanly
+        one_servo(port, codec.session(), device_id, codec.READ,
+                  codec.read_params(item.address, item.size), item.size)
+        return model.name
 
     def _item(self, port: Any, device_id: int, name: str) -> int:
         model = self._model(port, device_id)
