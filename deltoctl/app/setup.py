@@ -23,6 +23,7 @@ of servos is deltoctl.app.setup_in_place."""
 from __future__ import annotations
 
 import contextlib
+import re
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -289,6 +290,11 @@ class Setup:
         if not self.buses:
             raise InvalidInput(f"{self.profile.name}: --in-place readdresses servos; its "
                                "drives are set up by setup (or setup JOINT)")
+        for device_id, joint in mapping.items():
+            low, high = self._bus_of(joint)[0].family.address_range or (0, 252)
+            if not low <= device_id <= high:
+                raise InvalidInput(f"--map {device_id}={joint}: ID {device_id} is not "
+                                   f"{low}-{high}")
         outcome = Outcome("in place", True)
         for bus in self.buses:
             found = self._scan_bus(bus)
@@ -434,17 +440,16 @@ def _address(port: Any, addresser: Addresser, at_id: int, at_baud: int, w: Wante
 # -- opening ---------------------------------------------------------------------------------
 
 def target_map(profile: Any, targets: Sequence[str]) -> dict[str, str]:
-    """``BUS=URL`` items (or one URL, for a profile of one bus) → {bus: URL}."""
-    out: dict[str, str] = {}
-    for item in targets:
-        bus, sep, url = item.partition("=")
-        if sep and (bus in profile.buses or "://" not in bus):
-            out[bus] = url
-        elif len(profile.buses) == 1:
-            out[next(iter(profile.buses))] = item
-        else:
+    """``BUS=URL`` items (or one URL, for a profile of one bus) → {bus: URL}; the names are
+    checked as every verb checks them (deltoctl.core.system.parse_targets)."""
+    from deltoctl.core.system import parse_targets
+
+    out, bare = parse_targets(profile, list(targets))
+    for item in bare:
+        if len(profile.buses) != 1:
             raise InvalidInput(f"target {item!r}: name its bus, BUS=URL (buses: "
                                f"{', '.join(profile.buses)})")
+        out[next(iter(profile.buses))] = item
     return out
 
 
@@ -496,7 +501,7 @@ def parse_map(items: Sequence[str]) -> dict[int, str]:
     out: dict[int, str] = {}
     for item in items:
         text, sep, joint = item.partition("=")
-        if not sep or not text.strip().isdigit() or not joint.strip():
+        if not sep or not re.fullmatch(r"[0-9]{1,4}", text.strip()) or not joint.strip():
             raise InvalidInput(f"--map {item!r}: expected ID=JOINT, e.g. --map 3=elbow_flex")
         if int(text) in out:
             raise InvalidInput(f"--map: ID {int(text)} is mapped twice")

@@ -208,6 +208,10 @@ def test_feetech_has_no_factory_reset(cli):
     (("setup", "elbow", "--yes"), 2, "no servo joint 'elbow'"),
     (("setup", "elbow_flex"), 5, "--yes"),
     (("setup", "--in-place", "--map", "x=elbow_flex", "--yes"), 2, "ID=JOINT"),
+    (("setup", "--in-place", "--map", "\u00b2=elbow_flex", "--yes"), 2, "ID=JOINT"),
+    (("setup", "--in-place", "--map", "300=elbow_flex", "--yes"), 2, "ID 300 is not 0-252"),
+    (("-t", "dxll=serial:///dev/null", "setup", "elbow_flex", "--yes"), 2,
+     "unknown bus 'dxll'"),
 ])
 def test_refusals_and_bad_input(cli, args, code, said):
     result = cli("-p", "koch-arm", "--sim", "--sim-fresh", "--sim-option", "factory_new",
