@@ -253,6 +253,16 @@ class Setup:
         outcome.bus_seconds = self.bus_seconds
         return outcome
 
+    def check_reset(self, reset: str | None) -> None:
+        """InvalidInput unless every joint's servo can take the factory reset ``reset``."""
+        if reset is None:
+            return
+        for bus in self.buses:
+            for protocol in dict.fromkeys(w.protocol for w in bus.wanted):
+                _check_reset(bus, self._addresser(bus, protocol), reset)
+        for link in self.links:
+            raise InvalidInput(f"{link.block}: {link.family.name} drives: no factory reset")
+
     def wanted_plan(self) -> Outcome:
         """What a walk of every joint will set, before any servo is found."""
         return Outcome("one at a time", True, [_row(w, None, "planned") for w in self.joints()])
@@ -263,6 +273,7 @@ class Setup:
         be connected (``reply``: this process's simulators connected it, else None; not for
         a part its serial names, all connected at once), then set up and verified (``done``
         told each joint's row)."""
+        self.check_reset(reset)
         outcome = Outcome("one at a time", False)
         for w in self.joints():
             if self.asks_to_connect(w):

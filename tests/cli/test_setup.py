@@ -353,3 +353,14 @@ def test_verification_tells_two_alike_servos_at_one_id():
         twin.servos[3] = alike
         with pytest.raises(DeviceError, match="several servos answer at ID 3"):
             run.apply_one("elbow_flex", plan)
+
+
+def test_a_walk_checks_the_factory_reset_of_every_joint_before_asking(cli):
+    result = cli("-p", "so101-follower", "--sim", "--sim-fresh", "--sim-option", "factory_new",
+                 "setup", "--factory-reset", "all", "--allow", "factory-reset")
+    assert result.exit_code == 2, result.output
+    assert "no factory reset" in result.stderr
+    result = cli("-p", "koch-arm", "--sim", "--sim-fresh", "--sim-option", "factory_new",
+                 "setup", "--factory-reset", "keep-id", "--allow", "factory-reset")
+    assert result.exit_code == 5, result.output
+    assert "factory reset (keep-id) of each" in result.stderr
