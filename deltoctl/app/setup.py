@@ -142,10 +142,12 @@ class Setup:
             port.close()
 
     # -- one at a time -----------------------------------------------------------------------
-    def find(self, joint: str) -> dict[str, Any]:
+    def find(self, joint: str, walked: Sequence[str] | None = None) -> dict[str, Any]:
         """The one servo connected (the joint's, alone), at any rate and protocol (the
         joint's protocol first, in the scan's order); Refused when replies collide, several
-        answer or its model is not the joint's; Unreachable when nothing answers."""
+        answer, its model is not the joint's or it answers where another joint's is set up
+        (``walked``: the joints a walk has set up, None outside one); Unreachable when nothing
+        answers."""
         from deltoctl.app.scan import all_probes, run_probes
 
         bus, w = self._bus_of(joint)
@@ -163,23 +165,52 @@ class Setup:
                           f"({servo['protocol']}) at ID {servo['id']}; the profile says "
                           f"{joint} is a {w.model or 'servo'} ({w.protocol}): nothing was "
                           "written", f"connect {joint}'s own servo alone")
-        self._not_another(w, servo)
+        self._not_another(w, servo, walked)
         return servo
 
-    def _not_another(self, w: Wanted, servo: dict[str, Any]) -> None:
-        """Refused when the servo found answers where another joint's is set up (not where a
-        new one answers): that joint's servo, left connected."""
+    def _not_another(self, w: Wanted, servo: dict[str, Any],
+                     walked: Sequence[str] | None) -> None:
+        """Refused when the servo found answers where another joint's is set up: that
+        joint's servo, left connected. Where that is the factory's address too, a new servo
+        answers there as well: only a walk, which sets such joints up last, tells them apart
+        (the other joint not set up yet: a new one)."""
         at = (servo["id"], servo["baud"])
-        bus, _ = self._bus_of(w.joint)
-        if at in self._addresser(bus, servo["protocol"]).factory:
-            return
         other = next((o for o in self.joints() if o.joint != w.joint and (o.id, o.baud) == at
                       and o.protocol == servo["protocol"]), None)
-        if other is not None:
-            raise Refused(f"{w.joint}: the servo connected answers at ID {at[0]}, {at[1]} baud: "
-                          f"{other.joint}'s, set up already: nothing was written",
+        if other is None:
+            return
+        if not self._at_factory(other):
+            raise Refused(f"{w.joint}: the servo connected answers at ID {at[0]}, {at[1]} "
+                          f"baud: {other.joint}'s, set up already: nothing was written",
                           f"unplug {other.joint}'s servo and connect {w.joint}'s alone (a "
                           "servo given the wrong joint's ID: setup --in-place --map ID=JOINT)")
+        if walked is None or other.joint in walked:
+            raise Refused(f"{w.joint}: the servo connected answers at ID {at[0]}, {at[1]} "
+                          f"baud, the factory's and {other.joint}'s: a new servo or "
+                          f"{other.joint}'s is not known: nothing was written",
+                          f"run setup (each joint in turn, {other.joint} last), or give a new "
+                          f"servo alone {w.joint}'s ID with setup --in-place --map "
+                          f"{at[0]}={w.joint}")
+
+    def _at_factory(self, w: Wanted | LinkJoint) -> bool:
+        """Whether a servo joint's ID and rate are where its protocol's new servos answer."""
+        if self._link_of(w.joint) is not None:
+            return False
+        addresser = self._bus_of(w.joint)[0].addressing.addresser(w.protocol)
+        return addresser is not None and (w.id, w.baud) in addresser.factory
+
+    def factory_last(self) -> str | None:
+        """What a walk says of the joints it sets up last (None: no such joint)."""
+        last = [w.joint for w in self.joints() if self._at_factory(w)]
+        if not last:
+            return None
+        return (f"{', '.join(last)} last: {'its' if len(last) == 1 else 'their'} ID and rate "
+                "are the factory's, where each new servo answers")
+
+    def walk_order(self) -> list[Wanted | LinkJoint]:
+        """The joints in the profile's order, those whose ID and rate are the factory's last
+        (until then a servo there is a new one)."""
+        return sorted(self.joints(), key=self._at_factory)
 
     def _target_free(self, bus: Bus, addresser: Addresser, w: Wanted,
                      servo: dict[str, Any]) -> None:
@@ -200,9 +231,10 @@ class Setup:
                                   f"unplug it (or give it another ID), connect {w.joint}'s "
                                   f"servo alone, then run setup {w.joint} again")
 
-    def plan_one(self, joint: str, reset: str | None = None) -> Outcome:
-        """What setting up ``joint``'s servo (connected alone) or drive writes; nothing is
-        written."""
+    def plan_one(self, joint: str, reset: str | None = None,
+                 walked: Sequence[str] | None = None) -> Outcome:
+        """What setting up ``joint``'s servo (connected alone) or drive writes (``walked``:
+        see ``find``); nothing is written."""
         link = self._link_of(joint)
         if link is not None:
             return self._plan_link(*link, reset)
@@ -210,7 +242,7 @@ class Setup:
         addresser = self._addresser(bus, w.protocol)
         if reset is not None:
             _check_reset(bus, addresser, reset)
-        servo = self.find(joint)
+        servo = self.find(joint, walked)
         self._target_free(bus, addresser, w, servo)
         outcome = Outcome("one at a time", True)
         outcome.joints.append(_row(w, servo, "planned"))
@@ -235,7 +267,7 @@ class Setup:
             with self._port(bus.url, at_baud) as port:
                 addresser.factory_reset(port, at_id, reset)
             time.sleep(0.05)  # the servo restarts with its factory settings
-            servo = self.find(joint)
+            servo = self.find(joint, ())  # the servo reset, at the factory's address
             at_id, at_baud = servo["id"], servo["baud"]
         with self._port(bus.url, at_baud) as port:
             _address(port, addresser, at_id, at_baud, w)
@@ -265,20 +297,23 @@ class Setup:
 
     def wanted_plan(self) -> Outcome:
         """What a walk of every joint will set, before any servo is found."""
-        return Outcome("one at a time", True, [_row(w, None, "planned") for w in self.joints()])
+        return Outcome("one at a time", True,
+                       [_row(w, None, "planned") for w in self.walk_order()])
 
     def walk(self, connect: Callable[[Any, str | None], None], reset: str | None = None,
              done: Callable[[dict[str, Any]], None] | None = None) -> Outcome:
-        """Every joint in the profile's order: ``connect(wanted, reply)`` once its part is to
+        """Every joint in the walk's order (``walk_order``): ``connect(wanted, reply)`` once its part is to
         be connected (``reply``: this process's simulators connected it, else None; not for
         a part its serial names, all connected at once), then set up and verified (``done``
         told each joint's row)."""
         self.check_reset(reset)
         outcome = Outcome("one at a time", False)
-        for w in self.joints():
+        walked: list[str] = []
+        for w in self.walk_order():
             if self.asks_to_connect(w):
                 connect(w, self.connect_alone(w.joint))
-            one = self.apply_one(w.joint, self.plan_one(w.joint, reset))
+            one = self.apply_one(w.joint, self.plan_one(w.joint, reset, walked))
+            walked.append(w.joint)
             outcome.joints += one.joints
             outcome.steps += one.steps
             if done is not None:

@@ -96,6 +96,8 @@ def _walk(ctx: typer.Context, run: Any, reset: str | None, dry_run: bool) -> dic
                            "terminal, or name the joint (setup JOINT) in a script")
     for line in joint_lines(plan.as_dict()):
         info(line)
+    if run.factory_last():
+        info(run.factory_last())
     first = f"a factory reset ({reset}) of each, then " if reset else ""
     confirm(ctx, f"{first}give these {len(plan.joints)} servos their IDs and rates, one at "
                  "a time")

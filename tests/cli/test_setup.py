@@ -54,10 +54,12 @@ def test_a_factory_new_arm_in_process_then_identify_clean(profile):
     from deltoctl.app.setup import open_setup
 
     with open_setup(profile, sim={"factory_new": True}, wait=0.05) as run:
-        for w in run.joints():
+        walked = []
+        for w in run.walk_order():
             assert run.connect_alone(w.joint) == f"on the wire: {w.joint}"
-            done = run.apply_one(w.joint, run.plan_one(w.joint))
+            done = run.apply_one(w.joint, run.plan_one(w.joint, walked=walked))
             assert done.joints[0]["verified"]
+            walked.append(w.joint)
         assert run.controls.run("connect all").endswith(", ".join(ARM))
         [target] = run.targets()
         url = target.partition("=")[2]
@@ -74,10 +76,12 @@ def test_the_cli_sets_up_a_factory_new_arm_on_its_own_simulator(cli, profile):
                  "--json", "setup", "--yes", *WAIT)
     assert result.exit_code == 0, result.output
     doc = _doc(result)
-    assert [r["joint"] for r in doc["joints"]] == list(ARM)
+    order = list(ARM) if profile == "koch-arm" else [*ARM[1:], ARM[0]]  # 1 @ 1 Mbps: last
+    assert [r["joint"] for r in doc["joints"]] == order
     assert all(r["verified"] for r in doc["joints"])
-    assert [r["to"]["id"] for r in doc["joints"]] == [1, 2, 3, 4, 5, 6]
+    assert [r["to"]["id"] for r in doc["joints"]] == [ARM.index(j) + 1 for j in order]
     assert "the simulator connected gripper alone" in result.stderr
+    assert ("shoulder_pan last" in result.stderr) == (profile == "so101-follower")
 
 
 def _served(profile):
@@ -103,8 +107,17 @@ def test_setup_joint_by_joint_on_a_sim_serve_then_identify_clean(cli, profile):
         for joint in ARM:
             assert _control(proc, f"connect {joint}") == f"on the wire: {joint}"
             result = cli("-p", profile, "-t", target, "--json", "setup", joint, "--yes", *WAIT)
-            assert result.exit_code == 0, result.output
-            [row] = _doc(result)["joints"]
+            if profile == "so101-follower" and joint != "shoulder_pan":
+                # a new servo answers at shoulder_pan's ID and rate (the factory's): which it
+                # is, is not known; alone, it is given its joint's by setup --in-place --map
+                assert result.exit_code == 5, result.output
+                assert f"--map 1={joint}" in result.stderr
+                result = cli("-p", profile, "-t", target, "--json", "setup", "--in-place",
+                             "--map", f"1={joint}", "--yes", *WAIT)
+                assert result.exit_code == 3, result.output  # the others: not connected
+            else:
+                assert result.exit_code == 0, result.output
+            row = next(r for r in _doc(result)["joints"] if r["joint"] == joint)
             assert row["verified"] and row["from"]["id"] == 1
         assert _control(proc, "connect all").startswith("on the wire: shoulder_pan")
         result = cli("-p", profile, "-t", target, "identify")
@@ -364,3 +377,19 @@ def test_a_walk_checks_the_factory_reset_of_every_joint_before_asking(cli):
                  "setup", "--factory-reset", "keep-id", "--allow", "factory-reset")
     assert result.exit_code == 5, result.output
     assert "factory reset (keep-id) of each" in result.stderr
+
+
+def test_a_servo_at_the_factory_address_of_a_joint_set_up_is_not_taken_for_the_next():
+    from deltoctl.app.setup import open_setup
+    from deltoctl.errors import Refused
+
+    with open_setup("so101-follower", sim={"factory_new": True}, wait=0.05) as run:
+        run.connect_alone("shoulder_pan")
+        done = run.apply_one("shoulder_pan", run.plan_one("shoulder_pan"))
+        assert done.joints[0]["status"] == "already set"  # 1 @ 1 Mbps: the factory's
+        with pytest.raises(Refused, match="a new servo or shoulder_pan's is not known"):
+            run.plan_one("shoulder_lift")  # setup JOINT: shoulder_pan's, or a new one?
+        with pytest.raises(Refused, match="is not known"):  # a walk that set it up already
+            run.plan_one("shoulder_lift", walked=["shoulder_pan"])
+        run.controls.run("connect shoulder_lift")
+        assert run.plan_one("shoulder_lift", walked=[]).steps  # a walk sets shoulder_pan last
