@@ -276,14 +276,18 @@ def test_in_place_never_writes_a_servo_the_profile_lacks(cli, monkeypatch):
     assert writes == []
 
 
-def test_a_protocol_1_servo_is_set_up_and_reset(cli):
+def test_a_protocol_1_arm_is_set_up_and_reset_its_factory_address_last(cli):
     result = cli("-p", "phantomx-arm", "--sim", "--sim-fresh", "--sim-option", "factory_new",
-                 "--json", "setup", "elbow", "--factory-reset", "all", "--allow",
-                 "factory-reset", "--yes", *WAIT)
+                 "--json", "setup", "--factory-reset", "all", "--allow", "factory-reset",
+                 "--yes", *WAIT)
     assert result.exit_code == 0, result.output
-    [row] = _doc(result)["joints"]
-    assert (row["from"]["protocol"], row["from"]["model"]) == ("Dynamixel 1.0", "AX-12A")
-    assert (row["to"]["id"], row["to"]["baud"], row["verified"]) == (3, 1_000_000, True)
+    rows = _doc(result)["joints"]
+    assert [r["joint"] for r in rows] == ["shoulder", "elbow", "wrist", "gripper", "waist"]
+    assert {(r["from"]["id"], r["from"]["baud"], r["from"]["protocol"], r["from"]["model"])
+            for r in rows} == {(1, 1_000_000, "Dynamixel 1.0", "AX-12A")}  # an AX's factory
+    assert [(r["to"]["id"], r["to"]["baud"], r["verified"]) for r in rows] == \
+        [(i, 1_000_000, True) for i in (2, 3, 4, 5, 1)]
+    assert "waist last" in result.stderr
 
 
 def test_a_robot_on_its_own_simulators_runs_their_control_lines():
