@@ -54,9 +54,12 @@ def plan_one(link: Any, bus: LinkBus, w: LinkJoint) -> Outcome:
     """What setting up ``w``'s part writes (nothing when it answers at its address)."""
     found = bus.addressing.locate(link, w)
     outcome = Outcome("one at a time", True, [row(w, found, "planned")])
-    if (found["id"], found["baud"]) != (w.id, w.baud):
-        outcome.steps = [step(w.joint, "id", found["id"], found["baud"], w.id),
-                         step(w.joint, "store", w.id, found["baud"], w.baud)]
+    if found["id"] != w.id:
+        outcome.steps.append(step(w.joint, "id", found["id"], found["baud"], w.id))
+    if found["baud"] != w.baud:  # the link's rate: the new one is taken at the next power-on
+        outcome.steps.append(step(w.joint, "bit rate", w.id, found["baud"], w.baud))
+    if outcome.steps:
+        outcome.steps.append(step(w.joint, "store", w.id, found["baud"], w.baud))
     return outcome
 
 
