@@ -23,6 +23,7 @@ of servos is deltoctl.app.setup_in_place."""
 from __future__ import annotations
 
 import contextlib
+import functools
 import re
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -32,7 +33,7 @@ from typing import Any
 from deltoctl import registry
 from deltoctl.app import setup_link
 from deltoctl.app.setup_in_place import match, ordered_steps, run_step
-from deltoctl.app.setup_link import LinkBus, connect_lines, link_buses
+from deltoctl.app.setup_link import LinkBus, addressed_blocks, connect_lines, link_buses
 from deltoctl.app.setup_rows import Outcome
 from deltoctl.app.setup_rows import row as _row
 from deltoctl.app.setup_rows import step as _step
@@ -43,6 +44,17 @@ from deltoctl.servo.addressing import Addresser, Addressing, Wanted
 
 WAIT = 0.01  # s a probe waits for a reply
 FACTORY_RESET = "factory-reset"  # the --allow a factory reset needs
+
+
+def _timed(method: Callable[..., Outcome]) -> Callable[..., Outcome]:
+    """A procedure of Setup whose outcome carries the bus time spent so far."""
+    @functools.wraps(method)
+    def run(self: Setup, *args: Any, **kwargs: Any) -> Outcome:
+        outcome = method(self, *args, **kwargs)
+        outcome.bus_seconds = self.bus_seconds
+        return outcome
+
+    return run
 
 
 @dataclass
@@ -231,6 +243,7 @@ class Setup:
                                   f"unplug it (or give it another ID), connect {w.joint}'s "
                                   f"servo alone, then run setup {w.joint} again")
 
+    @_timed
     def plan_one(self, joint: str, reset: str | None = None,
                  walked: Sequence[str] | None = None) -> Outcome:
         """What setting up ``joint``'s servo (connected alone) or drive writes (``walked``:
@@ -247,16 +260,15 @@ class Setup:
         outcome = Outcome("one at a time", True)
         outcome.joints.append(_row(w, servo, "planned"))
         outcome.steps += _one_steps(w, servo, reset)
-        outcome.bus_seconds = self.bus_seconds
         return outcome
 
+    @_timed
     def apply_one(self, joint: str, plan: Outcome) -> Outcome:
         """Write the plan of ``plan_one`` and verify; the outcome with each joint's status."""
         link = self._link_of(joint)
         if link is not None:
             with self._link(link[0]) as opened:
                 done = setup_link.apply_one(opened, *link, plan)
-            done.bus_seconds = self.bus_seconds
             return done
         bus, w = self._bus_of(joint)
         addresser = self._addresser(bus, w.protocol)
@@ -274,7 +286,6 @@ class Setup:
             model = addresser.identify(port, w.id)
         done = Outcome("one at a time", False, [dict(row)], plan.steps)
         _verified(done.joints[0], w, model, row["from"]["model"])
-        done.bus_seconds = self.bus_seconds
         return done
 
     def _plan_link(self, bus: LinkBus, w: LinkJoint, reset: str | None) -> Outcome:
@@ -282,7 +293,6 @@ class Setup:
             raise InvalidInput(f"{bus.block}: {bus.family.name} drives: no factory reset")
         with self._link(bus) as opened:
             outcome = setup_link.plan_one(opened, bus, w)
-        outcome.bus_seconds = self.bus_seconds
         return outcome
 
     def check_reset(self, reset: str | None) -> None:
@@ -300,12 +310,13 @@ class Setup:
         return Outcome("one at a time", True,
                        [_row(w, None, "planned") for w in self.walk_order()])
 
+    @_timed
     def walk(self, connect: Callable[[Any, str | None], None], reset: str | None = None,
              done: Callable[[dict[str, Any]], None] | None = None) -> Outcome:
-        """Every joint in the walk's order (``walk_order``): ``connect(wanted, reply)`` once its part is to
-        be connected (``reply``: this process's simulators connected it, else None; not for
-        a part its serial names, all connected at once), then set up and verified (``done``
-        told each joint's row)."""
+        """Every joint in the walk's order (``walk_order``): ``connect(wanted, reply)`` once
+        its part is to be connected (``reply``: this process's simulators connected it, else
+        None; not for a part its serial names, all connected at once), then set up and
+        verified (``done`` told each joint's row)."""
         self.check_reset(reset)
         outcome = Outcome("one at a time", False)
         walked: list[str] = []
@@ -318,7 +329,6 @@ class Setup:
             outcome.steps += one.steps
             if done is not None:
                 done(one.joints[0])
-        outcome.bus_seconds = self.bus_seconds
         return outcome
 
     def _addresser(self, bus: Bus, protocol: str) -> Addresser:
@@ -328,6 +338,7 @@ class Setup:
         return addresser
 
     # -- in place ----------------------------------------------------------------------------
+    @_timed
     def plan_in_place(self, mapping: Mapping[int, str] = ()) -> Outcome:
         """Every servo bus scanned, its servos matched to joints (``mapping``: ID → joint
         where the match is ambiguous), and the ID and rate changes ordered without two servos
@@ -356,7 +367,6 @@ class Setup:
         if unknown:
             raise InvalidInput(f"--map names {', '.join(sorted(unknown))}: no such servo "
                                "joint in the profile")
-        outcome.bus_seconds = self.bus_seconds
         return outcome
 
     def _scan_bus(self, bus: Bus) -> list[dict[str, Any]]:
@@ -381,6 +391,7 @@ class Setup:
                           "each servo connected alone)")
         return found
 
+    @_timed
     def apply_in_place(self, plan: Outcome) -> Outcome:
         """Write the plan of ``plan_in_place`` (torque off first, IDs, then rates, the EEPROM
         locked again last), then verify every joint at its new ID and rate."""
@@ -389,7 +400,6 @@ class Setup:
             rows = [r for r in done.joints if r["block"] == bus.block and r["from"]]
             steps = [s for s in plan.steps if s["joint"] in {r["joint"] for r in rows}]
             self._apply_bus(bus, rows, steps)
-        done.bus_seconds = self.bus_seconds
         return done
 
     def _apply_bus(self, bus: Bus, rows: list[dict[str, Any]],
@@ -412,22 +422,12 @@ class Setup:
 # -- helpers: the buses ----------------------------------------------------------------------
 
 def _servo_buses(profile: Any, buses: Mapping[str, str], hardware: Sequence[str]) -> list[Bus]:
-    from deltoctl.core.system import select_blocks
-
-    out = []
-    for hw in select_blocks(profile, list(hardware)):
-        family = registry.of_block(profile.family_of(hw), hw.plugin)
-        addressing = family.addressing() if family is not None else None
-        if addressing is None:
-            continue
-        name = hw.bus or hw.name
-        url = buses.get(name) or profile.buses.get(name)
-        if not url:
-            raise InvalidInput(f"{hw.name}: no target for bus {name!r}",
-                               hint=f"give one: -t {name}=serial:///dev/ttyUSB0?baud=1000000")
-        wanted = addressing.wanted(profile, hw, profile.buses.get(name) or url)
-        out.append(Bus(hw.name, name, family, url, addressing, wanted))
-    return out
+    """The selected blocks whose family addresses servos; each joint's rate is the profile's
+    bus URL's (the target's where the profile has none)."""
+    return [Bus(hw.name, name, family, url, addressing,
+                addressing.wanted(profile, hw, profile.buses.get(name) or url))
+            for hw, name, family, url, addressing in addressed_blocks(
+                profile, buses, hardware, lambda f: f.addressing())]
 
 
 def _alone(joint: str, found: list[dict[str, Any]]) -> None:

@@ -73,6 +73,16 @@ class Addressing:
     no_reset: str = ""
 
 
+def in_joint_order(hw: Any, ids: dict[int, Any], baud: int, protocol: str,
+                   model: Callable[[Any], str]) -> list[Wanted]:
+    """A Wanted per joint of ``ids`` (its servo's ID → the joint) at the bus's ``baud`` in
+    ``protocol``, ``model(joint)`` its model's name (""), in the block's order of joints."""
+    order = [j.name for j in hw.joints]
+    out = [Wanted(joint.name, hw.name, device_id, baud, protocol, model(joint))
+           for device_id, joint in ids.items()]
+    return sorted(out, key=lambda w: order.index(w.joint) if w.joint in order else len(order))
+
+
 def ask(port: Any, session: Session, device_id: int, instruction: int, params: bytes,
         what: str, timeout: float = 0.5) -> Reply | None:
     """One request and its status (None when none is expected); NoAnswer naming ``what``

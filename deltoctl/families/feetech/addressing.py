@@ -11,7 +11,7 @@ from typing import Any
 from deltoctl.errors import DeltoctlError, InvalidInput
 from deltoctl.families.feetech import codec
 from deltoctl.families.feetech.models import BAUD_RATES, Model, by_bytes, expected_model, label
-from deltoctl.servo.addressing import Addressing, Wanted, ask, one_servo
+from deltoctl.servo.addressing import Addressing, Wanted, ask, in_joint_order, one_servo
 
 PROTOCOL = "Feetech"
 NO_RESET = ("Feetech documents no factory reset (instruction 0x06 is in none of its SDKs' "
@@ -89,13 +89,12 @@ def wanted(profile: Any, hw: Any, url: str) -> list[Wanted]:
     from deltoctl.families.feetech.ros2_control import servo_ids
 
     _, baud, _ = parse_bus_url(url)
-    out = []
-    for device_id, joint in servo_ids(profile, hw).items():
+
+    def model(joint: Any) -> str:
         number = expected_model(hw.params, joint.params, joint.name)
-        out.append(Wanted(joint.name, hw.name, device_id, baud, PROTOCOL,
-                          label(number) if number is not None else ""))
-    order = [j.name for j in hw.joints]
-    return sorted(out, key=lambda w: order.index(w.joint) if w.joint in order else len(order))
+        return label(number) if number is not None else ""
+
+    return in_joint_order(hw, servo_ids(profile, hw), baud, PROTOCOL, model)
 
 
 def addresser(protocol: str) -> FeetechAddresser | None:
