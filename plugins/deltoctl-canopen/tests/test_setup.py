@@ -180,7 +180,7 @@ def test_setup_says_what_it_addresses(cli):
 
 def test_the_rate_found_is_the_links_and_a_new_bit_rate_is_taken_at_power_on(cli, box,
                                                                               variant):
-    url, controls, serials = box  # the link at 1 Mbit/s
+    url, controls, _ = box  # the link at 1 Mbit/s
     controls.run("disconnect axis_2")
     profile = variant(profile=lambda t: t.replace("bitrate=1000000", "bitrate=500000"))
     result = cli("-p", profile, "-t", f"can0={url}", "--json", "setup", "axis_1", "--yes")
