@@ -120,7 +120,14 @@ def ordered_steps(bus: Bus, found: list[dict[str, Any]],
         final = pending.pop(start)
         if target != final:
             pending[target] = final
+    return steps + _rate_steps(bus, matched, moving)
+
+
+def _rate_steps(bus: Bus, matched: list[tuple[dict[str, Any], Wanted]],
+                moving: dict[int, tuple[dict[str, Any], Wanted]]) -> list[dict[str, Any]]:
+    """The rates, each servo at its new ID: none onto an ID and rate another servo holds."""
     held = {(w.id, s["baud"]) for s, w in matched}  # every servo at its new ID, old rate
+    steps = []
     for s, w in moving.values():
         if s["baud"] == w.baud:
             continue
