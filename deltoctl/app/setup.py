@@ -23,6 +23,8 @@ of servos is deltoctl.app.setup_in_place."""
 from __future__ import annotations
 
 import contextlib
+import functools
+import re
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -31,17 +33,28 @@ from typing import Any
 from deltoctl import registry
 from deltoctl.app import setup_link
 from deltoctl.app.setup_in_place import match, ordered_steps, run_step
-from deltoctl.app.setup_link import LinkBus, connect_lines, link_buses
+from deltoctl.app.setup_link import LinkBus, addressed_blocks, connect_lines, link_buses
 from deltoctl.app.setup_rows import Outcome
 from deltoctl.app.setup_rows import row as _row
 from deltoctl.app.setup_rows import step as _step
 from deltoctl.app.setup_rows import verified as _verified
 from deltoctl.core.link_setup import LinkJoint
-from deltoctl.errors import InvalidInput, Refused, Unreachable
+from deltoctl.errors import DeviceError, InvalidInput, Refused, Unreachable
 from deltoctl.servo.addressing import Addresser, Addressing, Wanted
 
 WAIT = 0.01  # s a probe waits for a reply
 FACTORY_RESET = "factory-reset"  # the --allow a factory reset needs
+
+
+def _timed(method: Callable[..., Outcome]) -> Callable[..., Outcome]:
+    """A procedure of Setup whose outcome carries the bus time spent so far."""
+    @functools.wraps(method)
+    def run(self: Setup, *args: Any, **kwargs: Any) -> Outcome:
+        outcome = method(self, *args, **kwargs)
+        outcome.bus_seconds = self.bus_seconds
+        return outcome
+
+    return run
 
 
 @dataclass
@@ -141,10 +154,12 @@ class Setup:
             port.close()
 
     # -- one at a time -----------------------------------------------------------------------
-    def find(self, joint: str) -> dict[str, Any]:
+    def find(self, joint: str, walked: Sequence[str] | None = None) -> dict[str, Any]:
         """The one servo connected (the joint's, alone), at any rate and protocol (the
         joint's protocol first, in the scan's order); Refused when replies collide, several
-        answer or its model is not the joint's; Unreachable when nothing answers."""
+        answer, its model is not the joint's or it answers where another joint's is set up
+        (``walked``: the joints a walk has set up, None outside one); Unreachable when nothing
+        answers."""
         from deltoctl.app.scan import all_probes, run_probes
 
         bus, w = self._bus_of(joint)
@@ -162,27 +177,77 @@ class Setup:
                           f"({servo['protocol']}) at ID {servo['id']}; the profile says "
                           f"{joint} is a {w.model or 'servo'} ({w.protocol}): nothing was "
                           "written", f"connect {joint}'s own servo alone")
-        self._not_another(w, servo)
+        self._not_another(w, servo, walked)
         return servo
 
-    def _not_another(self, w: Wanted, servo: dict[str, Any]) -> None:
-        """Refused when the servo found answers where another joint's is set up (not where a
-        new one answers): that joint's servo, left connected."""
+    def _not_another(self, w: Wanted, servo: dict[str, Any],
+                     walked: Sequence[str] | None) -> None:
+        """Refused when the servo found answers where another joint's is set up: that
+        joint's servo, left connected. Where that is the factory's address too, a new servo
+        answers there as well: only a walk, which sets such joints up last, tells them apart
+        (the other joint not set up yet: a new one)."""
         at = (servo["id"], servo["baud"])
-        bus, _ = self._bus_of(w.joint)
-        if at in self._addresser(bus, servo["protocol"]).factory:
-            return
         other = next((o for o in self.joints() if o.joint != w.joint and (o.id, o.baud) == at
                       and o.protocol == servo["protocol"]), None)
-        if other is not None:
-            raise Refused(f"{w.joint}: the servo connected answers at ID {at[0]}, {at[1]} baud: "
-                          f"{other.joint}'s, set up already: nothing was written",
+        if other is None:
+            return
+        if not self._at_factory(other):
+            raise Refused(f"{w.joint}: the servo connected answers at ID {at[0]}, {at[1]} "
+                          f"baud: {other.joint}'s, set up already: nothing was written",
                           f"unplug {other.joint}'s servo and connect {w.joint}'s alone (a "
                           "servo given the wrong joint's ID: setup --in-place --map ID=JOINT)")
+        if walked is None or other.joint in walked:
+            raise Refused(f"{w.joint}: the servo connected answers at ID {at[0]}, {at[1]} "
+                          f"baud, the factory's and {other.joint}'s: a new servo or "
+                          f"{other.joint}'s is not known: nothing was written",
+                          f"run setup (each joint in turn, {other.joint} last), or give a new "
+                          f"servo alone {w.joint}'s ID with setup --in-place --map "
+                          f"{at[0]}={w.joint}")
 
-    def plan_one(self, joint: str, reset: str | None = None) -> Outcome:
-        """What setting up ``joint``'s servo (connected alone) or drive writes; nothing is
-        written."""
+    def _at_factory(self, w: Wanted | LinkJoint) -> bool:
+        """Whether a servo joint's ID and rate are where its protocol's new servos answer."""
+        if self._link_of(w.joint) is not None:
+            return False
+        addresser = self._bus_of(w.joint)[0].addressing.addresser(w.protocol)
+        return addresser is not None and (w.id, w.baud) in addresser.factory
+
+    def factory_last(self) -> str | None:
+        """What a walk says of the joints it sets up last (None: no such joint)."""
+        last = [w.joint for w in self.joints() if self._at_factory(w)]
+        if not last:
+            return None
+        return (f"{', '.join(last)} last: {'its' if len(last) == 1 else 'their'} ID and rate "
+                "are the factory's, where each new servo answers")
+
+    def walk_order(self) -> list[Wanted | LinkJoint]:
+        """The joints in the profile's order, those whose ID and rate are the factory's last
+        (until then a servo there is a new one)."""
+        return sorted(self.joints(), key=self._at_factory)
+
+    def _target_free(self, bus: Bus, addresser: Addresser, w: Wanted,
+                     servo: dict[str, Any]) -> None:
+        """Refused when a servo answers at the joint's ID at the found servo's rate or at the
+        joint's (a probe may ask the factory's ID only: one there already is unseen)."""
+        rates = [b for b in dict.fromkeys((servo["baud"], w.baud))
+                 if (w.id, b) != (servo["id"], servo["baud"])]
+        with self._port(bus.url) as port:
+            for baud in rates:
+                port.baudrate = baud
+                try:
+                    model = addresser.identify(port, w.id)
+                except DeviceError:  # several answer: their replies garble
+                    model = "servo"
+                if model is not None:
+                    raise Refused(f"{w.joint}: a servo answers at ID {w.id}, {baud} baud ({model}),"
+                                  f" where {w.joint}'s is to go: nothing was written",
+                                  f"unplug it (or give it another ID), connect {w.joint}'s "
+                                  f"servo alone, then run setup {w.joint} again")
+
+    @_timed
+    def plan_one(self, joint: str, reset: str | None = None,
+                 walked: Sequence[str] | None = None) -> Outcome:
+        """What setting up ``joint``'s servo (connected alone) or drive writes (``walked``:
+        see ``find``); nothing is written."""
         link = self._link_of(joint)
         if link is not None:
             return self._plan_link(*link, reset)
@@ -190,20 +255,20 @@ class Setup:
         addresser = self._addresser(bus, w.protocol)
         if reset is not None:
             _check_reset(bus, addresser, reset)
-        servo = self.find(joint)
+        servo = self.find(joint, walked)
+        self._target_free(bus, addresser, w, servo)
         outcome = Outcome("one at a time", True)
         outcome.joints.append(_row(w, servo, "planned"))
         outcome.steps += _one_steps(w, servo, reset)
-        outcome.bus_seconds = self.bus_seconds
         return outcome
 
+    @_timed
     def apply_one(self, joint: str, plan: Outcome) -> Outcome:
         """Write the plan of ``plan_one`` and verify; the outcome with each joint's status."""
         link = self._link_of(joint)
         if link is not None:
             with self._link(link[0]) as opened:
                 done = setup_link.apply_one(opened, *link, plan)
-            done.bus_seconds = self.bus_seconds
             return done
         bus, w = self._bus_of(joint)
         addresser = self._addresser(bus, w.protocol)
@@ -214,14 +279,13 @@ class Setup:
             with self._port(bus.url, at_baud) as port:
                 addresser.factory_reset(port, at_id, reset)
             time.sleep(0.05)  # the servo restarts with its factory settings
-            servo = self.find(joint)
+            servo = self.find(joint, ())  # the servo reset, at the factory's address
             at_id, at_baud = servo["id"], servo["baud"]
         with self._port(bus.url, at_baud) as port:
             _address(port, addresser, at_id, at_baud, w)
             model = addresser.identify(port, w.id)
         done = Outcome("one at a time", False, [dict(row)], plan.steps)
         _verified(done.joints[0], w, model, row["from"]["model"])
-        done.bus_seconds = self.bus_seconds
         return done
 
     def _plan_link(self, bus: LinkBus, w: LinkJoint, reset: str | None) -> Outcome:
@@ -229,29 +293,42 @@ class Setup:
             raise InvalidInput(f"{bus.block}: {bus.family.name} drives: no factory reset")
         with self._link(bus) as opened:
             outcome = setup_link.plan_one(opened, bus, w)
-        outcome.bus_seconds = self.bus_seconds
         return outcome
+
+    def check_reset(self, reset: str | None) -> None:
+        """InvalidInput unless every joint's servo can take the factory reset ``reset``."""
+        if reset is None:
+            return
+        for bus in self.buses:
+            for protocol in dict.fromkeys(w.protocol for w in bus.wanted):
+                _check_reset(bus, self._addresser(bus, protocol), reset)
+        for link in self.links:
+            raise InvalidInput(f"{link.block}: {link.family.name} drives: no factory reset")
 
     def wanted_plan(self) -> Outcome:
         """What a walk of every joint will set, before any servo is found."""
-        return Outcome("one at a time", True, [_row(w, None, "planned") for w in self.joints()])
+        return Outcome("one at a time", True,
+                       [_row(w, None, "planned") for w in self.walk_order()])
 
+    @_timed
     def walk(self, connect: Callable[[Any, str | None], None], reset: str | None = None,
              done: Callable[[dict[str, Any]], None] | None = None) -> Outcome:
-        """Every joint in the profile's order: ``connect(wanted, reply)`` once its part is to
-        be connected (``reply``: this process's simulators connected it, else None; not for
-        a part its serial names, all connected at once), then set up and verified (``done``
-        told each joint's row)."""
+        """Every joint in the walk's order (``walk_order``): ``connect(wanted, reply)`` once
+        its part is to be connected (``reply``: this process's simulators connected it, else
+        None; not for a part its serial names, all connected at once), then set up and
+        verified (``done`` told each joint's row)."""
+        self.check_reset(reset)
         outcome = Outcome("one at a time", False)
-        for w in self.joints():
+        walked: list[str] = []
+        for w in self.walk_order():
             if self.asks_to_connect(w):
                 connect(w, self.connect_alone(w.joint))
-            one = self.apply_one(w.joint, self.plan_one(w.joint, reset))
+            one = self.apply_one(w.joint, self.plan_one(w.joint, reset, walked))
+            walked.append(w.joint)
             outcome.joints += one.joints
             outcome.steps += one.steps
             if done is not None:
                 done(one.joints[0])
-        outcome.bus_seconds = self.bus_seconds
         return outcome
 
     def _addresser(self, bus: Bus, protocol: str) -> Addresser:
@@ -261,6 +338,7 @@ class Setup:
         return addresser
 
     # -- in place ----------------------------------------------------------------------------
+    @_timed
     def plan_in_place(self, mapping: Mapping[int, str] = ()) -> Outcome:
         """Every servo bus scanned, its servos matched to joints (``mapping``: ID → joint
         where the match is ambiguous), and the ID and rate changes ordered without two servos
@@ -269,6 +347,11 @@ class Setup:
         if not self.buses:
             raise InvalidInput(f"{self.profile.name}: --in-place readdresses servos; its "
                                "drives are set up by setup (or setup JOINT)")
+        for device_id, joint in mapping.items():
+            low, high = self._bus_of(joint)[0].family.address_range or (0, 252)
+            if not low <= device_id <= high:
+                raise InvalidInput(f"--map {device_id}={joint}: ID {device_id} is not "
+                                   f"{low}-{high}")
         outcome = Outcome("in place", True)
         for bus in self.buses:
             found = self._scan_bus(bus)
@@ -284,7 +367,6 @@ class Setup:
         if unknown:
             raise InvalidInput(f"--map names {', '.join(sorted(unknown))}: no such servo "
                                "joint in the profile")
-        outcome.bus_seconds = self.bus_seconds
         return outcome
 
     def _scan_bus(self, bus: Bus) -> list[dict[str, Any]]:
@@ -309,6 +391,7 @@ class Setup:
                           "each servo connected alone)")
         return found
 
+    @_timed
     def apply_in_place(self, plan: Outcome) -> Outcome:
         """Write the plan of ``plan_in_place`` (torque off first, IDs, then rates, the EEPROM
         locked again last), then verify every joint at its new ID and rate."""
@@ -317,7 +400,6 @@ class Setup:
             rows = [r for r in done.joints if r["block"] == bus.block and r["from"]]
             steps = [s for s in plan.steps if s["joint"] in {r["joint"] for r in rows}]
             self._apply_bus(bus, rows, steps)
-        done.bus_seconds = self.bus_seconds
         return done
 
     def _apply_bus(self, bus: Bus, rows: list[dict[str, Any]],
@@ -340,22 +422,12 @@ class Setup:
 # -- helpers: the buses ----------------------------------------------------------------------
 
 def _servo_buses(profile: Any, buses: Mapping[str, str], hardware: Sequence[str]) -> list[Bus]:
-    from deltoctl.core.system import select_blocks
-
-    out = []
-    for hw in select_blocks(profile, list(hardware)):
-        family = registry.of_block(profile.family_of(hw), hw.plugin)
-        addressing = family.addressing() if family is not None else None
-        if addressing is None:
-            continue
-        name = hw.bus or hw.name
-        url = buses.get(name) or profile.buses.get(name)
-        if not url:
-            raise InvalidInput(f"{hw.name}: no target for bus {name!r}",
-                               hint=f"give one: -t {name}=serial:///dev/ttyUSB0?baud=1000000")
-        wanted = addressing.wanted(profile, hw, profile.buses.get(name) or url)
-        out.append(Bus(hw.name, name, family, url, addressing, wanted))
-    return out
+    """The selected blocks whose family addresses servos; each joint's rate is the profile's
+    bus URL's (the target's where the profile has none)."""
+    return [Bus(hw.name, name, family, url, addressing,
+                addressing.wanted(profile, hw, profile.buses.get(name) or url))
+            for hw, name, family, url, addressing in addressed_blocks(
+                profile, buses, hardware, lambda f: f.addressing())]
 
 
 def _alone(joint: str, found: list[dict[str, Any]]) -> None:
@@ -414,17 +486,16 @@ def _address(port: Any, addresser: Addresser, at_id: int, at_baud: int, w: Wante
 # -- opening ---------------------------------------------------------------------------------
 
 def target_map(profile: Any, targets: Sequence[str]) -> dict[str, str]:
-    """``BUS=URL`` items (or one URL, for a profile of one bus) → {bus: URL}."""
-    out: dict[str, str] = {}
-    for item in targets:
-        bus, sep, url = item.partition("=")
-        if sep and (bus in profile.buses or "://" not in bus):
-            out[bus] = url
-        elif len(profile.buses) == 1:
-            out[next(iter(profile.buses))] = item
-        else:
+    """``BUS=URL`` items (or one URL, for a profile of one bus) → {bus: URL}; the names are
+    checked as every verb checks them (deltoctl.core.system.parse_targets)."""
+    from deltoctl.core.system import parse_targets
+
+    out, bare = parse_targets(profile, list(targets))
+    for item in bare:
+        if len(profile.buses) != 1:
             raise InvalidInput(f"target {item!r}: name its bus, BUS=URL (buses: "
                                f"{', '.join(profile.buses)})")
+        out[next(iter(profile.buses))] = item
     return out
 
 
@@ -476,7 +547,7 @@ def parse_map(items: Sequence[str]) -> dict[int, str]:
     out: dict[int, str] = {}
     for item in items:
         text, sep, joint = item.partition("=")
-        if not sep or not text.strip().isdigit() or not joint.strip():
+        if not sep or not re.fullmatch(r"[0-9]{1,4}", text.strip()) or not joint.strip():
             raise InvalidInput(f"--map {item!r}: expected ID=JOINT, e.g. --map 3=elbow_flex")
         if int(text) in out:
             raise InvalidInput(f"--map: ID {int(text)} is mapped twice")

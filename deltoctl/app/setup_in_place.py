@@ -19,8 +19,10 @@ def match(bus: Bus, found: list[dict[str, Any]], mapping: dict[int, str]
           ) -> tuple[list[tuple[dict[str, Any], Wanted]], list[Wanted]]:
     """Found servos paired with the block's joints: as ``mapping`` says, then at the joint's
     ID with its model, then the only one of a model; ambiguity is InvalidInput (--map), a servo
-    that is no joint's or of another model is Refused."""
-    by_id = {s["id"]: s for s in found}
+    that is no joint's or of another model is Refused, as is an ID answering at two rates
+    (two servos, which an ID alone cannot tell apart)."""
+    _one_rate_per_id(bus, found)
+    by_id = {s["id"]: s for s in found}  # one servo per ID, checked above
     pairs = _mapped(bus, by_id, mapping)
     left = [w for w in bus.wanted if w not in pairs.values()]
     for w in list(left):
@@ -33,6 +35,19 @@ def match(bus: Bus, found: list[dict[str, Any]], mapping: dict[int, str]
         _same_model(w, by_id[device_id])
     return [(by_id[i], w) for i, w in pairs.items()], [w for w in bus.wanted
                                                         if w not in pairs.values()]
+
+
+def _one_rate_per_id(bus: Bus, found: list[dict[str, Any]]) -> None:
+    rates: dict[int, set[int]] = {}
+    for s in found:
+        rates.setdefault(s["id"], set()).add(s["baud"])
+    for device_id, bauds in sorted(rates.items()):
+        if len(bauds) > 1:
+            at = " and ".join(str(b) for b in sorted(bauds))
+            raise Refused(f"{bus.block}: ID {device_id} answers at {at} baud: two servos "
+                          "share the ID: nothing was written",
+                          "give one of them another ID alone first (setup JOINT, the "
+                          "other unplugged)")
 
 
 def _mapped(bus: Bus, by_id: dict[int, dict[str, Any]], mapping: dict[int, str]
@@ -105,8 +120,23 @@ def ordered_steps(bus: Bus, found: list[dict[str, Any]],
         final = pending.pop(start)
         if target != final:
             pending[target] = final
-    steps += [_step(w.joint, "baud", w.id, s["baud"], w.baud) for s, w in moving.values()
-              if s["baud"] != w.baud]
+    return steps + _rate_steps(bus, matched, moving)
+
+
+def _rate_steps(bus: Bus, matched: list[tuple[dict[str, Any], Wanted]],
+                moving: dict[int, tuple[dict[str, Any], Wanted]]) -> list[dict[str, Any]]:
+    """The rates, each servo at its new ID: none onto an ID and rate another servo holds."""
+    held = {(w.id, s["baud"]) for s, w in matched}  # every servo at its new ID, old rate
+    steps = []
+    for s, w in moving.values():
+        if s["baud"] == w.baud:
+            continue
+        if (w.id, w.baud) in held:
+            raise Refused(f"{bus.block}: ID {w.id} at {w.baud} baud, {w.joint}'s, is held by "
+                          "another servo: nothing was written")
+        held.discard((w.id, s["baud"]))
+        held.add((w.id, w.baud))
+        steps.append(_step(w.joint, "baud", w.id, s["baud"], w.baud))
     return steps
 
 

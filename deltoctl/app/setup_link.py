@@ -6,7 +6,7 @@ nothing written; one at its address already is left as it is."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,15 +29,17 @@ class LinkBus:
     wanted: list[LinkJoint]
 
 
-def link_buses(profile: Any, buses: Mapping[str, str], hardware: Sequence[str]
-               ) -> list[LinkBus]:
-    """The selected blocks whose family sets up the parts of their link."""
+def addressed_blocks(profile: Any, buses: Mapping[str, str], hardware: Sequence[str],
+                     pick: Callable[[registry.Family], Any]
+                     ) -> Iterator[tuple[Any, str, registry.Family, str, Any]]:
+    """The selected blocks whose family's ``pick`` gives an addressing (a servo family's
+    ``addressing()``, a link's ``link_addressing()``): each with its bus's name, its family,
+    its target URL (``buses``', else the profile's) and that addressing."""
     from deltoctl.core.system import select_blocks
 
-    out = []
     for hw in select_blocks(profile, list(hardware)):
         family = registry.of_block(profile.family_of(hw), hw.plugin)
-        addressing = family.link_addressing() if family is not None else None
+        addressing = pick(family) if family is not None else None
         if addressing is None:
             continue
         name = hw.bus or hw.name
@@ -45,18 +47,27 @@ def link_buses(profile: Any, buses: Mapping[str, str], hardware: Sequence[str]
         if not url:
             raise InvalidInput(f"{hw.name}: no target for bus {name!r}",
                                hint=f"give one: -t {name}=URL")
-        out.append(LinkBus(hw.name, name, family, url, addressing,
-                           addressing.joints(profile, hw)))
-    return out
+        yield hw, name, family, url, addressing
+
+
+def link_buses(profile: Any, buses: Mapping[str, str], hardware: Sequence[str]
+               ) -> list[LinkBus]:
+    """The selected blocks whose family sets up the parts of their link."""
+    return [LinkBus(hw.name, name, family, url, addressing, addressing.joints(profile, hw))
+            for hw, name, family, url, addressing in addressed_blocks(
+                profile, buses, hardware, lambda f: f.link_addressing())]
 
 
 def plan_one(link: Any, bus: LinkBus, w: LinkJoint) -> Outcome:
     """What setting up ``w``'s part writes (nothing when it answers at its address)."""
     found = bus.addressing.locate(link, w)
     outcome = Outcome("one at a time", True, [row(w, found, "planned")])
-    if (found["id"], found["baud"]) != (w.id, w.baud):
-        outcome.steps = [step(w.joint, "id", found["id"], found["baud"], w.id),
-                         step(w.joint, "store", w.id, found["baud"], w.baud)]
+    if found["id"] != w.id:
+        outcome.steps.append(step(w.joint, "id", found["id"], found["baud"], w.id))
+    if found["baud"] != w.baud:  # the link's rate: the new one is taken at the next power-on
+        outcome.steps.append(step(w.joint, "bit rate", w.id, found["baud"], w.baud))
+    if outcome.steps:
+        outcome.steps.append(step(w.joint, "store", w.id, found["baud"], w.baud))
     return outcome
 
 

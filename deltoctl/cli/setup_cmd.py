@@ -86,6 +86,7 @@ def _walk(ctx: typer.Context, run: Any, reset: str | None, dry_run: bool) -> dic
     """Each joint in the profile's order: connected alone (asked, or by the simulator)."""
     from deltoctl.render.setup import joint_lines
 
+    run.check_reset(reset)
     plan = run.wanted_plan()
     if dry_run:
         return plan.as_dict()
@@ -95,7 +96,11 @@ def _walk(ctx: typer.Context, run: Any, reset: str | None, dry_run: bool) -> dic
                            "terminal, or name the joint (setup JOINT) in a script")
     for line in joint_lines(plan.as_dict()):
         info(line)
-    confirm(ctx, f"give these {len(plan.joints)} servos their IDs and rates, one at a time")
+    if run.factory_last():
+        info(run.factory_last())
+    first = f"a factory reset ({reset}) of each, then " if reset else ""
+    confirm(ctx, f"{first}give these {len(plan.joints)} servos their IDs and rates, one at "
+                 "a time")
 
     def ask(w: Any, simulated: str | None) -> None:
         if simulated is not None:

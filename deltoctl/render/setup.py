@@ -28,6 +28,7 @@ def step_lines(result: dict[str, Any]) -> list[str]:
     """The writes, one a line: ``elbow_flex: ID 1 → 3 (at ID 1, 57600 baud)``."""
     words = {"factory reset": "factory reset {}", "torque off": "torque off",
              "id": "{at} → {}", "baud": "baud {at_baud} → {}",
+             "bit rate": "bit rate {at_baud} → {}, taken at the next power-on",
              "store": "ID and baud {} stored"}
     return [f"{s['joint']}: " + words[s["action"]].format(s["value"], at=_id(s["at_id"]), **s)
             + f" (at {_id(s['at_id'])}, {s['at_baud']} baud)" for s in result["steps"]]

@@ -18,7 +18,10 @@ from typing import Any, Protocol
 
 from deltoctl.errors import DeviceError, NoAnswer
 from deltoctl.servo.frames import Reply
+from deltoctl.servo.scan import alone
 from deltoctl.servo.session import Done, Session
+
+VERIFY_WAIT = 0.05  # s a verification's read waits on, for a second servo's reply
 
 
 @dataclass(frozen=True)
@@ -70,6 +73,16 @@ class Addressing:
     no_reset: str = ""
 
 
+def in_joint_order(hw: Any, ids: dict[int, Any], baud: int, protocol: str,
+                   model: Callable[[Any], str]) -> list[Wanted]:
+    """A Wanted per joint of ``ids`` (its servo's ID → the joint) at the bus's ``baud`` in
+    ``protocol``, ``model(joint)`` its model's name (""), in the block's order of joints."""
+    order = [j.name for j in hw.joints]
+    out = [Wanted(joint.name, hw.name, device_id, baud, protocol, model(joint))
+           for device_id, joint in ids.items()]
+    return sorted(out, key=lambda w: order.index(w.joint) if w.joint in order else len(order))
+
+
 def ask(port: Any, session: Session, device_id: int, instruction: int, params: bytes,
         what: str, timeout: float = 0.5) -> Reply | None:
     """One request and its status (None when none is expected); NoAnswer naming ``what``
@@ -101,3 +114,15 @@ def checked(reply: Reply | None, what: str, describe: Callable[[int], str]) -> R
     if reply is not None and reply[1]:
         raise DeviceError(f"{what}: the servo at ID {reply[0]} reports {describe(reply[1])}")
     return reply
+
+
+def one_servo(port: Any, session: Session, device_id: int, instruction: int, params: bytes,
+              length: int) -> None:
+    """DeviceError unless one servo answers at ``device_id``: the request (a read of its
+    present position, which differs between servos) answered by a reply that does not garble
+    (see deltoctl.servo.scan.alone)."""
+    if not alone(port, session, device_id, instruction, params, VERIFY_WAIT, length):
+        raise DeviceError(f"several servos answer at ID {device_id}: their replies to a read "
+                          "of the present position garble",
+                          hint="scan the bus (deltoctl scan), unplug all but one of them and "
+                               "give it its ID alone")

@@ -66,6 +66,15 @@ def listen(port: Any, session: Session, device_id: int, instruction: int, params
     return replies, heard < len(data)
 
 
+def alone(port: Any, session: Session, device_id: int, instruction: int, params: bytes,
+          wait: float, length: int = 0) -> bool:
+    """Whether at most one servo answers a request: servos of one model and firmware at one
+    ID send byte-identical statuses to a PING or a model read, which superimpose cleanly,
+    but their present positions differ, so a READ of it garbles (no reply says nothing)."""
+    replies, garbled = listen(port, session, device_id, instruction, params, wait, length)
+    return not garbled and len(replies) <= 1
+
+
 def hear(port: Any, session: Session, device_id: int, instruction: int, params: bytes,
          wait: float, length: int = 0, more: int = 1) -> tuple[list[Reply], bytes]:
     """One request's valid replies, and every byte heard. It listens until the wire would have

@@ -126,7 +126,7 @@ def _served(profile, *faults):
     ("koch-arm", ARM, ("XL430-W250", "Dynamixel 2.0", 57_600)),
     ("so101-follower", ARM, ("STS3215", "Feetech", 1_000_000)),
     ("phantomx-arm", ("waist", "shoulder", "elbow", "wrist", "gripper"),
-     ("AX-12A", "Dynamixel 1.0", 57_600)),
+     ("AX-12A", "Dynamixel 1.0", 1_000_000)),  # an AX's factory rate
 ])
 def test_factory_new_servos_collide_at_id_1_and_one_alone_is_found(cli, profile, joints, found):
     proc, url = _served(profile)

@@ -54,10 +54,12 @@ def test_a_factory_new_arm_in_process_then_identify_clean(profile):
     from deltoctl.app.setup import open_setup
 
     with open_setup(profile, sim={"factory_new": True}, wait=0.05) as run:
-        for w in run.joints():
+        walked = []
+        for w in run.walk_order():
             assert run.connect_alone(w.joint) == f"on the wire: {w.joint}"
-            done = run.apply_one(w.joint, run.plan_one(w.joint))
+            done = run.apply_one(w.joint, run.plan_one(w.joint, walked=walked))
             assert done.joints[0]["verified"]
+            walked.append(w.joint)
         assert run.controls.run("connect all").endswith(", ".join(ARM))
         [target] = run.targets()
         url = target.partition("=")[2]
@@ -74,10 +76,12 @@ def test_the_cli_sets_up_a_factory_new_arm_on_its_own_simulator(cli, profile):
                  "--json", "setup", "--yes", *WAIT)
     assert result.exit_code == 0, result.output
     doc = _doc(result)
-    assert [r["joint"] for r in doc["joints"]] == list(ARM)
+    order = list(ARM) if profile == "koch-arm" else [*ARM[1:], ARM[0]]  # 1 @ 1 Mbps: last
+    assert [r["joint"] for r in doc["joints"]] == order
     assert all(r["verified"] for r in doc["joints"])
-    assert [r["to"]["id"] for r in doc["joints"]] == [1, 2, 3, 4, 5, 6]
+    assert [r["to"]["id"] for r in doc["joints"]] == [ARM.index(j) + 1 for j in order]
     assert "the simulator connected gripper alone" in result.stderr
+    assert ("shoulder_pan last" in result.stderr) == (profile == "so101-follower")
 
 
 def _served(profile):
@@ -103,8 +107,17 @@ def test_setup_joint_by_joint_on_a_sim_serve_then_identify_clean(cli, profile):
         for joint in ARM:
             assert _control(proc, f"connect {joint}") == f"on the wire: {joint}"
             result = cli("-p", profile, "-t", target, "--json", "setup", joint, "--yes", *WAIT)
-            assert result.exit_code == 0, result.output
-            [row] = _doc(result)["joints"]
+            if profile == "so101-follower" and joint != "shoulder_pan":
+                # a new servo answers at shoulder_pan's ID and rate (the factory's): which it
+                # is, is not known; alone, it is given its joint's by setup --in-place --map
+                assert result.exit_code == 5, result.output
+                assert f"--map 1={joint}" in result.stderr
+                result = cli("-p", profile, "-t", target, "--json", "setup", "--in-place",
+                             "--map", f"1={joint}", "--yes", *WAIT)
+                assert result.exit_code == 3, result.output  # the others: not connected
+            else:
+                assert result.exit_code == 0, result.output
+            row = next(r for r in _doc(result)["joints"] if r["joint"] == joint)
             assert row["verified"] and row["from"]["id"] == 1
         assert _control(proc, "connect all").startswith("on the wire: shoulder_pan")
         result = cli("-p", profile, "-t", target, "identify")
@@ -208,6 +221,10 @@ def test_feetech_has_no_factory_reset(cli):
     (("setup", "elbow", "--yes"), 2, "no servo joint 'elbow'"),
     (("setup", "elbow_flex"), 5, "--yes"),
     (("setup", "--in-place", "--map", "x=elbow_flex", "--yes"), 2, "ID=JOINT"),
+    (("setup", "--in-place", "--map", "\u00b2=elbow_flex", "--yes"), 2, "ID=JOINT"),
+    (("setup", "--in-place", "--map", "300=elbow_flex", "--yes"), 2, "ID 300 is not 0-252"),
+    (("-t", "dxll=serial:///dev/null", "setup", "elbow_flex", "--yes"), 2,
+     "unknown bus 'dxll'"),
 ])
 def test_refusals_and_bad_input(cli, args, code, said):
     result = cli("-p", "koch-arm", "--sim", "--sim-fresh", "--sim-option", "factory_new",
@@ -259,14 +276,18 @@ def test_in_place_never_writes_a_servo_the_profile_lacks(cli, monkeypatch):
     assert writes == []
 
 
-def test_a_protocol_1_servo_is_set_up_and_reset(cli):
+def test_a_protocol_1_arm_is_set_up_and_reset_its_factory_address_last(cli):
     result = cli("-p", "phantomx-arm", "--sim", "--sim-fresh", "--sim-option", "factory_new",
-                 "--json", "setup", "elbow", "--factory-reset", "all", "--allow",
-                 "factory-reset", "--yes", *WAIT)
+                 "--json", "setup", "--factory-reset", "all", "--allow", "factory-reset",
+                 "--yes", *WAIT)
     assert result.exit_code == 0, result.output
-    [row] = _doc(result)["joints"]
-    assert (row["from"]["protocol"], row["from"]["model"]) == ("Dynamixel 1.0", "AX-12A")
-    assert (row["to"]["id"], row["to"]["baud"], row["verified"]) == (3, 1_000_000, True)
+    rows = _doc(result)["joints"]
+    assert [r["joint"] for r in rows] == ["shoulder", "elbow", "wrist", "gripper", "waist"]
+    assert {(r["from"]["id"], r["from"]["baud"], r["from"]["protocol"], r["from"]["model"])
+            for r in rows} == {(1, 1_000_000, "Dynamixel 1.0", "AX-12A")}  # an AX's factory
+    assert [(r["to"]["id"], r["to"]["baud"], r["verified"]) for r in rows] == \
+        [(i, 1_000_000, True) for i in (2, 3, 4, 5, 1)]
+    assert "waist last" in result.stderr
 
 
 def test_a_robot_on_its_own_simulators_runs_their_control_lines():
@@ -304,3 +325,75 @@ def test_a_joint_set_up_already_and_left_connected_is_not_taken_for_the_next():
             run.plan_one("shoulder_lift")  # shoulder_lift's servo not plugged in
         run.controls.run("connect shoulder_lift")
         assert run.plan_one("shoulder_lift").steps  # its own, at the factory's ID and rate
+
+
+def test_in_place_refuses_one_id_at_two_rates(cli, monkeypatch):
+    writes = _count_writes(monkeypatch, Servo)
+    models = [by_number(n) for n in KOCH_MODELS]
+    at_1m = DynamixelBus([Servo(i, model=m) for i, m in zip((2, 3, 4, 5, 6), models[1:])],
+                         baud=1_000_000)
+    slow = DynamixelBus([Servo(2, model=models[0])], baud=57_600)  # shoulder_pan's, at ID 2
+    with DynamixelPtyServer(MixedBus(at_1m, slow)) as server:
+        result = cli("-p", "koch-arm", "-t", f"dxl=serial://{server.port}?baud=1000000",
+                     "setup", "--in-place", "--map", "2=shoulder_lift", "--yes", *WAIT)
+    assert result.exit_code == 5, result.output
+    assert "ID 2 answers at 57600 and 1000000 baud" in result.stderr
+    assert writes == []
+
+
+def test_one_at_a_time_refuses_a_target_id_held_already(cli, monkeypatch):
+    writes = _count_writes(monkeypatch, Servo1)
+    new = Protocol1Bus([Servo1(1)], baud=57_600)  # the factory's ID, unlike elbow's
+    held = Protocol1Bus([Servo1(3)], baud=1_000_000)  # a servo at elbow's ID and rate already
+    with DynamixelPtyServer(MixedBus(new, held)) as server:
+        result = cli("-p", "phantomx-arm", "-t",
+                     f"dxl=serial://{server.port}?baud=1000000", "setup", "elbow",
+                     "--yes", *WAIT)
+    assert result.exit_code == 5, result.output
+    assert "a servo answers at ID 3, 1000000 baud" in result.stderr
+    assert writes == []
+
+
+def test_verification_tells_two_alike_servos_at_one_id():
+    from deltoctl.app.setup import open_setup
+    from deltoctl.errors import DeviceError
+
+    model = by_number(1200)
+    new = DynamixelBus([Servo(1, model=model)], baud=57_600)
+    twin = DynamixelBus([], baud=1_000_000)
+    with DynamixelPtyServer(MixedBus(new, twin)) as server, \
+            open_setup("koch-arm", [f"dxl=serial://{server.port}?baud=1000000"],
+                       wait=0.05) as run:
+        plan = run.plan_one("elbow_flex")
+        alike = Servo(3, model=model)  # elbow_flex's ID and rate, plugged in meanwhile
+        alike.position += 300  # another pose: its PING is byte for byte the new one's
+        twin.servos[3] = alike
+        with pytest.raises(DeviceError, match="several servos answer at ID 3"):
+            run.apply_one("elbow_flex", plan)
+
+
+def test_a_walk_checks_the_factory_reset_of_every_joint_before_asking(cli):
+    result = cli("-p", "so101-follower", "--sim", "--sim-fresh", "--sim-option", "factory_new",
+                 "setup", "--factory-reset", "all", "--allow", "factory-reset")
+    assert result.exit_code == 2, result.output
+    assert "no factory reset" in result.stderr
+    result = cli("-p", "koch-arm", "--sim", "--sim-fresh", "--sim-option", "factory_new",
+                 "setup", "--factory-reset", "keep-id", "--allow", "factory-reset")
+    assert result.exit_code == 5, result.output
+    assert "factory reset (keep-id) of each" in result.stderr
+
+
+def test_a_servo_at_the_factory_address_of_a_joint_set_up_is_not_taken_for_the_next():
+    from deltoctl.app.setup import open_setup
+    from deltoctl.errors import Refused
+
+    with open_setup("so101-follower", sim={"factory_new": True}, wait=0.05) as run:
+        run.connect_alone("shoulder_pan")
+        done = run.apply_one("shoulder_pan", run.plan_one("shoulder_pan"))
+        assert done.joints[0]["status"] == "already set"  # 1 @ 1 Mbps: the factory's
+        with pytest.raises(Refused, match="a new servo or shoulder_pan's is not known"):
+            run.plan_one("shoulder_lift")  # setup JOINT: shoulder_pan's, or a new one?
+        with pytest.raises(Refused, match="is not known"):  # a walk that set it up already
+            run.plan_one("shoulder_lift", walked=["shoulder_pan"])
+        run.controls.run("connect shoulder_lift")
+        assert run.plan_one("shoulder_lift", walked=[]).steps  # a walk sets shoulder_pan last

@@ -14,7 +14,14 @@ from deltoctl.families.dynamixel import codec, protocol1
 from deltoctl.families.dynamixel.control_table import BAUD_RATES
 from deltoctl.families.dynamixel.models import by_number, expected_model
 from deltoctl.families.dynamixel.models1 import BAUD_CODES
-from deltoctl.servo.addressing import Addressing, Wanted, ask, checked
+from deltoctl.servo.addressing import (
+    Addressing,
+    Wanted,
+    ask,
+    checked,
+    in_joint_order,
+    one_servo,
+)
 
 PROTOCOL_2, PROTOCOL_1 = "Dynamixel 2.0", "Dynamixel 1.0"
 RESETS_2 = {"all": 0xFF, "keep-id": 0x01, "keep-id-baud": 0x02}
@@ -46,6 +53,11 @@ class Protocol2:
             return None
         if reply is None or len(reply[2]) < 3:
             return None
+        model = by_number(struct.unpack_from("<H", reply[2])[0])
+        item = model.by_name.get("Present Position") if model is not None else None
+        if item is not None:  # a PING from twins superimposes cleanly: their positions differ
+            one_servo(port, codec.session(), device_id, codec.READ,
+                      codec.read_params(item.address, item.size), item.size)
         return _name(struct.unpack_from("<H", reply[2])[0])
 
     def prepare(self, port: Any, device_id: int) -> None:
@@ -86,6 +98,8 @@ class Protocol1:
             return None
         if reply is None or len(reply[2]) < 2:
             return None
+        one_servo(port, protocol1.session(), device_id, protocol1.READ,
+                  protocol1.read_params(36, 2), 2)  # Present Position: twins differ in it
         return _name(struct.unpack_from("<H", reply[2])[0])
 
     def prepare(self, port: Any, device_id: int) -> None:
@@ -112,14 +126,13 @@ def wanted(profile: Any, hw: Any, url: str) -> list[Wanted]:
 
     protocol = protocol_of(hw.params, hw.name)
     _, baud, _ = parse_bus_url(url, protocol)
-    out = []
-    for device_id, joint in servo_ids(profile, hw).items():
+
+    def model(joint: Any) -> str:
         number = expected_model(hw.params, joint.params, joint.name)
-        out.append(Wanted(joint.name, hw.name, device_id, baud,
-                          PROTOCOL_1 if protocol == 1.0 else PROTOCOL_2,
-                          _name(number) if number is not None else ""))
-    order = [j.name for j in hw.joints]
-    return sorted(out, key=lambda w: order.index(w.joint) if w.joint in order else len(order))
+        return _name(number) if number is not None else ""
+
+    return in_joint_order(hw, servo_ids(profile, hw), baud,
+                          PROTOCOL_1 if protocol == 1.0 else PROTOCOL_2, model)
 
 
 def addresser(protocol: str) -> Any:

@@ -446,21 +446,31 @@ def serve(ctx: ServeContext, blocks: list[Hardware]) -> dict[str, str]:
 
 def _factory_new(ctx: ServeContext, hw: Hardware, joints: dict[int, Component],
                  shafts: dict[str, Any]) -> Any:
-    """Servos as they leave the factory: each at ID 1 and 57,600 bps, an X-series in
-    Protocol 2.0, an AX or MX in 1.0, each in a pose of its own; all on one wire, so several
+    """Servos as they leave the factory: each at ID 1 and its model's factory rate (an
+    X-series at 57,600 bps in Protocol 2.0; an AX at 1 Mbps, an RX or MX at 57,600 in 1.0, as
+    its table's Baud Rate default says), each in a pose of its own; all on one wire, so several
     answer at ID 1 and their replies collide (each servo added to ``shafts`` by joint, all
     connected)."""
     from deltoctl.families.dynamixel.emulator1 import MixedBus
-    from deltoctl.families.dynamixel.models1 import Model1
 
     missing = {j.name for j in ctx.named("missing", hw)}
     present = [j for j in joints.values() if j.name not in missing]
-    buses = [_bus(hw, {1: j}, 57_600, 1.0 if isinstance(_listed_model(hw, j), Model1) else 2.0)
-             for j in present]
+    buses = [_bus(hw, {1: j}, *_factory_rate(hw, j)) for j in present]
     for k, bus in enumerate(buses):
         bus.servos[1].position += POSE_STEP * k  # poses of their own: their replies differ
     shafts.update((j.name, b.servos[1]) for j, b in zip(present, buses, strict=True))
     return MixedBus(*buses) if buses else DynamixelBus([], 57_600)
+
+
+def _factory_rate(hw: Hardware, joint: Component) -> tuple[int, float]:
+    """The rate and protocol a joint's servo leaves the factory at."""
+    from deltoctl.families.dynamixel.models1 import BAUD_CODES, Model1
+
+    model = _listed_model(hw, joint)
+    if not isinstance(model, Model1):
+        return 57_600, 2.0
+    code = model.by_name["Baud Rate"].default
+    return next(b for b, c in BAUD_CODES.items() if c == code), 1.0
 
 
 def _listed_model(hw: Hardware, joint: Component) -> Any:

@@ -21,6 +21,7 @@ from deltoctl.servo.scan import (
     SWEEP,
     Found,
     Probe,
+    alone,
     hear,
     listen,
     pings,
@@ -62,17 +63,14 @@ def _broadcast_2(baud: int) -> Probe:
 
 
 def _alone(port: Any, device_id: int, number: int, wait: float) -> bool:
-    """Whether the PING's clean status was one servo's: servos of one model and firmware at
-    one ID send byte-identical statuses, which superimpose cleanly, but their present
-    positions differ, so a READ of it garbles (no reply says nothing: a servo may answer
-    PINGs only)."""
+    """Whether the PING's clean status was one servo's (its present position read: see
+    deltoctl.servo.scan.alone)."""
     model = by_number(number)
     item = model.by_name.get("Present Position") if model is not None else None
     if item is None:
         return True
-    replies, garbled = listen(port, codec.session(), device_id, codec.READ,
-                              codec.read_params(item.address, item.size), wait)
-    return not garbled and len(replies) <= 1
+    return alone(port, codec.session(), device_id, codec.READ,
+                 codec.read_params(item.address, item.size), wait, item.size)
 
 
 def _headers(data: bytes) -> set[int]:

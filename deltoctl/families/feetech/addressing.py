@@ -11,7 +11,7 @@ from typing import Any
 from deltoctl.errors import DeltoctlError, InvalidInput
 from deltoctl.families.feetech import codec
 from deltoctl.families.feetech.models import BAUD_RATES, Model, by_bytes, expected_model, label
-from deltoctl.servo.addressing import Addressing, Wanted, ask
+from deltoctl.servo.addressing import Addressing, Wanted, ask, in_joint_order, one_servo
 
 PROTOCOL = "Feetech"
 NO_RESET = ("Feetech documents no factory reset (instruction 0x06 is in none of its SDKs' "
@@ -46,7 +46,12 @@ class FeetechAddresser:
     def identify(self, port: Any, device_id: int) -> str | None:
         self._models.pop(device_id, None)  # read again: a verification
         model = self._model(port, device_id)
-        return model.name if model else None
+        if model is None:
+            return None
+        item = model.by_name["Present_Position"]  # twins' model reads superimpose cleanly
+        one_servo(port, codec.session(), device_id, codec.READ,
+                  codec.read_params(item.address, item.size), item.size)
+        return model.name
 
     def _item(self, port: Any, device_id: int, name: str) -> int:
         model = self._model(port, device_id)
@@ -84,13 +89,12 @@ def wanted(profile: Any, hw: Any, url: str) -> list[Wanted]:
     from deltoctl.families.feetech.ros2_control import servo_ids
 
     _, baud, _ = parse_bus_url(url)
-    out = []
-    for device_id, joint in servo_ids(profile, hw).items():
+
+    def model(joint: Any) -> str:
         number = expected_model(hw.params, joint.params, joint.name)
-        out.append(Wanted(joint.name, hw.name, device_id, baud, PROTOCOL,
-                          label(number) if number is not None else ""))
-    order = [j.name for j in hw.joints]
-    return sorted(out, key=lambda w: order.index(w.joint) if w.joint in order else len(order))
+        return label(number) if number is not None else ""
+
+    return in_joint_order(hw, servo_ids(profile, hw), baud, PROTOCOL, model)
 
 
 def addresser(protocol: str) -> FeetechAddresser | None:

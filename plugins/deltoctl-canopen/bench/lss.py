@@ -6,8 +6,9 @@ canopen's own network over it, measured one after the other:
 - ``deltoctl scan`` (``scan_link``) of the bus with both drives unconfigured;
 - canopen's own ``LssMaster.fast_scan()`` as it comes (a 0.5 s wait for each reply that does
   not come) finding one drive, and ``lss.find_unconfigured`` finding both;
-- the setup of both axes from the profile, one drive connected at a time (``lss.apply``:
-  found, node ID and bit rate given and stored, identity read back over SDO);
+- the setup of both axes from the profile, one drive connected at a time, as ``deltoctl
+  setup JOINT`` does it (found, node ID and bit rate given and stored, identity read back over
+  SDO);
 - ``deltoctl scan`` of the bus with both drives at their node IDs, and canopen's own
   ``network.scanner.search()`` until it has heard both nodes.
 
@@ -32,6 +33,7 @@ def timed(work: Callable[[], Any]) -> tuple[float, Any]:
 
 def main() -> None:
     import canopen
+    from deltoctl.app.setup import open_setup
     from deltoctl.profile.catalog import load_profile
     from deltoctl.sim.controls import Controls
     from deltoctl.sim.serve import ServeOptions, serve_profile
@@ -61,11 +63,12 @@ def main() -> None:
             lambda: lss.find_unconfigured(network))[0]
         controls.run("disconnect all")
         total = 0.0
-        for step in lss.plan(profile, profile.hardware[0]):
-            controls.run(f"connect {step.joint}")
-            seconds, _ = timed(lambda step=step: lss.apply(network, step))
-            figures[f"setup {step.joint} (node {step.node_id})"] = seconds
-            total += seconds
+        with open_setup(profile, [f"can0={url}"]) as run:
+            for w in run.joints():
+                controls.run(f"connect {w.joint}")
+                seconds, _ = timed(lambda w=w: run.apply_one(w.joint, run.plan_one(w.joint)))
+                figures[f"setup {w.joint} (node {w.id})"] = seconds
+                total += seconds
         figures["setup, both axes"] = round(total, 3)
         figures["scan, 2 nodes at their node IDs"] = scan_link(url)["bus_seconds"]
         scanner = network.scanner

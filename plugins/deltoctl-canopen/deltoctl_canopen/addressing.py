@@ -27,18 +27,22 @@ class LssAddressing:
 
     def __init__(self) -> None:
         self._found: dict[int, lss.Identity] = {}  # serial → LSS address, as located
+        self._bitrate = 0  # the link's, as opened
 
     def joints(self, profile: Any, hw: Any) -> list[LinkJoint]:
         return [LinkJoint(s.joint, hw.name, s.node_id, s.bitrate, PROTOCOL, "", s.serial)
                 for s in lss.plan(profile, hw)]
 
     def open(self, url: str) -> AbstractContextManager[Any]:
+        from deltoctl_canopen.transport import parse_can_url
+
+        self._bitrate = parse_can_url(url).bitrate
         return lss.network_at(url)
 
     def locate(self, network: Any, want: LinkJoint) -> dict[str, Any]:
         identity, already = lss.locate(network, _step(want))
         self._found[identity.serial] = identity
-        return {"id": want.id if already else None, "baud": want.baud, "protocol": PROTOCOL,
+        return {"id": want.id if already else None, "baud": self._bitrate, "protocol": PROTOCOL,
                 "model": model_of(identity), "serial": identity.serial}
 
     def assign(self, network: Any, want: LinkJoint, found: dict[str, Any]) -> None:

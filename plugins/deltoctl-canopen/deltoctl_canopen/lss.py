@@ -1,8 +1,9 @@
 """Layer setting services (CiA 305) on a CAN bus, through canopen's ``LssMaster``: the drives
-that have no node ID yet (``find_unconfigured``), a node ID and bit rate given to one and stored
-(``assign``), what answers at node IDs (``configured_nodes``), and the plan a profile makes of
-them (``plan``, ``apply``). Each takes a connected ``canopen.Network`` (``network_at(url)``);
-none prompts or prints.
+that have no node ID yet (``find_unconfigured``), a node ID and bit rate given to one by its
+LSS address and stored (``assign``), what answers at node IDs (``configured_nodes``), and what
+a profile wants of them (``plan``) and which drive is a joint's (``locate``), for ``deltoctl
+setup`` (deltoctl_canopen.addressing). Each takes a connected ``canopen.Network``
+(``network_at(url)``); none prompts or prints.
 
 canopen's ``fast_scan`` finds the unconfigured drive of lowest LSS address and leaves it in the
 configuration state, where a fast scan no longer reaches it: scanning again finds the next one,
@@ -32,7 +33,7 @@ FAST_TIMEOUT = 0.05  # s a fast scan's query waits for a reply, before canopen's
 FIND_WAIT = 0.5  # s to wait for any drive without a node ID to say so (LssMaster's own wait)
 BOOT_WAIT = 2.0  # s a drive given a node ID has to answer an SDO read there
 MAX_DRIVES = 127
-_INQUIRE_SERIAL, _NON_CONFIGURED = 0x5D, 0x50
+_NON_CONFIGURED = 0x50
 
 
 @dataclass(frozen=True)
@@ -190,13 +191,13 @@ def read_identity(network: Any, node_id: int) -> Identity | None:
 
 # -- assigning ---------------------------------------------------------------------------------
 
-def assign(network: Any, identity: Identity | None, node_id: int, bitrate: int | None = None,
+def assign(network: Any, identity: Identity, node_id: int, bitrate: int | None = None,
            store: bool = True) -> dict[str, Any]:
-    """Give a drive ``node_id`` (and ``bitrate``, taken at its next power-on) and store them:
-    the drive at ``identity`` (switch state selective), or with None the only LSS drive on the
-    bus (switch state global; refused when several answer). A drive that had no node ID starts
-    at the new one at once, one that had another is reset to it; then canopen's SDO client
-    reads its identity at the new node ID. Returns what was done."""
+    """Give the drive at LSS address ``identity`` (switch state selective: no other drive
+    leaves waiting) ``node_id`` (and ``bitrate``, taken at its next power-on) and store them.
+    A drive that had no node ID starts at the new one at once, one that had another is reset
+    to it; then canopen's SDO client reads its identity at the new node ID. Returns what was
+    done."""
     from canopen.lss import LssError
 
     if not 1 <= node_id <= 127:
@@ -204,10 +205,7 @@ def assign(network: Any, identity: Identity | None, node_id: int, bitrate: int |
     timing = bit_timing(bitrate) if bitrate is not None else None
     lss = network.lss
     try:
-        if identity is not None:
-            _select(lss, identity)
-        else:
-            _select_the_only_one(lss)
+        _select(lss, identity)
         was = lss.inquire_node_id()
         lss.configure_node_id(node_id)
         if timing is not None:
@@ -222,7 +220,7 @@ def assign(network: Any, identity: Identity | None, node_id: int, bitrate: int |
     if was not in (node_id, UNCONFIGURED):
         network.send_message(0x000, bytes([0x82, was]))  # reset communication: the new ID
     found = _wait_identity(network, node_id)
-    if found is None or (identity is not None and found != identity):
+    if found is None or found != identity:
         raise DeviceError(f"node {node_id}: " + ("no SDO answer after LSS gave it the node ID"
                           if found is None else f"another drive answers ({found})"))
     return {"node_id": node_id, "was": None if was == UNCONFIGURED else was,
@@ -240,18 +238,6 @@ def _select(lss: Any, identity: Identity) -> None:
         raise NoAnswer(f"no drive answers at LSS address {identity}",
                        hint="check that it is connected and powered (deltoctl scan lists "
                             "the drives without a node ID)")
-
-
-def _select_the_only_one(lss: Any) -> None:
-    """Every drive to the configuration state, then its serial asked: two serials are two
-    drives, and nothing is configured."""
-    lss.send_switch_state_global(lss.CONFIGURATION_STATE)
-    lss.inquire_lss_address(_INQUIRE_SERIAL)
-    time.sleep(0.1)  # a second drive's reply, if any
-    if not lss.responses.empty():
-        lss.send_switch_state_global(lss.WAITING_STATE)
-        raise DeviceError("several LSS drives answer: a node ID is given to one drive at a "
-                          "time", hint="connect the drive alone, or name it by its serial")
 
 
 def _wait_identity(network: Any, node_id: int) -> Identity | None:
@@ -311,28 +297,3 @@ def locate(network: Any, step: Step) -> tuple[Identity, bool]:
                       f"connect {step.joint}'s drive alone, or give the joint its drive's "
                       "serial (lss_serial param)")
     return chosen[0], False
-
-
-def apply(network: Any, step: Step) -> dict[str, Any]:
-    """One step on the bus: done already when a drive answers at its node ID (with its
-    serial, when it names one); else its drive found among those without a node ID (by
-    serial, or the only one) and given the node ID and bit rate."""
-    identity, already = locate(network, step)
-    if already:
-        return {"joint": step.joint, "node_id": step.node_id, "done": "already",
-                "identity": identity.as_dict()}
-    done = assign(network, identity, step.node_id, step.bitrate)
-    return {"joint": step.joint, "done": "assigned", **done}
-
-
-def setup(url: str, profile: Profile, hw: Hardware,
-          joints: tuple[str, ...] | list[str] = ()) -> list[dict[str, Any]]:
-    """The plan's steps (of ``joints`` only, when given) applied on the CAN bus ``url``, in
-    the profile's order; what each did."""
-    steps = plan(profile, hw)
-    unknown = sorted(set(joints) - {s.joint for s in steps})
-    if unknown:
-        raise InvalidInput(f"{', '.join(unknown)}: no CANopen drive of {hw.name} "
-                           f"(its joints: {', '.join(s.joint for s in steps)})")
-    with network_at(url) as network:
-        return [apply(network, s) for s in steps if not joints or s.joint in joints]

@@ -1,6 +1,7 @@
 """From the box to ``identify``: drives served factory-new (no node ID), found and given the
-profile's node IDs over LSS through canopen's LssMaster, checked by canopen's own SDO client
-and by deltoctl identify; and ``deltoctl scan`` on the CAN bus."""
+profile's node IDs over LSS through canopen's LssMaster — as ``deltoctl setup JOINT`` does it
+(deltoctl.app.setup), and by ``lss.assign`` at a drive's LSS address —, checked by canopen's
+own SDO client and by deltoctl identify; and ``deltoctl scan`` on the CAN bus."""
 
 import contextlib
 import json
@@ -8,13 +9,15 @@ import json
 import canopen
 import pytest
 from conftest import PROFILE
-from deltoctl.errors import DeviceError, NoAnswer, ProfileError, Refused
+from deltoctl.errors import NoAnswer, ProfileError, Refused
 from deltoctl.profile.catalog import load_profile
 from deltoctl.sim.controls import Controls
 from deltoctl.sim.serve import ServeOptions, serve_profile
 
 from deltoctl_canopen import lss
 from deltoctl_canopen.transport import open_bus, parse_can_url
+
+JOINTS = ("axis_1", "axis_2")
 
 
 class Served:
@@ -31,8 +34,16 @@ class Served:
         self.network.connect()
         stack.callback(self.network.disconnect)
 
-    def steps(self) -> list[lss.Step]:
-        return lss.plan(self.profile, self.profile.hardware[0])
+    def set_up(self, joint: str) -> dict:
+        """``joint``'s drive set up as ``deltoctl setup JOINT`` does it: its row."""
+        from deltoctl.app.setup import open_setup
+
+        with open_setup(self.profile, [f"can0={self.url}"]) as run:
+            return run.apply_one(joint, run.plan_one(joint)).joints[0]
+
+    def only_unconfigured(self) -> lss.Identity:
+        [identity] = lss.find_unconfigured(self.network)
+        return identity
 
 
 @pytest.fixture
@@ -67,11 +78,11 @@ def test_from_the_box_to_identify_one_drive_at_a_time(box, cli):
     served = box()
     served.controls.run("disconnect all")
     done = []
-    for step in served.steps():
-        served.controls.run(f"connect {step.joint}")
-        done += lss.setup(served.url, served.profile, served.profile.hardware[0], [step.joint])
-    assert [(d["joint"], d["node_id"], d["done"]) for d in done] == \
-        [("axis_1", 2, "assigned"), ("axis_2", 3, "assigned")]
+    for joint in JOINTS:
+        served.controls.run(f"connect {joint}")
+        done.append(served.set_up(joint))
+    assert [(d["joint"], d["to"]["id"], d["status"], d["verified"]) for d in done] == \
+        [("axis_1", 2, "set", True), ("axis_2", 3, "set", True)]
     assert serial_at(served.network, 2) == served.serials["axis_1"]
     assert serial_at(served.network, 3) == served.serials["axis_2"]
     result = cli("-p", PROFILE, "-t", served.url, "identify")
@@ -80,8 +91,7 @@ def test_from_the_box_to_identify_one_drive_at_a_time(box, cli):
     served.controls.run("disconnect all")
     served.controls.run("connect all")
     assert serial_at(served.network, 2) == served.serials["axis_1"]
-    assert [lss.apply(served.network, s)["done"] for s in served.steps()] == \
-        ["already", "already"]
+    assert [served.set_up(j)["status"] for j in JOINTS] == ["already set", "already set"]
 
 
 def test_drives_named_by_serial_are_set_up_all_connected(box, variant):
@@ -90,17 +100,15 @@ def test_drives_named_by_serial_are_set_up_all_connected(box, variant):
         "        address: 3\n", "        address: 3\n        params: {lss_serial: 0xA0}\n"))
     served = box(profile)
     assert served.serials == {"axis_1": 0xA1, "axis_2": 0xA0}
-    for step in served.steps():
-        lss.apply(served.network, step)
+    for joint in JOINTS:
+        served.set_up(joint)
     assert (serial_at(served.network, 2), serial_at(served.network, 3)) == (0xA1, 0xA0)
 
 
 def test_two_drives_nobody_named_are_not_guessed(box):
     served = box()
     with pytest.raises(Refused, match="2 drives have no node ID"):
-        lss.apply(served.network, served.steps()[0])
-    with pytest.raises(DeviceError, match="several LSS drives answer"):
-        lss.assign(served.network, None, 5)
+        served.set_up("axis_1")
     assert lss.configured_nodes(served.network, describe=False) == {}
     assert len(lss.find_unconfigured(served.network)) == 2
 
@@ -108,20 +116,20 @@ def test_two_drives_nobody_named_are_not_guessed(box):
 def test_no_drive_connected_and_a_node_id_taken(box):
     served = box()
     served.controls.run("disconnect axis_2")
-    lss.apply(served.network, served.steps()[0])
+    served.set_up("axis_1")
     with pytest.raises(NoAnswer, match="axis_2: no drive without a node ID answers"):
-        lss.apply(served.network, served.steps()[1])
+        served.set_up("axis_2")
     with pytest.raises(NoAnswer, match="no drive answers at LSS address"):
         lss.assign(served.network, lss.Identity(0xDE7, 0x40201, 0x10002, 0x1234), 5)
     taken = lss.Step("axis_2", 2, 1_000_000, serial=0x1234)
     with pytest.raises(Refused, match="node 2 is taken"):
-        lss.apply(served.network, taken)
+        lss.locate(served.network, taken)
 
 
-def test_the_only_drive_by_switch_global_without_store_is_lost_at_power_off(box):
+def test_a_node_id_not_stored_is_lost_at_power_off(box):
     served = box()
     served.controls.run("disconnect axis_2")
-    done = lss.assign(served.network, None, 9, store=False)
+    done = lss.assign(served.network, served.only_unconfigured(), 9, store=False)
     assert done["identity"]["serial"] == served.serials["axis_1"] and done["was"] is None
     served.controls.run("disconnect axis_1")
     served.controls.run("connect axis_1")
@@ -133,8 +141,9 @@ def test_the_only_drive_by_switch_global_without_store_is_lost_at_power_off(box)
 def test_a_configured_drive_moves_to_another_node_id(box):
     served = box()
     served.controls.run("disconnect axis_2")
-    lss.assign(served.network, None, 9)
-    done = lss.assign(served.network, None, 12, bitrate=1_000_000)
+    identity = served.only_unconfigured()
+    lss.assign(served.network, identity, 9)
+    done = lss.assign(served.network, identity, 12, bitrate=1_000_000)
     assert done["was"] == 9 and serial_at(served.network, 12) == served.serials["axis_1"]
     assert serial_at(served.network, 9) is None
 
@@ -150,15 +159,16 @@ def test_bad_serial_param_and_bad_control_lines(box, variant):
     with pytest.raises(InvalidInput, match="takes one joint of a CANopen drive or all"):
         served.controls.run("connect axis_9")
     with pytest.raises(InvalidInput, match="LSS sets no bit rate"):
-        lss.assign(served.network, None, 5, bitrate=33_000)
-    with pytest.raises(InvalidInput, match="axis_9: no CANopen drive of axes"):
-        lss.setup(served.url, served.profile, served.profile.hardware[0], ["axis_9"])
+        lss.assign(served.network, lss.Identity(0xDE7, 0x40201, 0x10002, 1), 5,
+                   bitrate=33_000)
+    with pytest.raises(InvalidInput, match="no servo joint 'axis_9'"):
+        served.set_up("axis_9")
 
 
 def test_scan_lists_nodes_and_drives_without_a_node_id(box, cli):
     served = box()
     served.controls.run("disconnect axis_2")
-    lss.apply(served.network, served.steps()[0])
+    served.set_up("axis_1")
     served.controls.run("connect axis_2")
     result = cli("--json", "scan", served.url, "--wait", "0.5")
     assert result.exit_code == 0, result.output + result.stderr
@@ -209,7 +219,8 @@ def test_sim_serve_factory_new_and_its_control_lines(cli):
 def test_a_stored_bit_rate_is_taken_at_the_next_power_on(box):
     served = box()
     served.controls.run("disconnect axis_2")
-    identity = lss.Identity(**lss.assign(served.network, None, 4, bitrate=500_000)["identity"])
+    identity = served.only_unconfigured()
+    lss.assign(served.network, identity, 4, bitrate=500_000)
     assert serial_at(served.network, 4) == served.serials["axis_1"]  # still at 1 Mbit/s
     served.controls.run("disconnect axis_1")
     served.controls.run("connect axis_1")  # at 500 kbit/s now, on a bus at 1 Mbit/s

@@ -176,3 +176,20 @@ def test_setup_says_what_it_addresses(cli):
     result = cli("-p", PROFILE, "--sim", "--sim-fresh", "setup", "axis_1", "--yes",
                  "--factory-reset", "all", "--allow", "factory-reset")
     assert result.exit_code == 2 and "no factory reset" in result.stderr
+
+
+def test_the_rate_found_is_the_links_and_a_new_bit_rate_is_taken_at_power_on(cli, box,
+                                                                              variant):
+    url, controls, _ = box  # the link at 1 Mbit/s
+    controls.run("disconnect axis_2")
+    profile = variant(profile=lambda t: t.replace("bitrate=1000000", "bitrate=500000"))
+    result = cli("-p", profile, "-t", f"can0={url}", "--json", "setup", "axis_1", "--yes")
+    assert result.exit_code == 0, result.output + result.stderr
+    assert "bit rate 1000000 → 500000, taken at the next power-on" in result.stderr
+    doc = _doc(result)
+    [row] = doc["joints"]
+    assert (row["from"]["baud"], row["to"]["baud"], row["verified"]) == \
+        (1_000_000, 500_000, True)
+    assert [(s["action"], s["at_baud"], s["value"]) for s in doc["steps"]] == [
+        ("id", 1_000_000, 2), ("bit rate", 1_000_000, 500_000),
+        ("store", 1_000_000, 500_000)]

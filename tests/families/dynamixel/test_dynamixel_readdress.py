@@ -106,8 +106,9 @@ def test_connect_plugs_factory_new_parts_one_at_a_time():
 
 
 @contextlib.contextmanager
-def _factory_new(profile: str, protocol: float):
-    """A factory-new ``profile`` served, its control lines, and dynamixel-sdk on its bus."""
+def _factory_new(profile: str, protocol: float, baud: int = 57_600):
+    """A factory-new ``profile`` served, its control lines, and dynamixel-sdk on its bus at
+    ``baud`` (its servos' factory rate)."""
     from deltoctl.profile.catalog import load_profile
     from deltoctl.sim.controls import Controls
     from deltoctl.sim.serve import ServeOptions, serve_profile
@@ -117,7 +118,7 @@ def _factory_new(profile: str, protocol: float):
         info = serve_profile(stack, load_profile(profile), ServeOptions(factory_new=True),
                              controls=controls)
         port = sdk.PortHandler(info["endpoint"].split("?")[0].removeprefix("serial://"))
-        assert port.openPort() and port.setBaudRate(57_600)
+        assert port.openPort() and port.setBaudRate(baud)
         patient(port)
         try:
             yield port, sdk.PacketHandler(protocol), controls
@@ -134,6 +135,6 @@ def test_factory_new_servos_at_one_id_garble_and_never_answer_cleanly():
         assert ph.read4ByteTxRx(port, 1, 132)[1] != sdk.COMM_SUCCESS  # their poses differ
         controls.run("connect shoulder_pan")
         assert ph.read4ByteTxRx(port, 1, 132)[1:] == (sdk.COMM_SUCCESS, 0)
-    with _factory_new("phantomx-arm", 1.0) as (port, ph, controls):
+    with _factory_new("phantomx-arm", 1.0, 1_000_000) as (port, ph, controls):  # AX-12As
         assert ph.ping(port, 1) == (12, sdk.COMM_SUCCESS, 0)  # five AX-12As, alike
         assert ph.read2ByteTxRx(port, 1, 36)[1] != sdk.COMM_SUCCESS
