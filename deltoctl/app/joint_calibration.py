@@ -35,7 +35,6 @@ CAPABILITY = "calibrate_joints"
 # restore names them)
 PERMISSIONS = ("homing-offset", "min-position-limit", "max-position-limit")
 FORMAT = "deltoctl joint calibration"
-MAX_BYTES = 1 << 20
 PERIOD = 0.05  # s between samples of the range
 Rows = list[dict[str, Any]]
 
@@ -378,22 +377,9 @@ def _write(path: Path, text: str) -> Path:
 def load(path: Path) -> dict[str, Any]:
     """A calibration file's document (its blocks → joints → entries, whether the servos were
     written); anything else is an InvalidInput."""
-    import stat
+    from deltoctl.servo.lerobot import read_json
 
-    try:
-        if not stat.S_ISREG(path.stat().st_mode):
-            raise InvalidInput(f"{path}: a calibration file must be a regular file")
-        with path.open("rb") as file:
-            text = file.read(MAX_BYTES + 1)
-        if len(text) > MAX_BYTES:
-            raise InvalidInput(f"{path}: larger than 1 MiB, not a calibration file")
-        data = json.loads(text.decode())
-    except OSError as exc:
-        raise InvalidInput(f"{path}: cannot read the calibration ({exc.strerror})") from None
-    except RecursionError:
-        raise InvalidInput(f"{path}: not a calibration file (nested too deep)") from None
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise InvalidInput(f"{path}: not a calibration file ({exc})") from None
+    data = read_json(path)
     if not _shaped(data):
         raise InvalidInput(f"{path}: not a {FORMAT} file (blocks → joints → integers)")
     return data

@@ -9,8 +9,33 @@ import json
 import os
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
+
+from deltoctl.errors import InvalidInput
 
 KEYS = ("id", "drive_mode", "homing_offset", "range_min", "range_max")
+MAX_BYTES = 1 << 20  # a calibration file's largest size
+
+
+def read_json(path: Path) -> Any:
+    """A calibration file's JSON (LeRobot's or deltoctl's): a regular file (a device or a FIFO
+    would never end) of at most MAX_BYTES; anything else is one InvalidInput naming it."""
+    import stat
+
+    try:
+        if not stat.S_ISREG(path.stat().st_mode):
+            raise InvalidInput(f"{path}: a calibration file must be a regular file")
+        with path.open("rb") as file:
+            text = file.read(MAX_BYTES + 1)
+        if len(text) > MAX_BYTES:
+            raise InvalidInput(f"{path}: larger than 1 MiB, not a calibration file")
+        return json.loads(text.decode())
+    except OSError as exc:
+        raise InvalidInput(f"{path}: cannot read the calibration ({exc.strerror})") from None
+    except RecursionError:
+        raise InvalidInput(f"{path}: not a calibration file (nested too deep)") from None
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InvalidInput(f"{path}: not a calibration file ({exc})") from None
 
 
 def root() -> Path:

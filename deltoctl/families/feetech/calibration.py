@@ -31,31 +31,11 @@ class MotorCalibration:
     range_max: int
 
 
-MAX_BYTES = 1 << 20
-
-
-def _read_capped(path: Path) -> str:
-    """A regular file's text, at most MAX_BYTES (a device or a FIFO would never end)."""
-    import stat
-
-    if not stat.S_ISREG(path.stat().st_mode):
-        raise InvalidInput(f"{path}: a calibration file must be a regular file")
-    with path.open("rb") as file:
-        data = file.read(MAX_BYTES + 1)
-    if len(data) > MAX_BYTES:
-        raise InvalidInput(f"{path}: larger than {MAX_BYTES} bytes, not a calibration file")
-    return data.decode()
-
-
 def load(path: Path) -> dict[str, MotorCalibration]:
     """A calibration file; anything else than LeRobot's shape is one InvalidInput naming it."""
-    try:
-        data = json.loads(_read_capped(Path(path)))
-    except OSError as exc:
-        raise InvalidInput(f"{path}: cannot read the calibration file ({exc.strerror})") \
-            from None
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise InvalidInput(f"{path}: not JSON ({exc})") from None
+    from deltoctl.servo.lerobot import read_json
+
+    data = read_json(Path(path))
     if not isinstance(data, dict) or not data:
         raise InvalidInput(f"{path}: a LeRobot calibration file is an object of motors")
     motors = {}
