@@ -4,9 +4,10 @@ settings. Bus-level: no System is opened (a box of new parts answers at no joint
 
 - *One at a time* (new servos, all at the factory's ID): the part connected alone is found at
   any rate and protocol (the scan's probes), its model checked against the joint's, then torque
-  off, ID, rate (the family's exchanges, deltoctl.servo.addressing), verified by a PING and a
-  model read at the new ID and rate. Colliding replies or two servos answering: refused, named,
-  nothing written.
+  off, ID (once the target ID is free at both rates), rate (the family's exchanges,
+  deltoctl.servo.addressing), verified at the new ID and rate by a PING, a model read and a
+  present-position read (alike servos at one ID garble it). Colliding replies or two servos
+  answering: refused, named, nothing written.
 - *In place* (IDs unique but not the profile's): the servos found on the bus matched to joints
   (same ID and model, one of a model, or as the caller maps them), the ID changes ordered so no
   two servos ever share an ID (a temporary free ID where two swap or a chain closes), then the
