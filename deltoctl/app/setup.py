@@ -41,7 +41,7 @@ from deltoctl.app.setup_rows import step as _step
 from deltoctl.app.setup_rows import verified as _verified
 from deltoctl.core.link_setup import LinkJoint
 from deltoctl.errors import DeviceError, InvalidInput, Refused, Unreachable
-from deltoctl.servo.addressing import Addresser, Addressing, Wanted
+from deltoctl.servo.addressing import Addresser, Addressing, Wanted, free_wait
 
 WAIT = 0.01  # s a probe waits for a reply
 FACTORY_RESET = "factory-reset"  # the --allow a factory reset needs
@@ -235,7 +235,7 @@ class Setup:
             for baud in rates:
                 port.baudrate = baud
                 try:
-                    model = addresser.identify(port, w.id)
+                    model = addresser.identify(port, w.id, free_wait(baud) + self.wait)
                 except DeviceError:  # several answer: their replies garble
                     model = "servo"
                 if model is not None:

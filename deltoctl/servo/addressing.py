@@ -22,6 +22,13 @@ from deltoctl.servo.scan import alone
 from deltoctl.servo.session import Done, Session
 
 VERIFY_WAIT = 0.05  # s a verification's read waits on, for a second servo's reply
+ANSWER_WAIT = 0.2  # s a servo that should be there is given to answer
+
+
+def free_wait(baud: int) -> float:
+    """How long an ID that should be free is listened at: a request and its status (30 bytes
+    at the most) on the wire at ``baud``, and 20 ms of the adapter's latency."""
+    return 300 / baud + 0.02
 
 
 @dataclass(frozen=True)
@@ -43,8 +50,8 @@ class Addresser(Protocol):
     reset_options: tuple[str, ...]  # the factory resets it has, by name; () none
     factory: frozenset[tuple[int, int]]  # (ID, baud) a new servo answers at
 
-    def identify(self, port: Any, device_id: int) -> str | None:
-        """The model name of the servo at ``device_id`` (None: no answer)."""
+    def identify(self, port: Any, device_id: int, timeout: float = ANSWER_WAIT) -> str | None:
+        """The model name of the servo at ``device_id`` (None: no answer within ``timeout``)."""
         ...
 
     def prepare(self, port: Any, device_id: int) -> None:

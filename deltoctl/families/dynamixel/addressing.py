@@ -15,6 +15,7 @@ from deltoctl.families.dynamixel.control_table import BAUD_RATES
 from deltoctl.families.dynamixel.models import by_number, expected_model
 from deltoctl.families.dynamixel.models1 import BAUD_CODES
 from deltoctl.servo.addressing import (
+    ANSWER_WAIT,
     Addressing,
     Wanted,
     ask,
@@ -46,9 +47,9 @@ class Protocol2:
                     codec.write_params(address, data), what)
         checked(reply, what, _error_2)
 
-    def identify(self, port: Any, device_id: int) -> str | None:
+    def identify(self, port: Any, device_id: int, timeout: float = ANSWER_WAIT) -> str | None:
         try:
-            reply = ask(port, codec.session(), device_id, codec.PING, b"", "PING", 0.2)
+            reply = ask(port, codec.session(), device_id, codec.PING, b"", "PING", timeout)
         except DeltoctlError:  # no answer, or bytes that break the protocol: not there
             return None
         if reply is None or len(reply[2]) < 3:
@@ -90,10 +91,10 @@ class Protocol1:
                     bytes([address, *data]), what)
         checked(reply, what, protocol1.error_text)
 
-    def identify(self, port: Any, device_id: int) -> str | None:
+    def identify(self, port: Any, device_id: int, timeout: float = ANSWER_WAIT) -> str | None:
         try:
             reply = ask(port, protocol1.session(), device_id, protocol1.READ, bytes([0, 3]),
-                        "model", 0.2)
+                        "model", timeout)
         except DeltoctlError:  # no answer, or bytes that break the protocol: not there
             return None
         if reply is None or len(reply[2]) < 2:

@@ -11,7 +11,14 @@ from typing import Any
 from deltoctl.errors import DeltoctlError, InvalidInput
 from deltoctl.families.feetech import codec
 from deltoctl.families.feetech.models import BAUD_RATES, Model, by_bytes, expected_model, label
-from deltoctl.servo.addressing import Addressing, Wanted, ask, in_joint_order, one_servo
+from deltoctl.servo.addressing import (
+    ANSWER_WAIT,
+    Addressing,
+    Wanted,
+    ask,
+    in_joint_order,
+    one_servo,
+)
 
 PROTOCOL = "Feetech"
 NO_RESET = ("Feetech documents no factory reset (instruction 0x06 is in none of its SDKs' "
@@ -30,11 +37,11 @@ class FeetechAddresser:
         ask(port, codec.session(), device_id, codec.WRITE, codec.write_params(address, data),
             what)
 
-    def _model(self, port: Any, device_id: int) -> Model | None:
+    def _model(self, port: Any, device_id: int, timeout: float = ANSWER_WAIT) -> Model | None:
         if device_id not in self._models:
             try:
                 reply = ask(port, codec.session(), device_id, codec.READ,
-                            codec.read_params(3, 2), "model", 0.2)
+                            codec.read_params(3, 2), "model", timeout)
             except DeltoctlError:  # no answer, or bytes that break the protocol
                 return None
             model = by_bytes(reply[2]) if reply is not None else None
@@ -43,9 +50,9 @@ class FeetechAddresser:
             self._models[device_id] = model
         return self._models[device_id]
 
-    def identify(self, port: Any, device_id: int) -> str | None:
+    def identify(self, port: Any, device_id: int, timeout: float = ANSWER_WAIT) -> str | None:
         self._models.pop(device_id, None)  # read again: a verification
-        model = self._model(port, device_id)
+        model = self._model(port, device_id, timeout)
         if model is None:
             return None
         item = model.by_name["Present_Position"]  # twins' model reads superimpose cleanly
