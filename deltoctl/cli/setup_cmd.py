@@ -108,6 +108,8 @@ def _walk(ctx: typer.Context, run: Any, reset: str | None, dry_run: bool) -> dic
             return
         sys.stderr.write(run.ask_line(w.joint))
         sys.stderr.flush()
-        sys.stdin.readline()
+        if not sys.stdin.readline():  # the input closed: nobody is there to connect it
+            warn(f"input closed: setup stopped before {w.joint}")
+            raise typer.Exit(130)
 
     return run.walk(ask, reset, lambda row: info(joint_lines({"joints": [row]})[0])).as_dict()
