@@ -397,3 +397,18 @@ def test_a_servo_at_the_factory_address_of_a_joint_set_up_is_not_taken_for_the_n
             run.plan_one("shoulder_lift", walked=["shoulder_pan"])
         run.controls.run("connect shoulder_lift")
         assert run.plan_one("shoulder_lift", walked=[]).steps  # a walk sets shoulder_pan last
+
+
+def test_the_input_closed_at_a_prompt_stops_the_walk_with_nothing_written(cli, monkeypatch):
+    from deltoctl.cli import confirm, setup_cmd
+
+    monkeypatch.setattr(confirm, "on_terminal", lambda: True)
+    monkeypatch.setattr(setup_cmd, "on_terminal", lambda: True)
+    servos = [Servo(1, model=by_number(n)) for n in KOCH_MODELS]
+    bus = MixedBus(*[DynamixelBus([s], baud=57_600) for s in servos])
+    with DynamixelPtyServer(bus) as server:
+        result = cli("-p", "koch-arm", "-t", f"dxl=serial://{server.port}?baud=1000000",
+                     "setup", "--wait", "0.05", input="y\n")
+    assert result.exit_code == 130, result.output
+    assert "input closed: setup stopped before" in result.stderr
+    assert all((s.id, s.memory[8]) == (1, 1) for s in servos)  # ID 1, 57,600 still
