@@ -89,6 +89,7 @@ def apply(profile: Any, target: str, block: str, family: str, wanted: Sequence[A
     snap = config.Snapshot(str(profile.source or profile.name), profile.name, {block: family},
                            values, {})
     with open_robot(profile, [target], hardware=[block]) as robot:
+        _settings_only(mine, config.read_live(robot.system)[0].get(block, {}))
         rows = robot.config_restore(snap, allow)
     by_key = {(r["part"], r["item"]): r for r in rows}
     done = []
@@ -101,3 +102,15 @@ def apply(profile: Any, target: str, block: str, family: str, wanted: Sequence[A
         done.append(out)
     config.restore_outcome(rows)  # an item not verified: DeviceError (exit 1)
     return done
+
+
+def _settings_only(steps: Sequence[dict[str, Any]], live: Mapping[str, Any]) -> None:
+    """InvalidInput (exit 2, no item written) for a pinned item that is no setting: a reading
+    or a command, or one setup sets itself (ID, baud rate)."""
+    for s in steps:
+        entry = live.get("parts", {}).get(s["joint"], {}).get(s["item"], {})
+        if entry.get("state") or entry.get("fixed"):
+            raise InvalidInput(f"{s['joint']}: the profile pins {s['item']}, which is not a "
+                               "setting setup writes (a reading or a command, or the servo's "
+                               "address on its bus): no item was written",
+                               hint=f"remove {s['item']} from {s['joint']}'s params")

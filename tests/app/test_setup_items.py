@@ -137,3 +137,14 @@ def test_params_that_are_not_items_are_the_plugins():
     w = Wanted("gripper", "arm", 15, 1_000_000, "Dynamixel 2.0", "XM430-W350",
                {"Goal Current": "200", "id": "15", "use_dummy": "false"})
     assert pinned(w, config_rules()) == {"Goal Current": 200}
+
+
+def test_a_pinned_reading_or_command_is_refused_and_not_written(cli, monkeypatch, tmp_path):
+    writes = _count_writes(monkeypatch)
+    profile = _pinned(tmp_path, "Goal Current: 200", "Torque Enable: 1")
+    result = cli("-p", profile, "--sim", "--sim-fresh", "--sim-option", "factory_new",
+                 "setup", "gripper", "--yes", *ALLOW, *WAIT)
+    assert result.exit_code == 2, result.output
+    assert "gripper: the profile pins Torque Enable, which is not a setting" in result.stderr
+    torque_on = (64, b"\x01")  # (the torque is switched off to address it: that is written)
+    assert not [w for w in writes if w[1] == OPERATING_MODE or w[1:] == torque_on]
