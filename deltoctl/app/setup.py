@@ -13,8 +13,11 @@ settings. Bus-level: no System is opened (a box of new parts answers at no joint
   two servos ever share an ID (a temporary free ID where two swap or a chain closes), then the
   rates, then verified.
 
-A servo no joint of the profile is, or an ID no joint has, is never written. The bus time is
-the time spent on the links.
+Once a servo answers at its ID and rate, the items its joint's params pin (Operating Mode …)
+are read, written where they differ and read back, under ``config restore``'s rules
+(deltoctl.app.setup_items); their values and permissions are checked before anything is
+written. A servo no joint of the profile is, or an ID no joint has, is never written. The bus
+time is the time spent on the links.
 
 A block on a link of a family's own (CANopen drives on a CAN bus: node IDs by LSS) is set up
 one joint at a time through its family's ``link_setup`` (deltoctl.app.setup_link); the rows
@@ -567,7 +570,8 @@ def _quiet(message: str) -> None:
 
 
 def reset_allowed(option: str | None, allow: Sequence[str]) -> None:
-    """A factory reset is written only with --allow factory-reset (Refused else)."""
+    """A factory reset is written only with --allow factory-reset (Refused else); the other
+    --allow names are config restore's permissions (for the pinned items)."""
     if option is not None and FACTORY_RESET not in allow:
         raise Refused(f"a factory reset ({option}) erases the servo's settings: not without "
                       f"--allow {FACTORY_RESET}", f"pass --allow {FACTORY_RESET} to reset it")
