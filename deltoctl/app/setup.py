@@ -13,8 +13,11 @@ settings. Bus-level: no System is opened (a box of new parts answers at no joint
   two servos ever share an ID (a temporary free ID where two swap or a chain closes), then the
   rates, then verified.
 
-A servo no joint of the profile is, or an ID no joint has, is never written. The bus time is
-the time spent on the links.
+Once a servo answers at its ID and rate, the items its joint's params pin (Operating Mode …)
+are read, written where they differ and read back, under ``config restore``'s rules
+(deltoctl.app.setup_items); their values and permissions are checked before anything is
+written. A servo no joint of the profile is, or an ID no joint has, is never written. The bus
+time is the time spent on the links.
 
 A block on a link of a family's own (CANopen drives on a CAN bus: node IDs by LSS) is set up
 one joint at a time through its family's ``link_setup`` (deltoctl.app.setup_link); the rows
@@ -32,7 +35,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from deltoctl import registry
-from deltoctl.app import setup_link
+from deltoctl.app import setup_items, setup_link
 from deltoctl.app.setup_in_place import match, ordered_steps, run_step
 from deltoctl.app.setup_link import LinkBus, addressed_blocks, connect_lines, link_buses
 from deltoctl.app.setup_rows import Outcome
@@ -76,14 +79,32 @@ class Setup:
     connects each part itself)."""
 
     def __init__(self, profile: Any, buses: Mapping[str, str], hardware: Sequence[str] = (),
-                 controls: Any = None, wait: float = WAIT) -> None:
-        self.profile, self.controls, self.wait = profile, controls, wait
+                 controls: Any = None, wait: float = WAIT, allow: Sequence[str] = ()) -> None:
+        self.profile, self.controls, self.wait, self.allow = profile, controls, wait, allow
         self.buses = _servo_buses(profile, buses, hardware)
         self.links = link_buses(profile, buses, hardware)
         self.bus_seconds = 0.0
         if not self.buses and not self.links:
             raise InvalidInput(f"{profile.name} has no servo bus that setup addresses "
                                "(Dynamixel, Feetech), nor a CANopen bus (node IDs by LSS)")
+        # each servo block's item rules: what its joints' params pin (deltoctl.app.setup_items)
+        self.rules = {b.block: b.family.config_rule_table() for b in self.buses}
+
+    def item_steps(self, wanted: Sequence[Wanted]) -> list[dict[str, Any]]:
+        """The items ``wanted`` pin, unread; a value out of range (exit 2) or a safety setting
+        without its --allow (exit 5) refused before anything is written."""
+        return setup_items.planned(wanted, self.rules, self.allow)
+
+    def _set_items(self, bus: Bus, wanted: Sequence[Wanted],
+                   steps: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+        """The pinned items of ``wanted``'s servos, addressed now: read, written where they
+        differ, read back (the bus time of the robot's opening counted)."""
+        start = time.perf_counter()
+        try:
+            return setup_items.apply(self.profile, f"{bus.bus}={bus.url}", bus.block,
+                                     bus.family.name, wanted, steps, self.allow)
+        finally:
+            self.bus_seconds += time.perf_counter() - start
 
     # -- what the profile wants --------------------------------------------------------------
     def targets(self) -> list[str]:
@@ -260,7 +281,7 @@ class Setup:
         self._target_free(bus, addresser, w, servo)
         outcome = Outcome("one at a time", True)
         outcome.joints.append(_row(w, servo, "planned"))
-        outcome.steps += _one_steps(w, servo, reset)
+        outcome.steps += _one_steps(w, servo, reset) + self.item_steps([w])
         return outcome
 
     @_timed
@@ -285,8 +306,9 @@ class Setup:
         with self._port(bus.url, at_baud) as port:
             _address(port, addresser, at_id, at_baud, w)
             model = addresser.identify(port, w.id)
-        done = Outcome("one at a time", False, [dict(row)], plan.steps)
+        done = Outcome("one at a time", False, [dict(row)], _addressing(plan.steps))
         _verified(done.joints[0], w, model, row["from"]["model"])
+        done.steps += self._set_items(bus, [w], plan.steps)
         return done
 
     def _plan_link(self, bus: LinkBus, w: LinkJoint, reset: str | None) -> Outcome:
@@ -308,8 +330,9 @@ class Setup:
 
     def wanted_plan(self) -> Outcome:
         """What a walk of every joint will set, before any servo is found."""
-        return Outcome("one at a time", True,
-                       [_row(w, None, "planned") for w in self.walk_order()])
+        order = self.walk_order()
+        return Outcome("one at a time", True, [_row(w, None, "planned") for w in order],
+                       self.item_steps([w for w in order if isinstance(w, Wanted)]))
 
     @_timed
     def walk(self, connect: Callable[[Any, str | None], None], reset: str | None = None,
@@ -362,6 +385,7 @@ class Setup:
             for w in missing:
                 outcome.joints.append(_row(w, None, "missing"))
             outcome.steps += ordered_steps(bus, found, matched)
+            outcome.steps += self.item_steps([w for _, w in matched])
         order = [w.joint for w in self.joints()]
         outcome.joints.sort(key=lambda r: order.index(r["joint"]))  # the profile's order
         unknown = set(mapping.values()) - {r["joint"] for r in outcome.joints}
@@ -396,11 +420,16 @@ class Setup:
     def apply_in_place(self, plan: Outcome) -> Outcome:
         """Write the plan of ``plan_in_place`` (torque off first, IDs, then rates, the EEPROM
         locked again last), then verify every joint at its new ID and rate."""
-        done = Outcome("in place", False, [dict(r) for r in plan.joints], plan.steps)
+        done = Outcome("in place", False, [dict(r) for r in plan.joints],
+                       _addressing(plan.steps))
         for bus in self.buses:
             rows = [r for r in done.joints if r["block"] == bus.block and r["from"]]
-            steps = [s for s in plan.steps if s["joint"] in {r["joint"] for r in rows}]
+            steps = [s for s in done.steps if s["joint"] in {r["joint"] for r in rows}]
             self._apply_bus(bus, rows, steps)
+        for bus in self.buses:
+            present = {r["joint"] for r in done.joints if r["verified"]}
+            done.steps += self._set_items(bus, [w for w in bus.wanted if w.joint in present],
+                                          plan.steps)
         return done
 
     def _apply_bus(self, bus: Bus, rows: list[dict[str, Any]],
@@ -459,6 +488,11 @@ def _check_reset(bus: Bus, addresser: Addresser, option: str) -> None:
                            f"{', '.join(addresser.reset_options)}, not {option!r}")
 
 
+def _addressing(steps: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The steps that address servos (the pinned items' are set once they are addressed)."""
+    return [s for s in steps if s["action"] != setup_items.ACTION]
+
+
 def _one_steps(w: Wanted, servo: dict[str, Any], reset: str | None) -> list[dict[str, Any]]:
     at_id, at_baud = servo["id"], servo["baud"]
     steps = [_step(w.joint, "factory reset", at_id, at_baud, reset)] if reset else []
@@ -504,10 +538,12 @@ def target_map(profile: Any, targets: Sequence[str]) -> dict[str, str]:
 def open_setup(profile: Any, targets: Sequence[str] = (), *,
                sim: bool | Mapping[str, Any] = False, hardware: Sequence[str] = (),
                reuse: bool = False, notice: Callable[[str], None] | None = None,
-               warn: Callable[[str], None] | None = None, wait: float = WAIT) -> Iterator[Setup]:
+               warn: Callable[[str], None] | None = None, wait: float = WAIT,
+               allow: Sequence[str] = ()) -> Iterator[Setup]:
     """The profile's servo buses ready for setup: at ``targets``, or with ``sim`` on
     simulators this process serves (their control lines then connect each part) or, with
-    ``reuse``, on the ``sim serve`` of this profile running for the user."""
+    ``reuse``, on the ``sim serve`` of this profile running for the user; ``allow``: the
+    permissions the pinned items' safety settings need (``config restore``'s)."""
     from deltoctl.app.robot import load, serve_simulators
     from deltoctl.sim import running
     from deltoctl.sim.controls import Controls
@@ -526,7 +562,7 @@ def open_setup(profile: Any, targets: Sequence[str] = (), *,
             controls = Controls()
             blocks = [hw.name for hw in prof.hardware if not hardware or hw.name in hardware]
             buses.update(serve_simulators(stack, prof, blocks, faults, controls))
-        yield Setup(prof, buses, hardware, controls, wait)
+        yield Setup(prof, buses, hardware, controls, wait, allow)
 
 
 def _quiet(message: str) -> None:
@@ -534,13 +570,18 @@ def _quiet(message: str) -> None:
 
 
 def reset_allowed(option: str | None, allow: Sequence[str]) -> None:
-    """A factory reset is written only with --allow factory-reset (Refused else)."""
+    """A factory reset is written only with --allow factory-reset (Refused else); the other
+    --allow names are config restore's permissions (for the pinned items)."""
     if option is not None and FACTORY_RESET not in allow:
         raise Refused(f"a factory reset ({option}) erases the servo's settings: not without "
                       f"--allow {FACTORY_RESET}", f"pass --allow {FACTORY_RESET} to reset it")
-    unknown = [a for a in allow if a != FACTORY_RESET]
+    from deltoctl.app.config import permission, permission_names
+
+    names = [FACTORY_RESET, *permission_names()]
+    unknown = [a for a in allow if permission(a) not in names]
     if unknown:
-        raise InvalidInput(f"--allow {unknown[0]!r}: setup permits only {FACTORY_RESET}")
+        raise InvalidInput(f"--allow {unknown[0]!r}: setup permits {FACTORY_RESET} and the "
+                           "permissions of config restore (deltoctl config restore --help)")
 
 
 def parse_map(items: Sequence[str]) -> dict[int, str]:

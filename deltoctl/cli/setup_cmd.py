@@ -30,7 +30,8 @@ def setup(ctx: typer.Context,
               "--factory-reset", metavar="all|keep-id|keep-id-baud",
               help="Factory reset first (Dynamixel; with --allow factory-reset).")] = None,
           allow: Annotated[list[str] | None, typer.Option(
-              "--allow", metavar="factory-reset", help="Permit a factory reset.")] = None,
+              "--allow", metavar="NAME",
+              help="Permit a factory reset, or a pinned safety setting.")] = None,
           wait: Annotated[float, typer.Option("--wait", min=0.001, max=1.0,
                                               help="Seconds a probe waits.")] = 0.01,
           ) -> None:
@@ -38,7 +39,8 @@ def setup(ctx: typer.Context,
     one at a time (new servos, all at one ID: each joint's connected alone, found at any rate
     and protocol, its model checked; a drive by its serial, or the only one without a node
     ID) or --in-place. The plan is confirmed (--yes) before anything is written; each part is
-    verified at its new ID and rate. Colliding replies: exit 5, nothing written."""
+    verified at its new ID and rate, then the items its joint's params pin (Operating Mode …)
+    written where they differ and read back. Colliding replies: exit 5, nothing written."""
     from deltoctl.app import setup as app
     from deltoctl.render.setup import setup_parts
 
@@ -50,7 +52,7 @@ def setup(ctx: typer.Context,
     prof = opts.load_profile()
     with app.open_setup(prof, opts.target, sim=opts.sim_of(prof),
                         hardware=opts.hardware, reuse=not opts.sim_fresh, notice=info,
-                        warn=warn, wait=wait) as run:
+                        warn=warn, wait=wait, allow=allow or []) as run:
         if in_place:
             result = _apply(ctx, run.plan_in_place(mapping), run.apply_in_place, dry_run)
         elif joint:
@@ -84,7 +86,7 @@ def _apply(ctx: typer.Context, plan: Any, apply: Any, dry_run: bool) -> dict[str
 
 def _walk(ctx: typer.Context, run: Any, reset: str | None, dry_run: bool) -> dict[str, Any]:
     """Each joint in the profile's order: connected alone (asked, or by the simulator)."""
-    from deltoctl.render.setup import joint_lines
+    from deltoctl.render.setup import joint_lines, step_lines
 
     run.check_reset(reset)
     plan = run.wanted_plan()
@@ -94,7 +96,7 @@ def _walk(ctx: typer.Context, run: Any, reset: str | None, dry_run: bool) -> dic
                                                              run.joints())):
         raise InvalidInput("setup asks for each servo to be connected alone: run it on a "
                            "terminal, or name the joint (setup JOINT) in a script")
-    for line in joint_lines(plan.as_dict()):
+    for line in joint_lines(plan.as_dict()) + step_lines(plan.as_dict()):
         info(line)
     if run.factory_last():
         info(run.factory_last())

@@ -29,9 +29,14 @@ def step_lines(result: dict[str, Any]) -> list[str]:
     words = {"factory reset": "factory reset {}", "torque off": "torque off",
              "id": "{at} → {}", "baud": "baud {at_baud} → {}",
              "bit rate": "bit rate {at_baud} → {}, taken at the next power-on",
-             "store": "ID and baud {} stored"}
-    return [f"{s['joint']}: " + words[s["action"]].format(s["value"], at=_id(s["at_id"]), **s)
+             "store": "ID and baud {} stored", "item": "{item} {was} → {to}"}
+    return [f"{s['joint']}: " + words[s["action"]].format(
+        s.get("value"), at=_id(s["at_id"]), was=_read(s.get("from")), **s)
             + f" (at {_id(s['at_id'])}, {s['at_baud']} baud)" for s in result["steps"]]
+
+
+def _read(value: Any) -> str:
+    return "(read once addressed)" if value is None else str(value)
 
 
 def setup_parts(result: dict[str, Any]) -> list[str | tuple]:
@@ -39,7 +44,10 @@ def setup_parts(result: dict[str, Any]) -> list[str | tuple]:
     done = sum(1 for r in result["joints"] if r["verified"])
     what = "planned (dry run: nothing written)" if result["dry_run"] else \
         f"{done} of {len(result['joints'])} verified"
-    return [(None, COLUMNS, joint_rows(result)),
+    items = [f"{s['joint']}: {s['item']} {_read(s['from'])} → {s['to']}, {s['status']}"
+             + (", verified" if s["verified"] else "")
+             for s in result["steps"] if s["action"] == "item" and "status" in s]
+    return [(None, COLUMNS, joint_rows(result)), *items,
             f"setup {result['mode']}: {what}, {result['bus_seconds']:.3f} s of bus time"]
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from deltoctl.errors import DeviceError, NoAnswer
@@ -41,6 +41,8 @@ class Wanted:
     baud: int
     protocol: str  # as deltoctl.servo.scan.Found names it ("Dynamixel 2.0", "Feetech")
     model: str  # the model's name; "" when the profile names none
+    # the joint's params as its servo's (a servo gpio's merged in): items among them pinned
+    params: dict[str, str] = field(default_factory=dict, compare=False, hash=False)
 
 
 class Addresser(Protocol):
@@ -85,7 +87,8 @@ def in_joint_order(hw: Any, ids: dict[int, Any], baud: int, protocol: str,
     """A Wanted per joint of ``ids`` (its servo's ID → the joint) at the bus's ``baud`` in
     ``protocol``, ``model(joint)`` its model's name (""), in the block's order of joints."""
     order = [j.name for j in hw.joints]
-    out = [Wanted(joint.name, hw.name, device_id, baud, protocol, model(joint))
+    out = [Wanted(joint.name, hw.name, device_id, baud, protocol, model(joint),
+                  dict(joint.params))
            for device_id, joint in ids.items()]
     return sorted(out, key=lambda w: order.index(w.joint) if w.joint in order else len(order))
 
