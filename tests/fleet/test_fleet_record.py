@@ -139,9 +139,11 @@ def test_ctrl_c_on_the_caller_stops_the_stream_and_leaves_a_valid_file(hand, tmp
     finally:
         if caller.poll() is None:
             caller.kill()
-    assert caller.returncode == 0, stderr
+    # on a loaded machine a cycle may not arrive: then the one warning says so (exit 3)
+    assert caller.returncode in (0, 3), stderr
+    assert caller.returncode == 0 or stderr.count("warning:") == stderr.count("did not arrive")
     report = json.loads(stdout)["result"]
-    assert report["loop"]["cycles"] == report["loop"]["robot_cycles"] > 0
+    assert 0 < report["loop"]["cycles"] <= report["loop"]["robot_cycles"]
     assert _info(out)["messages"] == sum(report["messages"].values())
     assert sum(1 for topic, _, _ in _read(out) if topic == "/joint_states") == \
         report["loop"]["cycles"]
