@@ -114,7 +114,6 @@ def _opened(prof: Profile, urls: list[str], sim: bool | Mapping[str, Any],
     from deltoctl.core.system import System, mock_blocks, select_blocks
     from deltoctl.sim.controls import Controls
 
-    controls = Controls()
     with contextlib.ExitStack() as stack:
         simulated = (dict.fromkeys(hardware or [hw.name for hw in prof.hardware], "--sim")
                      if sim else mock_blocks(prof, hardware))

@@ -702,7 +702,7 @@ class FeetechDriver(Driver):
         items = model.by_name
         here = self.read_register(device_id, items["Present_Position"])
         actual = here + self.read_register(device_id, items["Homing_Offset"])
-        if not self.read_register(device_id, items["Phase"]) & 0x10:
+        if self._wraps(device_id):
             actual %= model.resolution
         offset = actual - (model.resolution - 1) // 2
         if abs(offset) > 2047:
