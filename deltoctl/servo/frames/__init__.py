@@ -29,6 +29,48 @@ class SyncCheck(Protocol):
     def feed(self, data: bytes) -> None: ...
 
 
+class SyncReplies:
+    """The replies to one sync read, checked as their bytes arrive: ``feed`` the bytes so far
+    while later replies are still on the wire, then ``result`` once all are in (or the time
+    is up). While each is the expected servo's status with the data asked for they are read
+    by their offsets (a status of ``overhead`` bytes besides its data, checked by the
+    variant's ``status_at``); anything else is left to the variant's ``split``."""
+
+    overhead = 0
+
+    def __init__(self, length: int, ids: list[int]) -> None:
+        self.length, self.ids, self.size = length, ids, self.overhead + length
+        self.found: list = []  # (id, error, data), or False for one that does not check
+        self.in_shape = True
+
+    @staticmethod
+    def status_at(data: bytes, offset: int, length: int, device_id: int) -> Reply | bool | None:
+        """The expected status at ``offset``, False when it does not check, None when what
+        is there is not that servo's status."""
+        raise NotImplementedError
+
+    @staticmethod
+    def split(data: bytes) -> list[Reply]:
+        raise NotImplementedError
+
+    def feed(self, data: bytes) -> None:
+        found, ids, size, length = self.found, self.ids, self.size, self.length
+        k, whole = len(found), min(len(data) // size, len(ids))
+        while k < whole and self.in_shape:
+            reply = self.status_at(data, k * size, length, ids[k])
+            if reply is None:
+                self.in_shape = False
+            else:
+                found.append(reply)
+                k += 1
+
+    def result(self, data: bytes) -> list[Reply]:
+        self.feed(data)
+        if self.in_shape and len(self.found) == len(self.ids):
+            return [r for r in self.found if r]
+        return self.split(data)
+
+
 class Frames(Protocol):
     """What a session needs of a frame variant."""
 

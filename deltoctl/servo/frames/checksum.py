@@ -12,6 +12,7 @@ feetech-sts-and-lerobot.md §1.1, §1.3, §1.5.
 from __future__ import annotations
 
 from deltoctl.errors import ProtocolError
+from deltoctl.servo import frames
 from deltoctl.servo.frames import Frame, Reply
 
 HEADER = b"\xff\xff"
@@ -187,26 +188,12 @@ def status_at(data: bytes, offset: int, length: int, device_id: int) -> Reply | 
     return device_id, data[offset + 4], bytes(data[offset + 5:end - 1])
 
 
-class SyncReplies:
-    """The replies to one sync read, checked as their bytes arrive (``feed`` the bytes so far
-    while later replies are still on the wire): by offsets while each is the expected
-    servo's status with the data asked for; anything else is left to ``split_statuses``."""
+class SyncReplies(frames.SyncReplies):
+    """The replies to one sync read, checked in place as they arrive (deltoctl.servo.frames)."""
 
-    def __init__(self, length: int, ids: list[int]) -> None:
-        self.length, self.ids, self.size = length, ids, 6 + length
-        self.found: list = []  # (id, error, data), or False for a bad checksum
-        self.in_shape = True
-
-    def feed(self, data: bytes) -> None:
-        found, ids, size, length = self.found, self.ids, self.size, self.length
-        k, whole = len(found), min(len(data) // size, len(ids))
-        while k < whole and self.in_shape:
-            reply = status_at(data, k * size, length, ids[k])
-            if reply is None:
-                self.in_shape = False
-            else:
-                found.append(reply)
-                k += 1
+    overhead = 6
+    status_at = staticmethod(status_at)
+    split = staticmethod(split_statuses)
 
 
 def error_words(error: int, names: dict[int, str]) -> list[str]:

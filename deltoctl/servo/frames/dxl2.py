@@ -15,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from deltoctl.errors import ProtocolError
+from deltoctl.servo import frames
 from deltoctl.servo.frames import Frame, Reply
 
 HEADER = b"\xff\xff\xfd\x00"
@@ -216,34 +217,6 @@ def status_at(data: bytes, offset: int, length: int, device_id: int) -> tuple | 
     return device_id, data[offset + 8], data[offset + 9:end - 2]
 
 
-class SyncReplies:
-    """The replies to one sync read, checked as their bytes arrive: ``feed`` the bytes so far
-    while later replies are still on the wire, then ``result`` once all are in (or the time
-    is up). The common case goes by offsets; anything else by ``split_statuses``."""
-
-    def __init__(self, length: int, ids: list[int]) -> None:
-        self.length, self.ids, self.size = length, ids, 11 + length
-        self.found: list = []  # (id, error, data), or False for a bad CRC
-        self.in_shape = True
-
-    def feed(self, data: bytes) -> None:
-        found, ids, size, length = self.found, self.ids, self.size, self.length
-        k, whole = len(found), min(len(data) // size, len(ids))
-        while k < whole and self.in_shape:
-            reply = status_at(data, k * size, length, ids[k])
-            if reply is None:
-                self.in_shape = False
-            else:
-                found.append(reply)
-                k += 1
-
-    def result(self, data: bytes) -> list[Reply]:
-        self.feed(data)
-        if self.in_shape and len(self.found) == len(self.ids):
-            return [r for r in self.found if r]
-        return split_statuses(data)
-
-
 def split_statuses(data: bytes) -> list[Reply]:
     """Status packets in whatever shape they came (some missing, stuffed, out of order, in
     noise): ``(id, error, data)`` per valid one. Each header is tried where it lies; one that
@@ -263,6 +236,15 @@ def split_statuses(data: bytes) -> list[Reply]:
         else:
             at = data.find(HEADER, at + 1)
     return out
+
+
+class SyncReplies(frames.SyncReplies):
+    """The replies to one sync read, checked in place as they arrive (deltoctl.servo.frames);
+    a stuffed one goes to ``split_statuses``."""
+
+    overhead = 11
+    status_at = staticmethod(status_at)
+    split = staticmethod(split_statuses)
 
 
 def fast_sync_status(blocks: list[tuple[int, int, bytes]]) -> bytes:
